@@ -1,0 +1,1 @@
+"""greybench: the command-line interface composing identify, simulate and service."""

@@ -1,0 +1,34 @@
+"""The ``greybench`` console script: one typer app composing identify, simulate and service.
+
+Each area registers its commands from its own module in :mod:`greybench.commands`;
+``greybench bench ...`` holds the benchmarks.
+"""
+from __future__ import annotations
+
+import importlib
+
+import typer
+
+app = typer.Typer(no_args_is_help=True, pretty_exceptions_enable=False, add_completion=False,
+                  help="greybench: friction identification and robot machining simulation (SI units).")
+bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks: tables with ratios measured in one run.")
+app.add_typer(bench_app, name="bench")
+
+# Areas, in the order of the workflow. Each module defines register(app, bench_app).
+_AREAS = ["friction", "robot", "toolpath", "machining", "evaluation", "serve"]
+for _name in _AREAS:
+    try:
+        _mod = importlib.import_module(f"greybench.commands.{_name}")
+    except ModuleNotFoundError as exc:  # an area not built yet
+        if exc.name != f"greybench.commands.{_name}":
+            raise
+        continue
+    _mod.register(app, bench_app)
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":
+    main()

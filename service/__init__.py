@@ -1,0 +1,1 @@
+"""service: the FastAPI application, thin routes over :mod:`identify` and :mod:`simulate`."""
