@@ -1,0 +1,46 @@
+"""Friction models with one estimator contract (:class:`~identify.models.base.FrictionModel`).
+
+``MODELS`` maps the CLI names to the classes; :func:`load_model` opens a saved model folder.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from identify.errors import InputError
+from identify.models.base import FrictionModel, read_params
+from identify.models.lugre import LuGre, LuGreTable
+from identify.models.static import CoulombViscous, Stribeck
+
+MODELS: dict[str, type[FrictionModel]] = {
+    CoulombViscous.name: CoulombViscous,
+    Stribeck.name: Stribeck,
+    LuGre.name: LuGre,
+}
+
+
+def register(cls: type[FrictionModel]) -> type[FrictionModel]:
+    """Add a model class to :data:`MODELS` (used by the learned models)."""
+    MODELS[cls.name] = cls
+    return cls
+
+
+def make_model(name: str, **hyperparameters) -> FrictionModel:
+    """A new, unfitted model by its CLI name."""
+    if name not in MODELS:
+        raise InputError(f"unknown model '{name}' (known: {', '.join(MODELS)})", field="model")
+    return MODELS[name](**hyperparameters)
+
+
+def load_model(ref: str | os.PathLike) -> FrictionModel:
+    """Load a fitted model from a saved folder (``params.json`` + model files)."""
+    directory = Path(ref)
+    doc = read_params(directory)
+    name = doc["model"]
+    if name not in MODELS:
+        raise InputError(f"unknown model '{name}'", source=str(directory), field="model")
+    return MODELS[name].from_document(doc, directory)
+
+
+__all__ = ["MODELS", "FrictionModel", "LuGre", "LuGreTable", "CoulombViscous", "Stribeck", "load_model",
+           "make_model", "register"]
