@@ -1,0 +1,548 @@
+"""The robot model: a six-axis serial arm read from a TOML robot file (paper 2.1, 3.2, 3.5, 3.6).
+
+A robot file (``data/robots/*.toml``) holds six ``[[joint]]`` tables, base to flange, and a
+``[tool]`` table. Per joint (SI units, joint side of the gear):
+
+=================  ===========  ============================================================
+key                unit         meaning
+=================  ===========  ============================================================
+a, d               m            standard DH link length / offset
+alpha              rad          standard DH twist
+theta_offset       rad          added to the joint angle: ``T_i = Rz(q_i + theta_offset)
+                                Tz(d) Tx(a) Rx(alpha)``
+lower, upper       rad          position limits
+vmax, amax, jmax   rad/s^n      velocity, acceleration, jerk limits
+mass               kg           link mass
+com                m            link centre of mass in the DH link frame i
+inertia            kg m^2       3x3 inertia about the COM, axes of link frame i
+gear_ratio         -            motor turns per joint turn
+motor_inertia      kg m^2       rotor (+ gear input) inertia, motor side
+stiffness          Nm/rad       joint (gear) stiffness; ``inf`` for a rigid joint
+backlash           rad          total gear play, joint side
+[joint.servo]                   ``kv`` [1/s], ``kp_vel`` [Nm s/rad], ``ki_vel`` [Nm/rad],
+                                ``ff_vel`` [-], ``ff_tau`` [-] (see :mod:`simulate.robot.servo`)
+[joint.friction]                inline LuGre ``fc, fs`` [Nm], ``vs`` [rad/s], ``delta`` [-],
+                                ``s0`` [Nm/rad], ``s1`` [Nm s/rad], ``nu`` [Nm s/rad]; or
+                                ``model = "<saved friction model dir or MLflow URI>"``
+=================  ===========  ============================================================
+
+The ``[tool]`` table: ``xyz`` [m] and ``rpy`` [rad] (fixed-axis roll, pitch, yaw about the flange
+x, y, z axes) of the TCP in the flange frame, ``type``, ``diameter``, ``corner_radius``,
+``length`` [m], ``flutes`` [-], ``helix`` [rad], and the spindle+tool inertial data ``mass`` [kg],
+``com`` [m] and ``inertia`` [kg m^2] in the flange frame.
+
+Errors name the bad key, e.g. ``field="joint[3].stiffness"``; joints are counted 1..6 like the
+axes A1..A6.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import re
+import tempfile
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from identify.errors import InputError
+
+N_JOINTS = 6
+
+#: Per-joint scalar keys that every ``[[joint]]`` table must have, with their unit.
+JOINT_SCALARS = {
+    "a": "m", "alpha": "rad", "d": "m", "theta_offset": "rad",
+    "lower": "rad", "upper": "rad", "vmax": "rad/s", "amax": "rad/s^2", "jmax": "rad/s^3",
+    "mass": "kg", "gear_ratio": "-", "motor_inertia": "kg m^2", "stiffness": "Nm/rad", "backlash": "rad",
+}
+SERVO_KEYS = {"kv": "1/s", "kp_vel": "Nm s/rad", "ki_vel": "Nm/rad", "ff_vel": "-", "ff_tau": "-"}
+LUGRE_KEYS = {"fc": "Nm", "fs": "Nm", "vs": "rad/s", "delta": "-", "s0": "Nm/rad", "s1": "Nm s/rad", "nu": "Nm s/rad"}
+
+
+def _frozen(a: Any, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    arr = np.array(a, dtype=float)
+    if shape is not None and arr.shape != shape:
+        raise ValueError(f"expected shape {shape}, got {arr.shape}")
+    arr.setflags(write=False)
+    return arr
+
+
+def rpy_to_matrix(rpy) -> np.ndarray:
+    """Rotation of fixed-axis roll, pitch, yaw (about x, then y, then z): ``Rz(y) Ry(p) Rx(r)``."""
+    r, p, y = (float(v) for v in rpy)
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+@dataclass(frozen=True, eq=False)
+class Tool:
+    """The cutting tool on the spindle, and the spindle+tool inertial data.
+
+    Attributes
+    ----------
+    xyz : ndarray (3,)
+        TCP position in the flange frame [m].
+    rpy : ndarray (3,)
+        TCP orientation in the flange frame, fixed-axis roll, pitch, yaw [rad].
+    type : str
+        Tool type, e.g. ``"flat"`` (flat end mill), ``"ball"``, ``"bull"``.
+    diameter, corner_radius, length : float
+        Cutter diameter, corner radius, flute length [m].
+    flutes : int
+        Number of teeth.
+    helix : float
+        Helix angle [rad].
+    mass : float
+        Spindle + holder + tool mass [kg] (carried by link 6).
+    com : ndarray (3,)
+        Its centre of mass in the flange frame [m].
+    inertia : ndarray (3, 3)
+        Its inertia about the COM, flange axes [kg m^2].
+    """
+
+    xyz: np.ndarray
+    rpy: np.ndarray
+    type: str = "flat"
+    diameter: float = 0.010
+    corner_radius: float = 0.0
+    flutes: int = 3
+    helix: float = math.radians(30.0)
+    length: float = 0.050
+    mass: float = 0.0
+    com: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(3)))
+    inertia: np.ndarray = field(default_factory=lambda: _frozen(np.zeros((3, 3))))
+
+    def __post_init__(self):
+        object.__setattr__(self, "xyz", _frozen(self.xyz, (3,)))
+        object.__setattr__(self, "rpy", _frozen(self.rpy, (3,)))
+        object.__setattr__(self, "com", _frozen(self.com, (3,)))
+        object.__setattr__(self, "inertia", _frozen(self.inertia, (3, 3)))
+
+    @property
+    def T_flange_tcp(self) -> np.ndarray:
+        """Homogeneous transform (4, 4) of the TCP in the flange frame [m]."""
+        T = np.eye(4)
+        T[:3, :3] = rpy_to_matrix(self.rpy)
+        T[:3, 3] = self.xyz
+        return T
+
+
+@dataclass(frozen=True, eq=False)
+class LuGreParams:
+    """Inline LuGre friction of one joint, joint side (paper 2.2; domain notes 1).
+
+    ``tau_F = s0*z + s1*zdot + nu*qd``, ``zdot = qd - s0*|qd|*z/g(qd)``,
+    ``g(qd) = fc + (fs - fc)*exp(-|qd/vs|^delta)``.
+    """
+
+    fc: float   # Nm
+    fs: float   # Nm
+    vs: float   # rad/s
+    delta: float  # -
+    s0: float   # Nm/rad
+    s1: float   # Nm s/rad
+    nu: float   # Nm s/rad
+
+
+@dataclass(frozen=True, eq=False)
+class FrictionSpec:
+    """Friction of one joint: inline LuGre parameters, or a reference to a fitted model.
+
+    Exactly one of ``lugre`` and ``model`` is set; ``model`` is a saved friction model directory
+    or an MLflow URI, loaded by ``identify.models.load_model`` (see :mod:`simulate.robot.friction`).
+    """
+
+    lugre: LuGreParams | None = None
+    model: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class ServoGains:
+    """Cascaded position/velocity loop gains per joint, joint side (arrays of shape (6,)).
+
+    Attributes
+    ----------
+    kv : ndarray
+        Position loop proportional gain [1/s].
+    kp_vel : ndarray
+        Velocity loop proportional gain [Nm s/rad].
+    ki_vel : ndarray
+        Velocity loop integral gain [Nm/rad].
+    ff_vel, ff_tau : ndarray
+        Velocity and torque feed-forward factors [-] (0 off, 1 ideal).
+    """
+
+    kv: np.ndarray
+    kp_vel: np.ndarray
+    ki_vel: np.ndarray
+    ff_vel: np.ndarray
+    ff_tau: np.ndarray
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            object.__setattr__(self, f.name, _frozen(getattr(self, f.name), (N_JOINTS,)))
+
+    def with_changes(self, **changes) -> "ServoGains":
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True, eq=False)
+class Robot:
+    """A six-axis serial robot in standard DH form with drives, stiffness, servo and tool.
+
+    All per-joint arrays have shape (6,), base to flange, SI units (see the module docstring).
+    Arrays are read-only; use :meth:`with_changes` (or ``dataclasses.replace``) for a modified copy,
+    e.g. ``robot.with_changes(stiffness=robot.stiffness * 0.5)``.
+
+    Attributes
+    ----------
+    name, description : str
+    joint_names : tuple of str
+    a, alpha, d, theta_offset : ndarray
+        DH parameters [m, rad, m, rad].
+    lower, upper, vmax, amax, jmax : ndarray
+        Joint limits [rad, rad, rad/s, rad/s^2, rad/s^3].
+    mass : ndarray (6,)
+        Link masses [kg].
+    com : ndarray (6, 3)
+        Link COMs in link frames [m].
+    inertia : ndarray (6, 3, 3)
+        Link inertias about the COM, link-frame axes [kg m^2].
+    gear_ratio, motor_inertia : ndarray
+        Gear ratio [-], rotor inertia [kg m^2] (motor side; reflected: ``gear_ratio**2 * motor_inertia``).
+    stiffness : ndarray
+        Joint stiffness [Nm/rad] (``inf`` = rigid).
+    backlash : ndarray
+        Total gear play, joint side [rad].
+    servo : ServoGains
+    friction : tuple of FrictionSpec
+    tool : Tool
+    source : str
+        File the robot was loaded from ("" if built in code).
+    """
+
+    name: str
+    a: np.ndarray
+    alpha: np.ndarray
+    d: np.ndarray
+    theta_offset: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    vmax: np.ndarray
+    amax: np.ndarray
+    jmax: np.ndarray
+    mass: np.ndarray
+    com: np.ndarray
+    inertia: np.ndarray
+    gear_ratio: np.ndarray
+    motor_inertia: np.ndarray
+    stiffness: np.ndarray
+    backlash: np.ndarray
+    servo: ServoGains
+    friction: tuple
+    tool: Tool
+    joint_names: tuple = tuple(f"A{i + 1}" for i in range(N_JOINTS))
+    description: str = ""
+    source: str = ""
+
+    def __post_init__(self):
+        for key in (*JOINT_SCALARS, ):
+            object.__setattr__(self, key, _frozen(getattr(self, key), (N_JOINTS,)))
+        object.__setattr__(self, "com", _frozen(self.com, (N_JOINTS, 3)))
+        object.__setattr__(self, "inertia", _frozen(self.inertia, (N_JOINTS, 3, 3)))
+        object.__setattr__(self, "friction", tuple(self.friction))
+        object.__setattr__(self, "joint_names", tuple(self.joint_names))
+        if len(self.friction) != N_JOINTS:
+            raise ValueError("friction needs one FrictionSpec per joint")
+
+    @property
+    def rotor_inertia(self) -> np.ndarray:
+        """Motor+gear inertia reflected to the joint side, ``gear_ratio**2 * motor_inertia`` [kg m^2]."""
+        return self.gear_ratio ** 2 * self.motor_inertia
+
+    def with_changes(self, **changes) -> "Robot":
+        """A copy with some fields replaced (validated like a loaded file, minus the file)."""
+        new = dataclasses.replace(self, **changes)
+        _validate(new, source=self.source or "<robot>")
+        return new
+
+    def equals(self, other: "Robot") -> bool:
+        """True when every value (arrays exactly) equals ``other``'s, ignoring ``source``."""
+        return _as_dict(self) == _as_dict(other)
+
+
+# --------------------------------------------------------------------------- loading
+
+def _number(table: dict, key: str, where: str, source: str, *, required: bool = True, default=None) -> float:
+    if key not in table:
+        if required:
+            raise InputError("missing key", source=source, field=f"{where}.{key}")
+        return default
+    v = table[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise InputError(f"expected a number, got {v!r}", source=source, field=f"{where}.{key}")
+    v = float(v)
+    if math.isnan(v):
+        raise InputError("is NaN", source=source, field=f"{where}.{key}")
+    return v
+
+
+def _vector(table: dict, key: str, n: int, where: str, source: str, default=None) -> np.ndarray:
+    if key not in table:
+        if default is not None:
+            return np.array(default, dtype=float)
+        raise InputError("missing key", source=source, field=f"{where}.{key}")
+    v = table[key]
+    try:
+        arr = np.array(v, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"expected numbers, got {v!r}", source=source, field=f"{where}.{key}") from None
+    want = (n,) if n != 9 else (3, 3)
+    if arr.shape != want:
+        raise InputError(f"expected shape {want}, got {arr.shape}", source=source, field=f"{where}.{key}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError("must be finite", source=source, field=f"{where}.{key}")
+    return arr
+
+
+def _check_inertia(I: np.ndarray, field_name: str, source: str) -> None:
+    if not np.allclose(I, I.T, rtol=0, atol=1e-12 * max(1.0, np.abs(I).max())):
+        raise InputError("inertia must be symmetric", source=source, field=field_name)
+    ev = np.linalg.eigvalsh(I)
+    if ev.min() < -1e-12:
+        raise InputError("inertia must be positive semi-definite", source=source, field=field_name)
+    # triangle inequality of principal moments (a physical rigid body)
+    s = np.sort(ev)
+    if s[0] + s[1] < s[2] * (1 - 1e-9) - 1e-12:
+        raise InputError("principal moments violate the triangle inequality", source=source, field=field_name)
+
+
+def load_robot(path: str | os.PathLike) -> Robot:
+    """Read and validate a robot TOML file.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The robot file.
+
+    Returns
+    -------
+    Robot
+
+    Raises
+    ------
+    InputError
+        Missing file, invalid TOML (with line), missing/bad key (``field="joint[3].stiffness"``).
+    """
+    p = Path(path)
+    source = str(p)
+    if not p.exists():
+        raise InputError("robot file not found", source=source)
+    try:
+        data = tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+), column (\d+)", str(exc))
+        raise InputError(f"invalid TOML: {exc}", source=source,
+                         line=int(m.group(1)) if m else None, column=int(m.group(2)) if m else None) from None
+    return robot_from_dict(data, source=source)
+
+
+def robot_from_dict(data: dict, source: str = "<robot>") -> Robot:
+    """Build and validate a :class:`Robot` from the parsed TOML structure (see :func:`load_robot`)."""
+    joints = data.get("joint")
+    if not isinstance(joints, list) or len(joints) != N_JOINTS:
+        n = len(joints) if isinstance(joints, list) else 0
+        raise InputError(f"need exactly {N_JOINTS} [[joint]] tables, found {n}", source=source, field="joint")
+    vals: dict[str, list] = {k: [] for k in JOINT_SCALARS}
+    com, inertia, names, frictions = [], [], [], []
+    servo = {k: [] for k in SERVO_KEYS}
+    for i, jt in enumerate(joints):
+        where = f"joint[{i + 1}]"
+        if not isinstance(jt, dict):
+            raise InputError("must be a table", source=source, field=where)
+        names.append(str(jt.get("name", f"A{i + 1}")))
+        for key in JOINT_SCALARS:
+            vals[key].append(_number(jt, key, where, source))
+        com.append(_vector(jt, "com", 3, where, source))
+        inertia.append(_vector(jt, "inertia", 9, where, source))
+        sv = jt.get("servo")
+        if not isinstance(sv, dict):
+            raise InputError("missing [joint.servo] table", source=source, field=f"{where}.servo")
+        for key in SERVO_KEYS:
+            servo[key].append(_number(sv, key, f"{where}.servo", source))
+        fr = jt.get("friction")
+        if not isinstance(fr, dict):
+            raise InputError("missing [joint.friction] table", source=source, field=f"{where}.friction")
+        if "model" in fr:
+            if not isinstance(fr["model"], str) or not fr["model"].strip():
+                raise InputError("model must be a non-empty path or URI", source=source,
+                                 field=f"{where}.friction.model")
+            extra = set(fr) - {"model"}
+            if extra:
+                raise InputError(f"give either model or inline LuGre parameters, not both ({sorted(extra)})",
+                                 source=source, field=f"{where}.friction")
+            frictions.append(FrictionSpec(model=fr["model"]))
+        else:
+            frictions.append(FrictionSpec(lugre=LuGreParams(
+                **{k: _number(fr, k, f"{where}.friction", source) for k in LUGRE_KEYS})))
+    tt = data.get("tool")
+    if not isinstance(tt, dict):
+        raise InputError("missing [tool] table", source=source, field="tool")
+    tool_type = tt.get("type", "flat")
+    if not isinstance(tool_type, str):
+        raise InputError("must be a string", source=source, field="tool.type")
+    flutes = tt.get("flutes", 3)
+    if isinstance(flutes, bool) or not isinstance(flutes, int) or flutes < 1:
+        raise InputError("must be a positive integer", source=source, field="tool.flutes")
+    tool = Tool(
+        xyz=_vector(tt, "xyz", 3, "tool", source), rpy=_vector(tt, "rpy", 3, "tool", source),
+        type=tool_type, diameter=_number(tt, "diameter", "tool", source),
+        corner_radius=_number(tt, "corner_radius", "tool", source, required=False, default=0.0),
+        flutes=flutes, helix=_number(tt, "helix", "tool", source, required=False, default=0.0),
+        length=_number(tt, "length", "tool", source),
+        mass=_number(tt, "mass", "tool", source, required=False, default=0.0),
+        com=_vector(tt, "com", 3, "tool", source, default=np.zeros(3)),
+        inertia=_vector(tt, "inertia", 9, "tool", source, default=np.zeros((3, 3))),
+    )
+    robot = Robot(
+        name=str(data.get("name", Path(source).stem)), description=str(data.get("description", "")),
+        joint_names=tuple(names), com=np.array(com), inertia=np.array(inertia),
+        servo=ServoGains(**{k: np.array(v) for k, v in servo.items()}), friction=tuple(frictions),
+        tool=tool, source=source if source != "<robot>" else "", **{k: np.array(v) for k, v in vals.items()})
+    _validate(robot, source)
+    return robot
+
+
+def _validate(r: Robot, source: str) -> None:
+    """Physical sanity of every value; errors name the key (joints counted 1..6)."""
+    def bad(msg, i, key):
+        raise InputError(msg, source=source, field=f"joint[{i + 1}].{key}")
+
+    for i in range(N_JOINTS):
+        for key in ("a", "alpha", "d", "theta_offset", "lower", "upper", "mass", "gear_ratio", "motor_inertia",
+                    "backlash"):
+            if not math.isfinite(getattr(r, key)[i]):
+                bad("must be finite", i, key)
+        if not r.lower[i] < r.upper[i]:
+            bad(f"must be above lower ({r.lower[i]})", i, "upper")
+        for key in ("vmax", "amax", "jmax", "gear_ratio", "stiffness"):
+            if not getattr(r, key)[i] > 0:
+                bad("must be > 0", i, key)
+        for key in ("mass", "motor_inertia", "backlash"):
+            if not getattr(r, key)[i] >= 0:
+                bad("must be >= 0", i, key)
+        _check_inertia(r.inertia[i], f"joint[{i + 1}].inertia", source)
+        for key in ("kv", "kp_vel", "ki_vel", "ff_vel", "ff_tau"):
+            v = getattr(r.servo, key)[i]
+            if not (math.isfinite(v) and v >= 0):
+                bad("must be finite and >= 0", i, f"servo.{key}")
+        for key in ("kv", "kp_vel"):
+            if not getattr(r.servo, key)[i] > 0:
+                bad("must be > 0", i, f"servo.{key}")
+        lg = r.friction[i].lugre
+        if lg is not None:
+            for key in ("fc", "fs", "vs", "s0", "s1", "nu", "delta"):
+                v = getattr(lg, key)
+                if not (math.isfinite(v) and v >= 0):
+                    bad("must be finite and >= 0", i, f"friction.{key}")
+            for key in ("fc", "vs", "s0", "delta"):
+                if not getattr(lg, key) > 0:
+                    bad("must be > 0", i, f"friction.{key}")
+            if lg.fs < lg.fc:
+                bad("static level fs must be >= Coulomb level fc", i, "friction.fs")
+    t = r.tool
+    for key in ("diameter", "length"):
+        if not (math.isfinite(getattr(t, key)) and getattr(t, key) > 0):
+            raise InputError("must be finite and > 0", source=source, field=f"tool.{key}")
+    for key in ("corner_radius", "mass", "helix"):
+        if not (math.isfinite(getattr(t, key)) and getattr(t, key) >= 0):
+            raise InputError("must be finite and >= 0", source=source, field=f"tool.{key}")
+    if t.corner_radius > t.diameter / 2:
+        raise InputError("must not exceed diameter/2", source=source, field="tool.corner_radius")
+    _check_inertia(t.inertia, "tool.inertia", source)
+
+
+# --------------------------------------------------------------------------- saving
+
+def _as_dict(r: Robot) -> dict:
+    """The TOML structure of a robot (plain Python floats, lists)."""
+    joints = []
+    for i in range(N_JOINTS):
+        jt: dict[str, Any] = {"name": r.joint_names[i]}
+        for key in JOINT_SCALARS:
+            jt[key] = float(getattr(r, key)[i])
+        jt["com"] = [float(v) for v in r.com[i]]
+        jt["inertia"] = [[float(v) for v in row] for row in r.inertia[i]]
+        jt["servo"] = {k: float(getattr(r.servo, k)[i]) for k in SERVO_KEYS}
+        fr = r.friction[i]
+        jt["friction"] = ({"model": fr.model} if fr.model is not None
+                          else {k: float(getattr(fr.lugre, k)) for k in LUGRE_KEYS})
+        joints.append(jt)
+    t = r.tool
+    tool = {"xyz": [float(v) for v in t.xyz], "rpy": [float(v) for v in t.rpy], "type": t.type,
+            "diameter": float(t.diameter), "corner_radius": float(t.corner_radius), "flutes": int(t.flutes),
+            "helix": float(t.helix), "length": float(t.length), "mass": float(t.mass),
+            "com": [float(v) for v in t.com], "inertia": [[float(v) for v in row] for row in t.inertia]}
+    return {"name": r.name, "description": r.description, "joint": joints, "tool": tool}
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        s = repr(v)  # shortest repr that round-trips exactly
+        return s if any(c in s for c in ".en") else s + ".0"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(type(v))
+
+
+def robot_to_toml(robot: Robot) -> str:
+    """TOML text of a robot; :func:`load_robot` reads it back to an identical robot."""
+    d = _as_dict(robot)
+    lines = ["# Robot file written by greybench (simulate.robot.model.save_robot). Units: m, rad, s, kg, N, Nm.",
+             f"name = {_toml_value(d['name'])}", f"description = {_toml_value(d['description'])}", ""]
+    for jt in d["joint"]:
+        lines.append("[[joint]]")
+        for k, v in jt.items():
+            if not isinstance(v, dict):
+                lines.append(f"{k} = {_toml_value(v)}")
+        for sub in ("servo", "friction"):
+            lines.append(f"[joint.{sub}]")
+            lines.extend(f"{k} = {_toml_value(v)}" for k, v in jt[sub].items())
+        lines.append("")
+    lines.append("[tool]")
+    lines.extend(f"{k} = {_toml_value(v)}" for k, v in d["tool"].items())
+    return "\n".join(lines) + "\n"
+
+
+def save_robot(robot: Robot, path: str | os.PathLike) -> Path:
+    """Write ``robot`` as a TOML robot file (atomically: temp file, then rename).
+
+    ``load_robot(save_robot(r, p))`` equals ``r`` exactly (floats written with their shortest
+    round-trip representation). Comments of a hand-written source file are not kept.
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    text = robot_to_toml(robot)
+    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, p)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return p
