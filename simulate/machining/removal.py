@@ -1,0 +1,518 @@
+"""Removal of the cutter's swept volume from the tri-dexel workpiece (paper section 3.3).
+
+Between two 2 ms steps the cutter moves on a straight line from ``p0`` to ``p1`` (tool tip, workpiece
+frame, metres) with its axis along workpiece +z (2.5-D milling, fixed orientation). The swept solid
+is convex (a convex cutter translated along a segment), so every ray meets it in one interval,
+computed analytically per ray and subtracted from the ray's material intervals. Nothing is
+sampled along the path, so there are no gaps at any feed.
+
+Closed forms per ray family (see :mod:`simulate.machining.tools` for r(z') and zlow(rho)):
+
+- horizontal move, any cutter: a horizontal ray at height z sees a 2-D stadium of radius r(z - p_z);
+  a vertical ray at distance rho_min from the path sees ``[p_z + zlow(rho_min), p_z + L]``;
+- any move, flat end mill: the ray's height window cuts the path to a sub-segment, then a stadium;
+- vertical move: a disk of the largest radius in the height window;
+- other moves of ball and bull-nose cutters (ramps): the interval ends are minima of convex
+  functions of the path parameter, found by golden-section search to 1e-12 of the move (numerical,
+  but converged far below a micrometre).
+
+Each end created in a step stores the step index; the process values of the step are kept in
+the step table (:mod:`simulate.machining.virtual_workpiece`).
+
+While a horizontal ray is processed, the kernel also takes the *engagement samples* of its layer:
+where the ray crosses the cutter's circle at ``p1``, it records the angle and whether material was
+there before the cut (:mod:`simulate.machining.engagement`).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+#: Inward offset [m] for testing material just inside the cutter boundary (1 nm, far below any
+#: geometric feature but far above float64 rounding at metre-scale coordinates).
+_ETA = 1e-9
+_INF = 1e300
+_GOLD = 0.6180339887498949
+
+
+@njit(cache=True, inline="always")
+def radius_at(zp, R, rc, L):
+    """Cutter radius r(z') [m] at height z' above the tip; -1 outside [0, L]."""
+    if zp < 0.0 or zp > L:
+        return -1.0
+    if zp < rc:
+        d = rc - zp
+        v = rc * rc - d * d
+        return (R - rc) + math.sqrt(v if v > 0.0 else 0.0)
+    return R
+
+
+@njit(cache=True, inline="always")
+def zlow_at(rho, R, rc):
+    """Lowest cutter point [m above tip] at radial distance rho <= R."""
+    a = R - rc
+    if rho <= a:
+        return 0.0
+    d = rho - a
+    v = rc * rc - d * d
+    return rc - math.sqrt(v if v > 0.0 else 0.0)
+
+
+@njit(cache=True)
+def stadium_interval(a0, e0, a1, e1, r, e):
+    """Interval along a line ``e = const`` (2-D coordinates a, e) inside the stadium of radius r
+    around the segment (a0, e0)-(a1, e1). Returns (lo, hi); lo > hi means no hit."""
+    lo = _INF
+    hi = -_INF
+    rr = r * r
+    d = e - e0
+    if d * d <= rr:
+        w = math.sqrt(rr - d * d)
+        lo = min(lo, a0 - w)
+        hi = max(hi, a0 + w)
+    d = e - e1
+    if d * d <= rr:
+        w = math.sqrt(rr - d * d)
+        lo = min(lo, a1 - w)
+        hi = max(hi, a1 + w)
+    da = a1 - a0
+    de = e1 - e0
+    ls = math.sqrt(da * da + de * de)
+    if ls > 1e-15:
+        ta = da / ls
+        te = de / ls
+        na = -te
+        ne = ta
+        rlo = -_INF
+        rhi = _INF
+        ok = True
+        off = (e - e0) * ne
+        if abs(na) > 1e-15:
+            x1 = a0 + (-r - off) / na
+            x2 = a0 + (r - off) / na
+            rlo = max(rlo, min(x1, x2))
+            rhi = min(rhi, max(x1, x2))
+        elif abs(off) > r:
+            ok = False
+        off2 = (e - e0) * te
+        if abs(ta) > 1e-15:
+            x1 = a0 + (0.0 - off2) / ta
+            x2 = a0 + (ls - off2) / ta
+            rlo = max(rlo, min(x1, x2))
+            rhi = min(rhi, max(x1, x2))
+        elif off2 < 0.0 or off2 > ls:
+            ok = False
+        if ok and rlo <= rhi:
+            lo = min(lo, rlo)
+            hi = max(hi, rhi)
+    return lo, hi
+
+
+@njit(cache=True)
+def _h_width(s, c1, c2, axis, across, p0, d, R, rc, L):
+    """For a horizontal ray: g(s) = r(z - p_z(s)) - |e - p_e(s)| (concave in s)."""
+    r = radius_at(c2 - (p0[2] + s * d[2]), R, rc, L)
+    if r < 0.0:
+        return -_INF
+    return r - abs(c1 - (p0[across] + s * d[across]))
+
+
+@njit(cache=True)
+def _h_end(s, c1, c2, axis, across, p0, d, R, rc, L, sign):
+    """Entry (sign=-1) or exit (sign=+1) of the cutter at path parameter s on a horizontal ray."""
+    r = radius_at(c2 - (p0[2] + s * d[2]), R, rc, L)
+    de = c1 - (p0[across] + s * d[across])
+    v = r * r - de * de
+    w = math.sqrt(v) if v > 0.0 else 0.0
+    return sign * (p0[axis] + s * d[axis] + sign * w)  # minimised: -exit or +entry
+
+
+@njit(cache=True)
+def _golden_min_end(lo, hi, c1, c2, axis, across, p0, d, R, rc, L, sign):
+    a = lo
+    b = hi
+    for _ in range(90):
+        if b - a < 1e-12:
+            break
+        x1 = b - _GOLD * (b - a)
+        x2 = a + _GOLD * (b - a)
+        if _h_end(x1, c1, c2, axis, across, p0, d, R, rc, L, sign) <= \
+                _h_end(x2, c1, c2, axis, across, p0, d, R, rc, L, sign):
+            b = x2
+        else:
+            a = x1
+    s = 0.5 * (a + b)
+    best = _h_end(s, c1, c2, axis, across, p0, d, R, rc, L, sign)
+    best = min(best, _h_end(lo, c1, c2, axis, across, p0, d, R, rc, L, sign))
+    best = min(best, _h_end(hi, c1, c2, axis, across, p0, d, R, rc, L, sign))
+    return best
+
+
+@njit(cache=True)
+def _horizontal_numeric(c1, c2, axis, across, p0, d, R, rc, L, slo, shi):
+    # maximise the concave width function to find whether/where the ray meets the cutter
+    a = slo
+    b = shi
+    for _ in range(90):
+        if b - a < 1e-12:
+            break
+        x1 = b - _GOLD * (b - a)
+        x2 = a + _GOLD * (b - a)
+        if _h_width(x1, c1, c2, axis, across, p0, d, R, rc, L) >= _h_width(x2, c1, c2, axis, across, p0, d, R, rc, L):
+            b = x2
+        else:
+            a = x1
+    sm = 0.5 * (a + b)
+    gm = _h_width(sm, c1, c2, axis, across, p0, d, R, rc, L)
+    for sx in (slo, shi):
+        gx = _h_width(sx, c1, c2, axis, across, p0, d, R, rc, L)
+        if gx > gm:
+            gm = gx
+            sm = sx
+    if gm < 0.0:
+        return _INF, -_INF
+    # domain ends by bisection on each side of the maximum
+    if _h_width(slo, c1, c2, axis, across, p0, d, R, rc, L) >= 0.0:
+        d0 = slo
+    else:
+        a = slo
+        b = sm
+        for _ in range(60):
+            m = 0.5 * (a + b)
+            if _h_width(m, c1, c2, axis, across, p0, d, R, rc, L) >= 0.0:
+                b = m
+            else:
+                a = m
+        d0 = b
+    if _h_width(shi, c1, c2, axis, across, p0, d, R, rc, L) >= 0.0:
+        d1 = shi
+    else:
+        a = sm
+        b = shi
+        for _ in range(60):
+            m = 0.5 * (a + b)
+            if _h_width(m, c1, c2, axis, across, p0, d, R, rc, L) >= 0.0:
+                a = m
+            else:
+                b = m
+        d1 = a
+    lo = _golden_min_end(d0, d1, c1, c2, axis, across, p0, d, R, rc, L, -1.0)
+    hi = -_golden_min_end(d0, d1, c1, c2, axis, across, p0, d, R, rc, L, 1.0)
+    return lo, hi
+
+
+@njit(cache=True)
+def swept_interval(axis, c1, c2, p0, p1, R, rc, L):
+    """Interval (lo, hi) [m] of an axis-aligned ray inside the swept cutter; lo > hi: no hit.
+
+    Parameters
+    ----------
+    axis : int
+        Ray direction 0, 1, 2 (x, y, z).
+    c1, c2 : float
+        The ray's fixed coordinates [m]: (y, z) for x, (x, z) for y, (x, y) for z.
+    p0, p1 : ndarray (3,)
+        Tool tip at the start and end of the move [m], workpiece frame.
+    R, rc, L : float
+        Cutter radius, corner radius, fluted length [m].
+    """
+    d = p1 - p0
+    if axis == 2:
+        fx = c1 - p0[0]
+        fy = c2 - p0[1]
+        A = d[0] * d[0] + d[1] * d[1]
+        B = -2.0 * (fx * d[0] + fy * d[1])
+        C = fx * fx + fy * fy - R * R
+        if A < 1e-24:
+            if C > 0.0:
+                return _INF, -_INF
+            sa = 0.0
+            sb = 1.0
+        else:
+            disc = B * B - 4.0 * A * C
+            if disc < 0.0:
+                return _INF, -_INF
+            sq = math.sqrt(disc)
+            sa = max(0.0, (-B - sq) / (2.0 * A))
+            sb = min(1.0, (-B + sq) / (2.0 * A))
+            if sa > sb:
+                return _INF, -_INF
+        za = p0[2] + sa * d[2]
+        zb = p0[2] + sb * d[2]
+        top = max(za, zb) + L
+        if rc <= 0.0:
+            return min(za, zb), top
+        if A < 1e-24:
+            rho = math.sqrt(fx * fx + fy * fy)
+            return min(za, zb) + zlow_at(rho, R, rc), top
+        if abs(d[2]) < 1e-15:
+            s = min(max(-B / (2.0 * A), sa), sb)
+            ex = fx - s * d[0]
+            ey = fy - s * d[1]
+            return p0[2] + zlow_at(math.sqrt(ex * ex + ey * ey), R, rc), top
+        # ramp with a rounded cutter: bottom = min over s of p_z(s) + zlow(rho(s)), convex in s
+        a = sa
+        b = sb
+        for _ in range(90):
+            if b - a < 1e-12:
+                break
+            x1 = b - _GOLD * (b - a)
+            x2 = a + _GOLD * (b - a)
+            e1x = fx - x1 * d[0]
+            e1y = fy - x1 * d[1]
+            e2x = fx - x2 * d[0]
+            e2y = fy - x2 * d[1]
+            g1 = x1 * d[2] + zlow_at(min(R, math.sqrt(e1x * e1x + e1y * e1y)), R, rc)
+            g2 = x2 * d[2] + zlow_at(min(R, math.sqrt(e2x * e2x + e2y * e2y)), R, rc)
+            if g1 <= g2:
+                b = x2
+            else:
+                a = x1
+        s = 0.5 * (a + b)
+        ex = fx - s * d[0]
+        ey = fy - s * d[1]
+        bot = p0[2] + s * d[2] + zlow_at(min(R, math.sqrt(ex * ex + ey * ey)), R, rc)
+        return min(bot, min(za, zb) + R), top
+    across = 1 - axis
+    z = c2
+    if abs(d[2]) < 1e-15:
+        r = radius_at(z - p0[2], R, rc, L)
+        if r <= 0.0:
+            return _INF, -_INF
+        return stadium_interval(p0[axis], p0[across], p1[axis], p1[across], r, c1)
+    # height window of the move: 0 <= z - p_z(s) <= L
+    s1 = (z - p0[2] - L) / d[2]
+    s2 = (z - p0[2]) / d[2]
+    slo = max(0.0, min(s1, s2))
+    shi = min(1.0, max(s1, s2))
+    if slo > shi:
+        return _INF, -_INF
+    if rc <= 0.0:
+        return stadium_interval(p0[axis] + slo * d[axis], p0[across] + slo * d[across],
+                                p0[axis] + shi * d[axis], p0[across] + shi * d[across], R, c1)
+    if d[0] * d[0] + d[1] * d[1] < 1e-24:
+        # vertical move: the largest radius in the window (r is non-decreasing in z')
+        zp_hi = min(z - (p0[2] + slo * d[2]), z - (p0[2] + shi * d[2]))
+        zp_hi = max(z - (p0[2] + slo * d[2]), z - (p0[2] + shi * d[2]))
+        r = radius_at(min(zp_hi, L), R, rc, L)
+        if r <= 0.0:
+            return _INF, -_INF
+        return stadium_interval(p0[axis], p0[across], p0[axis], p0[across], r, c1)
+    return _horizontal_numeric(c1, c2, axis, across, p0, d, R, rc, L, slo, shi)
+
+
+@njit(cache=True)
+def subtract_interval(lo, hi, lo_step, hi_step, count, r, a, b, step):
+    """Remove [a, b] from ray r. Returns the removed length [m], or -1.0 if the ray is full
+    (a split would exceed the capacity; nothing is changed then)."""
+    n = count[r]
+    if n == 0 or b <= lo[r, 0] or a >= hi[r, n - 1]:
+        return 0.0
+    i = 0
+    while i < n and hi[r, i] <= a:
+        i += 1
+    if i == n or lo[r, i] >= b:
+        return 0.0
+    if lo[r, i] < a and hi[r, i] > b:
+        if n == lo.shape[1]:
+            return -1.0
+        for q in range(n - 1, i, -1):
+            lo[r, q + 1] = lo[r, q]
+            hi[r, q + 1] = hi[r, q]
+            lo_step[r, q + 1] = lo_step[r, q]
+            hi_step[r, q + 1] = hi_step[r, q]
+        lo[r, i + 1] = b
+        hi[r, i + 1] = hi[r, i]
+        lo_step[r, i + 1] = step
+        hi_step[r, i + 1] = hi_step[r, i]
+        hi[r, i] = a
+        hi_step[r, i] = step
+        count[r] = n + 1
+        return b - a
+    removed = 0.0
+    w = i
+    for q in range(i, n):
+        l = lo[r, q]
+        h = hi[r, q]
+        ls = lo_step[r, q]
+        hs = hi_step[r, q]
+        if l >= b:
+            pass
+        elif l < a:
+            removed += h - a
+            h = a
+            hs = step
+        elif h > b:
+            removed += b - l
+            l = b
+            ls = step
+        else:
+            removed += h - l
+            continue
+        lo[r, w] = l
+        hi[r, w] = h
+        lo_step[r, w] = ls
+        hi_step[r, w] = hs
+        w += 1
+    count[r] = w
+    return removed
+
+
+@njit(cache=True, inline="always")
+def material_at(lo, hi, count, r, t):
+    for i in range(count[r]):
+        if lo[r, i] <= t <= hi[r, i]:
+            return True
+        if lo[r, i] > t:
+            return False
+    return False
+
+
+@njit(cache=True, inline="always")
+def _grid_range(vmin, vmax, lower, s, n):
+    i0 = max(0, int(math.ceil((vmin - lower) / s - 0.5)))
+    i1 = min(n - 1, int(math.floor((vmax - lower) / s - 0.5)))
+    return i0, i1
+
+
+@njit(parallel=True, cache=True)
+def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, nz,
+                      p0, p1, R, rc, L, step, sample, samp_ang, samp_eng, samp_cnt, layer_removed):
+    """Remove the swept cutter from x- and y-rays, one z-layer per parallel task.
+
+    Engagement samples of layer ``k0 + kk`` go to row ``kk`` of ``samp_ang`` (angle [rad] about the
+    cutter axis at ``p1``, from +x counter-clockwise) and ``samp_eng`` (1 if material was there
+    before the cut). Returns ``(k0, n_layers, status)``; status 1: a ray overflowed its capacity.
+    """
+    zmin = min(p0[2], p1[2])
+    zmax = max(p0[2], p1[2]) + L
+    k0, k1 = _grid_range(zmin, zmax, lower[2], s, nz)
+    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
+    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
+    nl = k1 - k0 + 1
+    if nl <= 0:
+        return k0, 0, 0
+    if nl > samp_cnt.shape[0]:
+        return k0, 0, 2
+    mcap = samp_ang.shape[1]
+    overflow = np.zeros(nl, np.int32)
+    for kk in prange(nl):
+        k = k0 + kk
+        zc = lower[2] + (k + 0.5) * s
+        r1 = radius_at(zc - p1[2], R, rc, L)
+        m = 0
+        rem = 0.0
+        for j in range(j0, j1 + 1):
+            ridx = k * ny + j
+            if xcnt[ridx] == 0:
+                continue
+            yc = lower[1] + (j + 0.5) * s
+            if sample and r1 > 0.0:
+                de = yc - p1[1]
+                if de * de < r1 * r1 and m + 2 <= mcap:
+                    w = math.sqrt(r1 * r1 - de * de)
+                    samp_ang[kk, m] = math.atan2(de, -w)
+                    samp_eng[kk, m] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] - w + _ETA) else 0
+                    samp_ang[kk, m + 1] = math.atan2(de, w)
+                    samp_eng[kk, m + 1] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] + w - _ETA) else 0
+                    m += 2
+            a, b = swept_interval(0, yc, zc, p0, p1, R, rc, L)
+            if a < b:
+                got = subtract_interval(xlo, xhi, xls, xhs, xcnt, ridx, a, b, step)
+                if got < 0.0:
+                    overflow[kk] = 1
+                else:
+                    rem += got
+        for i in range(i0, i1 + 1):
+            ridx = k * nx + i
+            if ycnt[ridx] == 0:
+                continue
+            xc = lower[0] + (i + 0.5) * s
+            if sample and r1 > 0.0:
+                de = xc - p1[0]
+                if de * de < r1 * r1 and m + 2 <= mcap:
+                    w = math.sqrt(r1 * r1 - de * de)
+                    samp_ang[kk, m] = math.atan2(-w, de)
+                    samp_eng[kk, m] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] - w + _ETA) else 0
+                    samp_ang[kk, m + 1] = math.atan2(w, de)
+                    samp_eng[kk, m + 1] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] + w - _ETA) else 0
+                    m += 2
+            a, b = swept_interval(1, xc, zc, p0, p1, R, rc, L)
+            if a < b:
+                got = subtract_interval(ylo, yhi, yls, yhs, ycnt, ridx, a, b, step)
+                if got < 0.0:
+                    overflow[kk] = 1
+        samp_cnt[kk] = m
+        layer_removed[kk] = rem * s * s
+    return k0, nl, 1 if overflow.sum() > 0 else 0
+
+
+@njit(parallel=True, cache=True)
+def remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, step):
+    """Remove the swept cutter from the z-rays; returns (removed volume [m^3] seen by z-rays, status)."""
+    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
+    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
+    nj = j1 - j0 + 1
+    if nj <= 0 or i1 < i0:
+        return 0.0, 0
+    rem = np.zeros(nj)
+    overflow = np.zeros(nj, np.int32)
+    for jj in prange(nj):
+        j = j0 + jj
+        yc = lower[1] + (j + 0.5) * s
+        acc = 0.0
+        for i in range(i0, i1 + 1):
+            ridx = j * nx + i
+            if zcnt[ridx] == 0:
+                continue
+            xc = lower[0] + (i + 0.5) * s
+            a, b = swept_interval(2, xc, yc, p0, p1, R, rc, L)
+            if a < b:
+                got = subtract_interval(zlo, zhi, zls, zhs, zcnt, ridx, a, b, step)
+                if got < 0.0:
+                    overflow[jj] = 1
+                else:
+                    acc += got
+        rem[jj] = acc
+    return rem.sum() * s * s, 1 if overflow.sum() > 0 else 0
+
+
+class RemovalBuffers:
+    """Scratch arrays for the engagement samples of one step (sized for the grid and cutter)."""
+
+    def __init__(self, workpiece, R: float, max_move: float):
+        s = workpiece.spacing
+        nx, ny, nz = workpiece.shape
+        across = int(math.ceil((2 * R + max_move) / s)) + 3
+        self.samp_ang = np.zeros((nz, 4 * across))
+        self.samp_eng = np.zeros((nz, 4 * across), np.int8)
+        self.samp_cnt = np.zeros(nz, np.int64)
+        self.layer_removed = np.zeros(nz)
+
+
+def remove_step(workpiece, cutter, p0, p1, step: int, buffers: RemovalBuffers | None = None,
+                sample: bool = True):
+    """Remove the cutter swept from ``p0`` to ``p1`` (tool tip, workpiece frame [m]).
+
+    Returns ``(k0, n_layers, buffers)`` where the engagement samples of z-layer ``k0 + i`` are in
+    row ``i`` of the buffers. Raises RuntimeError if a ray's capacity is exceeded.
+    """
+    p0 = np.asarray(p0, float)
+    p1 = np.asarray(p1, float)
+    if buffers is None:
+        buffers = RemovalBuffers(workpiece, cutter.radius, float(np.linalg.norm(p1 - p0)))
+    fx, fy, fz = workpiece.families
+    R, rc, L = cutter.radius, cutter.corner_radius, cutter.length
+    nx, ny, nz = workpiece.shape
+    k0, nl, st = remove_horizontal(fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count,
+                                   fy.lo, fy.hi, fy.lo_step, fy.hi_step, fy.count,
+                                   workpiece.lower, workpiece.spacing, nx, ny, nz, p0, p1, R, rc, L, step,
+                                   sample, buffers.samp_ang, buffers.samp_eng, buffers.samp_cnt,
+                                   buffers.layer_removed)
+    _, st2 = remove_vertical(fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count, workpiece.lower,
+                             workpiece.spacing, nx, ny, p0, p1, R, rc, L, step)
+    if st or st2:
+        raise RuntimeError("dexel ray capacity exceeded; rebuild the workpiece with a larger capacity")
+    return k0, nl, buffers
