@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from identify.errors import InputError
 from simulate.toolpath.interpolation import Interpolation
@@ -44,9 +45,11 @@ from simulate.toolpath.switching import DEFAULT_THRESHOLD, switching_points
 #: TCP axes in the workpiece frame (columns x, y, z), paper 3.2.1 ``T_7^0``; z_tcp = -z_wcs.
 R_WCS_TCP = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
-#: rad. Reference configuration for the first IK point: A1 0, A2 75 deg (upper arm leaning
-#: forward), A3 -20 deg, A4 0, A5 115 deg (wrist bent so the tool points down), A6 90 deg.
-HOME_Q = np.radians([0.0, 75.0, -20.0, 0.0, 115.0, 90.0])
+#: rad. Reference configuration for the first IK point (robot convention of
+#: ``data/robots/max100.toml``): A1 0, A2 50 deg (upper arm leaning forward), A3 110 deg (forearm
+#: pointing forward and down), A4 0, A5 25 deg (wrist bent, away from the q5 = 0 singularity), A6 90 deg
+#: (TCP x = workpiece y, see ``R_WCS_TCP``).
+HOME_Q = np.radians([0.0, 50.0, 110.0, 0.0, 25.0, 90.0])
 
 
 def rpy_matrix(rpy) -> np.ndarray:
@@ -113,7 +116,7 @@ def parse_poses(data, source: str = "<poses>") -> list[Placement]:
         where = f"poses[{i}]"
         if not isinstance(item, dict):
             raise InputError("must be an object", source=source, field=where)
-        unknown = sorted(set(item) - {"name", "xyz", "rpy", "description"})
+        unknown = sorted(set(item) - {"name", "xyz", "rpy", "description", "comment"})
         if unknown:
             raise InputError(f"unknown key '{unknown[0]}'", source=source, field=f"{where}.{unknown[0]}")
         name = item.get("name")
@@ -159,14 +162,27 @@ def select_pose(poses: list[Placement], name: str | None, source: str = "<poses>
 
 def tcp_poses(xyz_wcs: np.ndarray, placement: Placement) -> np.ndarray:
     """TCP poses in the robot base frame, (N, 4, 4), for TCP positions in the WCS (N, 3), m."""
-    xyz_wcs = np.asarray(xyz_wcs, dtype=float)
+    xyz_wcs = np.ascontiguousarray(xyz_wcs, dtype=float)
     T_zp = placement.T
-    n = len(xyz_wcs)
-    T = np.zeros((n, 4, 4))
-    T[:, :3, :3] = T_zp[:3, :3] @ R_WCS_TCP
-    T[:, :3, 3] = xyz_wcs @ T_zp[:3, :3].T + T_zp[:3, 3]
-    T[:, 3, 3] = 1.0
+    T = np.empty((len(xyz_wcs), 4, 4))
+    _tcp_kernel(xyz_wcs, np.ascontiguousarray(T_zp[:3, :3]), np.ascontiguousarray(T_zp[:3, 3]),
+                np.ascontiguousarray(T_zp[:3, :3] @ R_WCS_TCP), T)
     return T
+
+
+@njit(cache=True)
+def _tcp_kernel(xyz, R_zp, p_zp, R_tcp, out):
+    for k in range(xyz.shape[0]):
+        for i in range(3):
+            acc = p_zp[i]
+            for m in range(3):
+                acc += R_zp[i, m] * xyz[k, m]
+                out[k, i, m] = R_tcp[i, m]
+            out[k, i, 3] = acc
+        out[k, 3, 0] = 0.0
+        out[k, 3, 1] = 0.0
+        out[k, 3, 2] = 0.0
+        out[k, 3, 3] = 1.0
 
 
 @dataclass(frozen=True)

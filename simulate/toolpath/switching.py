@@ -16,6 +16,7 @@ Noise of an axis at rest (below ``threshold``) never flags. Step 0 is 0.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 #: rad/s. Below this an axis counts as stopped. With the 2 ms cycle and backward differences of
 #: joint angles accurate to ~1e-12 rad, numerical noise is ~1e-9 rad/s; finishing feeds give
@@ -42,17 +43,22 @@ def switching_points(qd: np.ndarray, threshold: float = DEFAULT_THRESHOLD) -> np
         raise ValueError(f"qd must have shape (N, n_axes), got {qd.shape}")
     if not threshold >= 0:
         raise ValueError("threshold must be >= 0")
+    if qd.shape[1] > 62:
+        raise ValueError("at most 62 axes fit the switching integer")
     out = np.zeros(len(qd), dtype=np.int64)
-    if len(qd) < 2:
-        return out
-    prev, cur = qd[:-1], qd[1:]
-    aprev, acur = np.abs(prev), np.abs(cur)
-    reversal = (prev * cur < 0) & (aprev > threshold) & (acur > threshold)
-    stop = (acur <= threshold) & (aprev > threshold)
-    flags = reversal | stop
-    weights = (1 << np.arange(qd.shape[1], dtype=np.int64))
-    out[1:] = flags.astype(np.int64) @ weights
+    _switch_kernel(np.ascontiguousarray(qd), float(threshold), out)
     return out
+
+
+@njit(cache=True)
+def _switch_kernel(qd, thr, out):
+    for k in range(1, qd.shape[0]):
+        code = 0
+        for i in range(qd.shape[1]):
+            a, b = qd[k - 1, i], qd[k, i]
+            if abs(a) > thr and ((abs(b) <= thr) or (a * b < 0.0 and abs(b) > thr)):
+                code |= 1 << i
+        out[k] = code
 
 
 def axes_of(code: int) -> list[int]:
