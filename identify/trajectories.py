@@ -114,7 +114,7 @@ def _chirp_trajectory(kind: str, limits: AxisLimits, duration: float, rate: floa
 
 
 def universal_trajectory(limits: AxisLimits, duration: float = 60.0, rate: float = 1000.0, *,
-                         f0: float = 0.1, f1: float = 2.0, decay: float = 1e-3,
+                         f0: float = 0.1, f1: float = 2.0, decay: float = 1e-4,
                          amplitude_share: float = 1.0) -> Trajectory:
     """The Universal Trajectory (paper 2.3.1): up-chirp times a decaying exponential.
 
@@ -133,8 +133,8 @@ def universal_trajectory(limits: AxisLimits, duration: float = 60.0, rate: float
     f0, f1 : float
         Start and end frequency of the linear up-chirp [Hz].
     decay : float
-        Final over initial amplitude (1e-3 brings a rad-scale sweep down to the
-        sub-milliradian pre-sliding range).
+        Final over initial amplitude (1e-4 brings a rad-scale sweep down to about
+        1e-4 rad, the bristle-deflection (pre-sliding) range g/s0 of a robot joint).
     amplitude_share : float
         Share of the largest admissible amplitude.
     """
@@ -145,10 +145,10 @@ def universal_trajectory(limits: AxisLimits, duration: float = 60.0, rate: float
 def test_trajectory(limits: AxisLimits, duration: float = 60.0, rate: float = 1000.0) -> Trajectory:
     """Test variant of the UT (paper 2.3.1): same character, changed amplitudes and sweep.
 
-    80% of the admissible amplitude, sweep 0.15-2.6 Hz, slower decay (2e-3), another phase:
+    80% of the admissible amplitude, sweep 0.15-2.6 Hz, slower decay (2e-4), another phase:
     no interval coincides with the training UT.
     """
-    return _chirp_trajectory("test", limits, duration, rate, f0=0.15, f1=2.6, decay=2e-3,
+    return _chirp_trajectory("test", limits, duration, rate, f0=0.15, f1=2.6, decay=2e-4,
                              amplitude_share=0.8, phase=0.7, ramp=min(1.0, duration / 10))
 
 
@@ -233,6 +233,8 @@ def presliding_motion(limits: AxisLimits, duration: float = 40.0, rate: float = 
     q, qd, qdd, qddd = _derivatives(pos, t)
     return Trajectory("presliding", t, q, qd, qdd, qddd)
 
+
+test_trajectory.__test__ = False  # a trajectory for testing models, not a pytest test
 
 TRAJECTORIES = {"universal": universal_trajectory, "test": test_trajectory,
                 "stribeck": stribeck_steps, "presliding": presliding_motion}

@@ -39,9 +39,9 @@ class CoulombViscous(FrictionModel):
     def _fit(self, record: AxisRecord) -> None:
         cols = [np.sign(record.qd), record.qd] + _rigid_columns(record, self.rigid_)
         x, _ = _bounded_lsq(cols, record.friction_target, [True, True, True, False][: len(cols)])
-        self.params_ = {"mu": x[0], "nu": x[1]}
+        self.params_ = {"mu": float(x[0]), "nu": float(x[1])}
         if self.rigid_:
-            self.params_.update(J=x[2], c=x[3])
+            self.params_.update(J=float(x[2]), c=float(x[3]))
 
     def _friction(self, record: AxisRecord) -> np.ndarray:
         p = self.params_
@@ -81,9 +81,9 @@ class Stribeck(FrictionModel):
         log_vs = float(np.clip(res.x[0], *lo))
         delta = float(np.clip(res.x[1], *self.delta_bounds))
         x, _ = self._solve_linear(record, log_vs, delta)
-        self.params_ = {"fc": x[0], "fs": x[0] + x[1], "vs": 10.0**log_vs, "delta": delta, "nu": x[2]}
+        self.params_ = {"fc": float(x[0]), "fs": float(x[0] + x[1]), "vs": 10.0**log_vs, "delta": delta, "nu": float(x[2])}
         if self.rigid_:
-            self.params_.update(J=x[3], c=x[4])
+            self.params_.update(J=float(x[3]), c=float(x[4]))
 
     def _friction(self, record: AxisRecord) -> np.ndarray:
         p = self.params_

@@ -1,0 +1,18 @@
+"""Project-wide test settings: nothing a test does may write into the working tree."""
+import os
+
+import pytest
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _isolated_tracking(tmp_path_factory):
+    """Point MLflow at a throwaway SQLite store for the whole session."""
+    root = tmp_path_factory.mktemp("mlflow")
+    old = os.environ.get("MLFLOW_TRACKING_URI")
+    os.environ["MLFLOW_TRACKING_URI"] = f"sqlite:///{root}/mlruns.db"
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    yield
+    if old is None:
+        os.environ.pop("MLFLOW_TRACKING_URI", None)
+    else:
+        os.environ["MLFLOW_TRACKING_URI"] = old
