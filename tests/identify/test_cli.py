@@ -1,0 +1,88 @@
+"""The CLI chain trajectory -> synth -> fit -> predict, and its bad-input contract (exit 2, nothing written)."""
+import json
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from greybench.cli import app
+
+runner = CliRunner()
+
+
+def run(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def chain(tmp_path_factory):
+    d = tmp_path_factory.mktemp("chain")
+    assert run("trajectory", "universal", "--axis", 1, "--duration", 20, "--out", d / "ut.csv").exit_code == 0
+    assert run("trajectory", "test", "--duration", 20, "--out", d / "te.parquet").exit_code == 0
+    assert run("synth", "--trajectory", d / "ut.csv", "--out", d / "train.csv", "--seed", 1).exit_code == 0
+    assert run("synth", "--trajectory", d / "te.parquet", "--out", d / "test.parquet", "--seed", 2).exit_code == 0
+    return d
+
+
+def test_trajectory_json_is_one_object(tmp_path):
+    r = run("trajectory", "stribeck", "--axis", 2, "--out", tmp_path / "s.csv", "--json")
+    assert r.exit_code == 0
+    doc = json.loads(r.stdout)
+    assert doc["kind"] == "stribeck" and doc["peaks"]["qd"] <= doc["limits"]["vmax"]
+
+
+def test_synth_writes_the_record_columns(chain):
+    df = pd.read_csv(chain / "train.csv")
+    assert list(df.columns) == ["t", "q", "qd", "qdd", "tau", "temp", "tau_load"]
+
+
+def test_fit_json_and_predict(chain):
+    r = run("fit", "--model", "coulomb-viscous", "--train", chain / "train.csv", "--test", chain / "test.parquet",
+            "--out", chain / "cv", "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert doc["model"] == "coulomb-viscous" and set(doc["params"]) == {"mu", "nu", "J", "c"}
+    assert {"rmse", "r2"} <= set(doc["train"]) and {"rmse", "r2"} <= set(doc["test"])
+    assert (chain / "cv" / "params.json").exists()
+    r = run("predict", "--model", chain / "cv", "--data", chain / "test.parquet", "--out", chain / "pred.csv")
+    assert r.exit_code == 0, r.output
+    pred = pd.read_csv(chain / "pred.csv")
+    src = pd.read_parquet(chain / "test.parquet")
+    assert list(pred.columns) == list(src.columns) + ["tau_pred"]
+
+
+def test_bad_training_file_exits_2_and_writes_nothing(chain, tmp_path):
+    df = pd.read_csv(chain / "train.csv")
+    df.loc[42, "tau"] = float("nan")
+    bad = tmp_path / "bad.csv"
+    df.to_csv(bad, index=False)
+    r = run("fit", "--model", "lugre", "--train", bad, "--out", tmp_path / "m")
+    assert r.exit_code == 2
+    assert "bad.csv" in r.output and "'tau'" in r.output and "row 42" in r.output
+    assert not (tmp_path / "m").exists()
+
+
+def test_unknown_model_and_missing_column(chain, tmp_path):
+    r = run("fit", "--model", "nope", "--train", chain / "train.csv", "--out", tmp_path / "m")
+    assert r.exit_code == 2 and "unknown model" in r.output
+    df = pd.read_csv(chain / "train.csv").drop(columns=["q"])
+    df.to_csv(tmp_path / "noq.csv", index=False)
+    r = run("predict", "--model", chain / "cv", "--data", tmp_path / "noq.csv", "--out", tmp_path / "p.csv")
+    assert r.exit_code == 2 and "'q'" in r.output and not (tmp_path / "p.csv").exists()
+
+
+def test_synth_bad_config_key_names_it(chain, tmp_path):
+    cfg = tmp_path / "plant.toml"
+    cfg.write_text("inertia = 0.5\nfriction_level = 3\n")
+    r = run("synth", "--trajectory", chain / "ut.csv", "--out", tmp_path / "x.csv", "--config", cfg)
+    assert r.exit_code == 2 and "friction_level" in r.output and "plant.toml" in r.output
+    assert not (tmp_path / "x.csv").exists()
+    r = run("synth", "--trajectory", chain / "ut.csv", "--out", tmp_path / "x.csv", "--static-curve", "square")
+    assert r.exit_code == 2 and "static_curve" in r.output
+
+
+def test_trajectory_bad_robot_and_axis(tmp_path):
+    r = run("trajectory", "universal", "--axis", 9, "--out", tmp_path / "u.csv")
+    assert r.exit_code == 2 and "axis" in r.output and not (tmp_path / "u.csv").exists()
+    r = run("trajectory", "universal", "--robot", "nosuchrobot", "--out", tmp_path / "u.csv")
+    assert r.exit_code == 2 and "unknown robot" in r.output
