@@ -28,6 +28,10 @@ exact geometry of a :class:`~simulate.toolpath.gcode.Program`:
    seven constant-jerk phases are evaluated in numpy for all 2 ms sample times at once and mapped
    onto the exact line/arc geometry.
 
+Limitation: with zero acceleration at every junction, programs made of many very short colinear
+pieces (dense polylines) run slower than a controller that blends acceleration across junctions;
+CAM output with arcs (as the test-piece program) is not affected.
+
 Samples are uniform in time and therefore nonuniform along the path (paper Figure 5). The last
 sample is the first cycle at or after the end of motion, holding the end point.
 """
