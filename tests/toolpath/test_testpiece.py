@@ -90,3 +90,12 @@ def test_write_is_atomic_and_validated(tmp_path):
     assert ei.value.field == "tool-diameter"
     assert not (tmp_path / "big.nc").exists() and not (tmp_path / "big.stock.json").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tp.nc", "tp.stock.json"]
+
+
+@pytest.mark.parametrize("size", [160, 320])
+def test_shipped_programs_match_the_generator(size):
+    from pathlib import Path
+    data = Path(__file__).resolve().parents[2] / "data" / "programs"
+    assert (data / f"iso{size}.nc").read_text() == finishing_program(iso_test_piece(size))
+    stock = json.loads((data / f"iso{size}.stock.json").read_text())
+    assert stock == json.loads(json.dumps(stock_description(iso_test_piece(size), program=f"iso{size}.nc")))
