@@ -268,7 +268,11 @@ def _wrap_pi(x):
     return x - 2.0 * math.pi * math.floor((x + math.pi) / (2.0 * math.pi))
 
 
-@njit(cache=True)
+#: LLVM fast-math flags that keep NaN/inf semantics (the validity checks rely on them).
+_FM = {"contract", "arcp", "nsz", "reassoc"}
+
+
+@njit(cache=True, fastmath=_FM)
 def _solve_pose(T, Tinv, g, off, hint4, qout, reach, sing, F, M):
     """All 8 branches of one pose: qout (8, 6) [rad, wrapped to [-pi, pi)], reach/sing (8,) bool.
 
@@ -433,7 +437,7 @@ def _ik_all_kernel(T, Tinv, g, off, lower, upper, q_out, valid, reach_out, sing_
             valid[k, s] = ok
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_FM)
 def _ik_nearest_kernel(T, Tinv, g, off, lower, upper, qref, path, q_out, status, tol):
     """Pick per pose the valid branch nearest the reference (path: the previous solution)."""
     n = T.shape[0]
