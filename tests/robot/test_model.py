@@ -1,0 +1,123 @@
+"""Robot file loading, validation messages, save/load round trip, modified copies."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from identify.axis_limits import load_axis_limits
+from identify.errors import InputError
+from simulate.robot.model import load_robot, save_robot
+
+
+def test_max100_loads_with_units_and_values(robot, robot_path):
+    assert robot.name == "max100"
+    for key in ("a", "alpha", "d", "theta_offset", "lower", "upper", "vmax", "amax", "jmax", "stiffness", "backlash",
+                "gear_ratio", "motor_inertia"):
+        assert getattr(robot, key).shape == (6,)
+    assert robot.com.shape == (6, 3) and robot.inertia.shape == (6, 3, 3)
+    assert 700 < robot.mass.sum() < 1200          # about 1 t arm
+    assert np.all(robot.stiffness[:3] >= 1e6) and np.all(robot.stiffness[3:] < 1e6)
+    t = robot.tool
+    assert t.type == "flat" and t.diameter == 0.010 and t.flutes == 3 and t.corner_radius == 0.0
+    assert t.helix == pytest.approx(np.radians(30))
+    assert np.allclose(t.T_flange_tcp, [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.3], [0, 0, 0, 1]])
+    # identify reads the same limits
+    lim = load_axis_limits(robot_path, 2)
+    assert (lim.lower, lim.upper, lim.vmax) == (robot.lower[1], robot.upper[1], robot.vmax[1])
+
+
+def test_every_value_in_the_file_has_a_unit_or_source(robot_path):
+    for line in robot_path.read_text().splitlines():
+        m = re.match(r"^\s*(\w+)\s*=\s*([^#]+?)\s*(#.*)?$", line)
+        if m and m.group(1) not in ("name", "description"):
+            assert m.group(3), f"no comment (unit/source/assumed) on: {line}"
+
+
+def test_arrays_are_read_only(robot):
+    with pytest.raises(ValueError):
+        robot.stiffness[0] = 1.0
+
+
+def test_save_load_round_trip_is_identical(robot, tmp_path):
+    p = save_robot(robot, tmp_path / "copy.toml")
+    again = load_robot(p)
+    assert again.equals(robot)
+    for key in ("a", "alpha", "d", "stiffness", "inertia", "com"):
+        assert np.array_equal(getattr(again, key), getattr(robot, key))
+    assert np.array_equal(again.tool.T_flange_tcp, robot.tool.T_flange_tcp)
+
+
+def test_with_changes_halves_stiffness_and_adds_backlash(robot, tmp_path):
+    soft = robot.with_changes(stiffness=robot.stiffness * 0.5, backlash=robot.backlash + 1e-3)
+    assert np.array_equal(soft.stiffness, robot.stiffness * 0.5)
+    assert np.array_equal(robot.stiffness, load_robot(robot.source).stiffness)   # original unchanged
+    assert load_robot(save_robot(soft, tmp_path / "soft.toml")).equals(soft)
+    with pytest.raises(InputError) as ei:
+        robot.with_changes(stiffness=np.array([1e6, 1e6, -1.0, 1e5, 1e5, 1e5]))
+    assert ei.value.field == "joint[3].stiffness"
+
+
+def test_friction_model_reference_round_trips(robot, tmp_path):
+    from simulate.robot.model import FrictionSpec
+    fr = list(robot.friction)
+    fr[2] = FrictionSpec(model="models/axis3")
+    r2 = robot.with_changes(friction=tuple(fr))
+    assert load_robot(save_robot(r2, tmp_path / "r2.toml")).friction[2].model == "models/axis3"
+
+
+def _edit(src: Path, dst: Path, old: str, new: str, count: int = 1) -> Path:
+    text = src.read_text()
+    assert old in text
+    dst.write_text(text.replace(old, new, count))
+    return dst
+
+
+@pytest.mark.parametrize("old,new,field", [
+    ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = -1.0       #", "joint[3].stiffness"),
+    ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = \"stiff\"   #", "joint[3].stiffness"),
+    ("gear_ratio = 120.0      # assumed", "", "joint[3].gear_ratio"),
+    ("com = [0.03, -0.02, -0.05]", "com = [0.03, -0.02]", "joint[3].com"),
+    ("inertia = [[6.0, 0.0, 0.1], [0.0, 6.0, 0.0], [0.1, 0.0, 4.0]]",
+     "inertia = [[6.0, 0.0, 0.5], [0.0, 6.0, 0.0], [0.1, 0.0, 4.0]]", "joint[3].inertia"),
+    ("upper = 2.7052603", "upper = -3.0", "joint[3].upper"),
+    ("kv = 40.0               # 1/s\nkp_vel = 3.0e4", "kv = 0.0 # 1/s\nkp_vel = 3.0e4", "joint[3].servo.kv"),
+    ("fs = 55.0               # Nm", "fs = 5.0 # Nm", "joint[3].friction.fs"),
+    ("diameter = 0.010", "diameter = 0.0", "tool.diameter"),
+    ("flutes = 3 ", "flutes = 2.5 ", "tool.flutes"),
+])
+def test_bad_values_name_the_key(robot_path, tmp_path, old, new, field):
+    bad = _edit(robot_path, tmp_path / "bad.toml", old, new)
+    with pytest.raises(InputError) as ei:
+        load_robot(bad)
+    assert ei.value.field == field
+    assert str(bad) in str(ei.value) and field in str(ei.value)
+
+
+def test_wrong_joint_count_and_missing_tool(robot_path, tmp_path):
+    text = robot_path.read_text()
+    five = text[: text.index("# ---- joint 6 ----")] + text[text.index("# ---- tool"):]
+    (tmp_path / "five.toml").write_text(five)
+    with pytest.raises(InputError) as ei:
+        load_robot(tmp_path / "five.toml")
+    assert ei.value.field == "joint" and "found 5" in ei.value.message
+    (tmp_path / "notool.toml").write_text(text[: text.index("[tool]")])
+    with pytest.raises(InputError) as ei:
+        load_robot(tmp_path / "notool.toml")
+    assert ei.value.field == "tool"
+
+
+def test_invalid_toml_names_the_line(robot_path, tmp_path):
+    bad = _edit(robot_path, tmp_path / "syntax.toml", "mass = 150.0", "mass = = 150.0")
+    with pytest.raises(InputError) as ei:
+        load_robot(bad)
+    line = next(i for i, s in enumerate(bad.read_text().splitlines(), 1) if "mass = = 150.0" in s)
+    assert ei.value.line == line
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(InputError) as ei:
+        load_robot(tmp_path / "nope.toml")
+    assert "not found" in str(ei.value)
