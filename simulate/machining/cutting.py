@@ -14,8 +14,14 @@ edge angle psi (workpiece frame, from +x counter-clockwise), ``u = (cos psi, sin
   ``|Fz| = N a Kac c/pi + N a Kae/2`` (domain notes 6). The axial force pulls the cutter into the
   part (-z), the usual sign for a right-hand helix.
 
-Tooth passing is resolved by sub-sampling the 2 ms step: ``n_sub`` instants per step, at least
-``sub_per_tooth`` per tooth period; the step's force is their mean and its peak their maximum.
+The force handed to the robot model is the *mean over a spindle revolution* at the step's
+engagement and chip thickness, ``N/(2 pi) * integral f(psi) dpsi`` over the engaged arcs, computed
+in closed form per disk (the arcs are the angular Voronoi cells of the engagement samples). Tooth
+passing (hundreds of Hz) lies above the 2 ms step's Nyquist frequency, so a quasi-static robot
+compliance can only follow this mean; sampling the instantaneous force at a few instants per step
+instead aliases the tooth frequency into a biased mean. The instantaneous force is still evaluated
+at ``n_sub`` instants per step (at least ``per_tooth`` per tooth period, with helix lag) for the
+step's *peak* force.
 """
 from __future__ import annotations
 
@@ -100,13 +106,64 @@ def substeps(dt: float, omega: float, flutes: int, per_tooth: int = 8) -> int:
     return max(1, int(math.ceil(per_tooth * dt / t_tooth)))
 
 
+@njit(cache=True, inline="always")
+def _wrap(x):
+    return x - 2.0 * math.pi * math.floor((x + math.pi) / (2.0 * math.pi))
+
+
+@njit(cache=True)
+def _arc_force(p1_, p2_, A, B, Cc, b, sk, ck, T, kc, ke, acc):
+    """Add the integral over psi in [p1_, p2_] of the disk force per unit angle to acc (3,)."""
+    if p2_ <= p1_:
+        return
+    s1 = math.sin(p1_)
+    s2 = math.sin(p2_)
+    c1 = math.cos(p1_)
+    c2 = math.cos(p2_)
+    I0 = p2_ - p1_
+    Ic = s2 - s1
+    Is = -(c2 - c1)
+    d2 = (math.sin(2.0 * p2_) - math.sin(2.0 * p1_)) * 0.25
+    Icc = 0.5 * I0 + d2
+    Iss = 0.5 * I0 - d2
+    Isc = 0.5 * (s2 * s2 - s1 * s1)
+    Ig = A * Ic + B * Is + Cc * I0
+    Igc = A * Icc + B * Isc + Cc * Ic
+    Igs = A * Isc + B * Iss + Cc * Is
+    bt = b * T
+    acc[0] += -(bt * kc[0] * Igs + b * ke[0] * Is) - sk * (bt * kc[1] * Igc + b * ke[1] * Ic) \
+        - ck * (bt * kc[2] * Igc + b * ke[2] * Ic)
+    acc[1] += (bt * kc[0] * Igc + b * ke[0] * Ic) - sk * (bt * kc[1] * Igs + b * ke[1] * Is) \
+        - ck * (bt * kc[2] * Igs + b * ke[2] * Is)
+    acc[2] += ck * (bt * kc[1] * Ig + b * ke[1] * I0) - sk * (bt * kc[2] * Ig + b * ke[2] * I0)
+
+
+@njit(cache=True)
+def _cell_force(l, r, theta, alpha, A, B, Cc, b, sk, ck, T, kc, ke, acc):
+    """Integrate over the angular cell [l, r] (r >= l, width < 2 pi) intersected with the arc where
+    the chip thickness is positive, [theta - alpha, theta + alpha] (alpha >= pi: everywhere)."""
+    if alpha >= math.pi:
+        _arc_force(l, r, A, B, Cc, b, sk, ck, T, kc, ke, acc)
+        return
+    # shift so that the h > 0 arc is [-alpha, alpha]; the cell may then straddle +-pi
+    lo = _wrap(l - theta)
+    hi = lo + (r - l)
+    for shift in (0.0, -2.0 * math.pi):
+        a_ = max(lo + shift, -alpha)
+        b_ = min(hi + shift, alpha)
+        if b_ > a_:
+            _arc_force(a_ + theta, b_ + theta, A, B, Cc, b, sk, ck, T, kc, ke, acc)
+
+
 @njit(cache=True)
 def step_forces(samp_ang, samp_eng, samp_cnt, k0, n_layers, lower_z, s, p0, p1, dt, t_end,
                 R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, out):
-    """Mean and peak cutting force of one step (on the cutter, workpiece frame).
+    """Revolution-mean and peak cutting force of one step (on the cutter, workpiece frame).
 
-    Writes ``out[0:3]`` = mean force [N], ``out[3]`` = peak |F| over the sub-samples [N].
-    Samples of layer ``k0 + kk`` in row ``kk`` (sorted here in place).
+    Writes ``out[0:3]`` = mean force over a spindle revolution [N] at this step's engagement and
+    chip thickness (closed-form integral over the engaged arcs), ``out[3]`` = peak |F| of the
+    instantaneous force over ``n_sub`` instants of the step [N]. Samples of layer ``k0 + kk`` are
+    in row ``kk`` (sorted here in place).
     """
     vx = (p1[0] - p0[0]) / dt
     vy = (p1[1] - p0[1]) / dt
@@ -128,61 +185,86 @@ def step_forces(samp_ang, samp_eng, samp_cnt, k0, n_layers, lower_z, s, p0, p1, 
     if klow < 0:
         return
     grid_bottom = lower_z
-    for m in range(n_sub):
-        t = t_end - dt + (m + 0.5) * dt / n_sub
-        fx = 0.0
-        fy = 0.0
-        fz = 0.0
-        for kk in range(klow, n_layers):
-            cnt = samp_cnt[kk]
-            if cnt == 0:
+    vxy = math.sqrt(vx * vx + vy * vy)
+    theta = math.atan2(vy, vx)
+    acc = np.zeros(3)
+    inst = np.zeros((n_sub, 3))
+    for kk in range(klow, n_layers):
+        cnt = samp_cnt[kk]
+        if cnt == 0:
+            continue
+        zc = lower_z + (k0 + kk + 0.5) * s
+        zp = zc - p1[2]
+        r = radius_at(zp, R, rc, L)
+        if r <= 0.0:
+            continue
+        b_hi = min(zc + 0.5 * s, p1[2] + L)
+        b_lo = zc - 0.5 * s
+        if kk == klow:
+            # the lowest sampled disk also takes the slice between the tool tip and its slab
+            b_lo = max(p1[2], zc - s, grid_bottom)
+        dzk = b_hi - b_lo
+        if dzk <= 0.0:
+            continue
+        if zp < rc:
+            sk = (r - a_in) / rc
+            ck = (rc - zp) / rc
+        else:
+            sk = 1.0
+            ck = 0.0
+        if sk < 1e-3:
+            continue
+        b = dzk / sk
+        # chip thickness h = T * g(psi), g = A cos + B sin + Cc = S cos(psi - theta) + Cc
+        A = sk * vx
+        B = sk * vy
+        Cc = -ck * vz
+        S = sk * vxy
+        if S <= abs(Cc):
+            if Cc <= 0.0:
                 continue
-            zc = lower_z + (k0 + kk + 0.5) * s
-            zp = zc - p1[2]
-            r = radius_at(zp, R, rc, L)
-            if r <= 0.0:
+            alpha = 4.0
+        else:
+            alpha = math.acos(min(1.0, max(-1.0, -Cc / S)))
+        ang = samp_ang[kk]
+        eng = samp_eng[kk]
+        for i in range(cnt):
+            if eng[i] == 0:
                 continue
-            b_hi = min(zc + 0.5 * s, p1[2] + L)
-            b_lo = zc - 0.5 * s
-            if kk == klow:
-                # the lowest sampled disk also takes the slice between the tool tip and its slab
-                b_lo = max(p1[2], zc - s, grid_bottom)
-            dzk = b_hi - b_lo
-            if dzk <= 0.0:
-                continue
-            if zp < rc:
-                sk = (r - a_in) / rc
-                ck = (rc - zp) / rc
+            prev = ang[i - 1] if i > 0 else ang[cnt - 1] - 2.0 * math.pi
+            nxt = ang[i + 1] if i + 1 < cnt else ang[0] + 2.0 * math.pi
+            if cnt == 1:
+                l = ang[i] - math.pi
+                rr = ang[i] + math.pi
             else:
-                sk = 1.0
-                ck = 0.0
-            if sk < 1e-3:
-                continue
-            b = dzk / sk
-            lag = zp * tan_helix / R
+                l = 0.5 * (prev + ang[i])
+                rr = 0.5 * (ang[i] + nxt)
+            _cell_force(l, rr, theta, alpha, A, B, Cc, b, sk, ck, t_tooth, kc, ke, acc)
+        # instantaneous force at n_sub instants, for the peak
+        lag = zp * tan_helix / R
+        for m in range(n_sub):
+            t = t_end - dt + (m + 0.5) * dt / n_sub
             for j in range(N):
                 psi = phase - omega * t + 2.0 * math.pi * j / N + lag
                 ux = math.cos(psi)
                 uy = math.sin(psi)
-                nx = sk * ux
-                ny = sk * uy
-                nz = -ck
-                vn = vx * nx + vy * ny + vz * nz
+                vn = A * ux + B * uy + Cc
                 if vn <= 0.0:
                     continue
-                if nearest_engaged(samp_ang[kk], samp_eng[kk], cnt, psi) == 0:
+                if nearest_engaged(ang, eng, cnt, psi) == 0:
                     continue
                 h = t_tooth * vn
                 ft = b * (kc[0] * h + ke[0])
                 fr = b * (kc[1] * h + ke[1])
                 fa = b * (kc[2] * h + ke[2])
-                # e = (uy, -ux, 0); a = (ck ux, ck uy, sk)
-                fx += -ft * uy - fr * nx - fa * ck * ux
-                fy += ft * ux - fr * ny - fa * ck * uy
-                fz += -fr * nz - fa * sk
-        out[0] += fx / n_sub
-        out[1] += fy / n_sub
-        out[2] += fz / n_sub
-        mag = math.sqrt(fx * fx + fy * fy + fz * fz)
+                inst[m, 0] += -ft * uy - fr * sk * ux - fa * ck * ux
+                inst[m, 1] += ft * ux - fr * sk * uy - fa * ck * uy
+                inst[m, 2] += fr * ck - fa * sk
+    f = N / (2.0 * math.pi)
+    out[0] = acc[0] * f
+    out[1] = acc[1] * f
+    out[2] = acc[2] * f
+    for m in range(n_sub):
+        mag = math.sqrt(inst[m, 0] ** 2 + inst[m, 1] ** 2 + inst[m, 2] ** 2)
         if mag > out[3]:
             out[3] = mag

@@ -126,7 +126,8 @@ def _h_end(s, c1, c2, axis, across, p0, d, R, rc, L, sign):
     de = c1 - (p0[across] + s * d[across])
     v = r * r - de * de
     w = math.sqrt(v) if v > 0.0 else 0.0
-    return sign * (p0[axis] + s * d[axis] + sign * w)  # minimised: -exit or +entry
+    a = p0[axis] + s * d[axis]
+    return (a - w) if sign < 0.0 else -(a + w)  # minimised: the entry, or minus the exit
 
 
 @njit(cache=True)
@@ -391,6 +392,15 @@ def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower,
     k0, k1 = _grid_range(zmin, zmax, lower[2], s, nz)
     j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
     i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
+    # unclipped ray index ranges around the circle at p1 (for the engagement samples)
+    ju0 = int(math.ceil((p1[1] - R - lower[1]) / s - 0.5))
+    ju1 = int(math.floor((p1[1] + R - lower[1]) / s - 0.5))
+    iu0 = int(math.ceil((p1[0] - R - lower[0]) / s - 0.5))
+    iu1 = int(math.floor((p1[0] + R - lower[0]) / s - 0.5))
+    ju0 = min(ju0, j0)
+    ju1 = max(ju1, j1)
+    iu0 = min(iu0, i0)
+    iu1 = max(iu1, i1)
     nl = k1 - k0 + 1
     if nl <= 0:
         return k0, 0, 0
@@ -404,20 +414,27 @@ def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower,
         r1 = radius_at(zc - p1[2], R, rc, L)
         m = 0
         rem = 0.0
-        for j in range(j0, j1 + 1):
+        for j in range(ju0, ju1 + 1):
+            # rays beyond the grid or without material still give (non-engaged) samples, so the
+            # engaged arcs end where the material ends
+            inside = 0 <= j < ny
             ridx = k * ny + j
-            if xcnt[ridx] == 0:
-                continue
             yc = lower[1] + (j + 0.5) * s
             if sample and r1 > 0.0:
                 de = yc - p1[1]
                 if de * de < r1 * r1 and m + 2 <= mcap:
                     w = math.sqrt(r1 * r1 - de * de)
                     samp_ang[kk, m] = math.atan2(de, -w)
-                    samp_eng[kk, m] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] - w + _ETA) else 0
                     samp_ang[kk, m + 1] = math.atan2(de, w)
-                    samp_eng[kk, m + 1] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] + w - _ETA) else 0
+                    if inside:
+                        samp_eng[kk, m] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] - w + _ETA) else 0
+                        samp_eng[kk, m + 1] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] + w - _ETA) else 0
+                    else:
+                        samp_eng[kk, m] = 0
+                        samp_eng[kk, m + 1] = 0
                     m += 2
+            if not inside or xcnt[ridx] == 0:
+                continue
             a, b = swept_interval(0, yc, zc, p0, p1, R, rc, L)
             if a < b:
                 got = subtract_interval(xlo, xhi, xls, xhs, xcnt, ridx, a, b, step)
@@ -425,20 +442,25 @@ def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower,
                     overflow[kk] = 1
                 else:
                     rem += got
-        for i in range(i0, i1 + 1):
+        for i in range(iu0, iu1 + 1):
+            inside = 0 <= i < nx
             ridx = k * nx + i
-            if ycnt[ridx] == 0:
-                continue
             xc = lower[0] + (i + 0.5) * s
             if sample and r1 > 0.0:
                 de = xc - p1[0]
                 if de * de < r1 * r1 and m + 2 <= mcap:
                     w = math.sqrt(r1 * r1 - de * de)
                     samp_ang[kk, m] = math.atan2(-w, de)
-                    samp_eng[kk, m] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] - w + _ETA) else 0
                     samp_ang[kk, m + 1] = math.atan2(w, de)
-                    samp_eng[kk, m + 1] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] + w - _ETA) else 0
+                    if inside:
+                        samp_eng[kk, m] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] - w + _ETA) else 0
+                        samp_eng[kk, m + 1] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] + w - _ETA) else 0
+                    else:
+                        samp_eng[kk, m] = 0
+                        samp_eng[kk, m + 1] = 0
                     m += 2
+            if not inside or ycnt[ridx] == 0:
+                continue
             a, b = swept_interval(1, xc, zc, p0, p1, R, rc, L)
             if a < b:
                 got = subtract_interval(ylo, yhi, yls, yhs, ycnt, ridx, a, b, step)

@@ -132,8 +132,11 @@ class Cutter:
         for pt in prof[1:]:
             if abs(pt[0] - clean[-1][0]) > 1e-12 or abs(pt[1] - clean[-1][1]) > 1e-12:
                 clean.append(pt)
-        linestring = np.array(clean)
-        return trimesh.creation.revolve(linestring, sections=sections)
+        # built in millimetres: trimesh's absolute merge tolerances are tuned for unit-sized parts
+        linestring = np.array(clean) * 1e3
+        m = trimesh.creation.revolve(linestring, sections=sections)
+        m.apply_scale(1e-3)
+        return m
 
 
 def make_cutter(kind: str = "flat", diameter: float = 10e-3, corner_radius: float | None = None,

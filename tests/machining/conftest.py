@@ -1,0 +1,56 @@
+"""Fixtures and helpers for the machining tests: run tool paths through removal and forces."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from simulate.machining.cutting import Spindle, load_material, step_forces, substeps
+from simulate.machining.removal import RemovalBuffers, remove_step
+
+
+def run_path(wp, cutter, points, dt=0.002, rpm=10000.0, material="Al7075", forces=True):
+    """Remove along consecutive points (tool tip, m); returns per-step forces (n-1, 4)."""
+    mat = load_material(material)
+    sp = Spindle.from_rpm(rpm)
+    steps = np.diff(points, axis=0)
+    buf = RemovalBuffers(wp, cutter.radius, float(np.max(np.linalg.norm(steps, axis=1))) if len(steps) else 0.0)
+    nsub = substeps(dt, sp.omega, cutter.flutes)
+    out = np.zeros(4)
+    F = np.zeros((len(points) - 1, 4))
+    for k in range(1, len(points)):
+        k0, nl, _ = remove_step(wp, cutter, points[k - 1], points[k], k, buf, sample=forces)
+        if forces:
+            step_forces(buf.samp_ang, buf.samp_eng, buf.samp_cnt, k0, nl, wp.lower[2], wp.spacing,
+                        points[k - 1], points[k], dt, k * dt, cutter.radius, cutter.corner_radius,
+                        cutter.length, cutter.flutes, math.tan(cutter.helix), sp.omega, sp.phase,
+                        mat.kc, mat.ke, nsub, out)
+            F[k - 1] = out
+    return F
+
+
+def line(a, b, step):
+    """Points from a to b (m) at about ``step`` (m) spacing, both ends included."""
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    n = max(1, int(math.ceil(np.linalg.norm(b - a) / step)))
+    return a + (b - a) * np.linspace(0, 1, n + 1)[:, None]
+
+
+def arc(center, radius, a0, a1, z, step):
+    """Points on a circular arc (angles in rad, counter-clockwise if a1 > a0)."""
+    n = max(2, int(math.ceil(abs(a1 - a0) * radius / step)))
+    t = np.linspace(a0, a1, n + 1)
+    return np.column_stack([center[0] + radius * np.cos(t), center[1] + radius * np.sin(t), np.full_like(t, z)])
+
+
+@pytest.fixture
+def helpers():
+    class H:
+        pass
+    h = H()
+    h.run_path = run_path
+    h.line = line
+    h.arc = arc
+    return h
