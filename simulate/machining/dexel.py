@@ -152,13 +152,47 @@ class TriDexel:
         return wp
 
     @classmethod
+    def from_solids(cls, solids: list["ConvexSolid"], spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
+        """Workpiece as the union of convex solids (prisms with planar tops, cylinders) [m]."""
+        if not solids:
+            raise InputError("stock has no solids", field="stock")
+        lower = np.min([sd.lower for sd in solids], axis=0)
+        upper = np.max([sd.upper for sd in solids], axis=0)
+        wp = cls.empty(lower, upper, spacing, capacity)
+        for fam in wp.families:
+            c1, c2 = wp.ray_coords(fam.axis)
+            others = [a for a in range(3) if a != fam.axis]
+            origin = np.zeros((len(c1), 3))
+            origin[:, others[0]] = c1
+            origin[:, others[1]] = c2
+            los = np.empty((len(solids), len(c1)))
+            his = np.empty((len(solids), len(c1)))
+            for i, sd in enumerate(solids):
+                los[i], his[i] = sd.line_interval(origin, fam.axis)
+            _merge_kernel(fam.lo, fam.hi, fam.count, los, his)
+            if np.any(fam.count < 0):
+                raise InputError(f"stock too complex for dexel capacity {fam.capacity} along axis {fam.axis}",
+                                 field="stock")
+        return wp
+
+    @classmethod
     def box(cls, lower, upper, spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
         """A rectangular block ``[lower, upper]`` [m]."""
         return cls.from_boxes([(lower, upper)], spacing, capacity)
 
     @classmethod
     def from_stock_file(cls, path, spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
-        """Workpiece from a stock description JSON (see :func:`read_stock_boxes`)."""
+        """Workpiece from a stock description JSON: the toolpath's test-piece stock (``base`` +
+        ``blanks`` of kind polygon / circle with planar tops, see :func:`read_stock_solids`) or the
+        simple box form of :func:`read_stock_boxes`."""
+        p = Path(path)
+        if p.exists():
+            try:
+                doc = json.loads(p.read_text())
+            except json.JSONDecodeError:
+                doc = None
+            if isinstance(doc, dict) and "base" in doc:
+                return cls.from_solids(read_stock_solids(p), spacing, capacity)
         return cls.from_boxes(read_stock_boxes(path), spacing, capacity)
 
     # ---- geometry helpers ---------------------------------------------------------------
@@ -281,6 +315,160 @@ def read_stock_boxes(path) -> list[tuple[np.ndarray, np.ndarray]]:
         raise InputError("'blanks' must be a list", source=str(p), field="blanks")
     boxes += [one(b, "blanks", i) for i, b in enumerate(blanks)]
     return boxes
+
+
+@dataclass
+class ConvexSolid:
+    """A convex solid: half-spaces ``n . p <= b`` (rows ``[nx, ny, nz, b]``) and optionally a
+    vertical cylinder ``(x - cx)^2 + (y - cy)^2 <= r^2`` (``cylinder = (cx, cy, r)``), metres."""
+
+    halfspaces: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    cylinder: tuple | None = None
+
+    def line_interval(self, origin: np.ndarray, axis: int):
+        """Interval (lo, hi) along axis-parallel lines through ``origin`` (M, 3); NaN if missed."""
+        lo = np.full(len(origin), -np.inf)
+        hi = np.full(len(origin), np.inf)
+        for nx_, ny_, nz_, b in self.halfspaces:
+            n = np.array([nx_, ny_, nz_])
+            na = n[axis]
+            rest = origin @ n - origin[:, axis] * na  # n . o without the ray coordinate
+            if abs(na) < 1e-15:
+                bad = rest > b
+                lo[bad] = np.inf
+            else:
+                t = (b - rest) / na
+                if na > 0:
+                    hi = np.minimum(hi, t)
+                else:
+                    lo = np.maximum(lo, t)
+        if self.cylinder is not None:
+            cx, cy, r = self.cylinder
+            if axis == 2:
+                bad = (origin[:, 0] - cx) ** 2 + (origin[:, 1] - cy) ** 2 > r * r
+                lo[bad] = np.inf
+            else:
+                other = 1 - axis
+                e = origin[:, other] - (cy if other == 1 else cx)
+                c = cx if axis == 0 else cy
+                w2 = r * r - e * e
+                w = np.sqrt(np.clip(w2, 0, None))
+                lo = np.where(w2 < 0, np.inf, np.maximum(lo, c - w))
+                hi = np.minimum(hi, c + w)
+        miss = ~(lo < hi)
+        lo[miss] = np.nan
+        hi[miss] = np.nan
+        return lo, hi
+
+
+def box_solid(lower, upper) -> ConvexSolid:
+    lower = np.asarray(lower, float)
+    upper = np.asarray(upper, float)
+    hs = []
+    for a in range(3):
+        n = np.zeros(3)
+        n[a] = 1
+        hs.append([*n, upper[a]])
+        hs.append([*(-n), -lower[a]])
+    return ConvexSolid(np.array(hs), lower, upper)
+
+
+def read_stock_solids(path) -> list[ConvexSolid]:
+    """Solids of the toolpath's stock description (:mod:`simulate.toolpath.testpiece`).
+
+    ``units`` "m" or "mm"; ``base`` and each of ``blanks``: ``kind`` "polygon" (convex,
+    ``vertices`` [[x, y], ...]) or "circle" (``center``, ``radius``), ``z_bottom`` and a planar
+    ``top`` ``z = z0 + dzdx*x + dzdy*y``.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise InputError("stock description not found", source=str(p))
+    try:
+        doc = json.loads(p.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not valid JSON: {exc.msg}", source=str(p), line=exc.lineno, column=exc.colno) from None
+    if not isinstance(doc, dict) or "base" not in doc:
+        raise InputError("stock description has no 'base'", source=str(p), field="base")
+    scale = {"mm": 1e-3, "m": 1.0}.get(doc.get("units", "m"))
+    if scale is None:
+        raise InputError(f"unknown units '{doc.get('units')}' (use 'mm' or 'm')", source=str(p), field="units")
+    items = [("base", None, doc["base"])] + [("blanks", i, b) for i, b in enumerate(doc.get("blanks", []))]
+    out = []
+    for fieldname, row, it in items:
+        try:
+            zb = float(it["z_bottom"]) * scale
+            top = it["top"]
+            z0, gx, gy = float(top["z0"]) * scale, float(top.get("dzdx", 0.0)), float(top.get("dzdy", 0.0))
+            hs = [[0, 0, -1, -zb], [-gx, -gy, 1, z0]]
+            cyl = None
+            if it["kind"] == "polygon":
+                v = np.asarray(it["vertices"], float) * scale
+                if v.ndim != 2 or v.shape[1] != 2 or len(v) < 3:
+                    raise ValueError
+                area = 0.5 * np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1])
+                if area < 0:
+                    v = v[::-1]
+                for a, b in zip(v, np.roll(v, -1, axis=0)):
+                    d = b - a
+                    n = np.array([d[1], -d[0]])  # outward for counter-clockwise vertices
+                    n /= np.linalg.norm(n)
+                    hs.append([n[0], n[1], 0.0, float(n @ a)])
+                xy_lo, xy_hi = v.min(axis=0), v.max(axis=0)
+            elif it["kind"] == "circle":
+                c = np.asarray(it["center"], float) * scale
+                r = float(it["radius"]) * scale
+                if c.shape != (2,) or not r > 0:
+                    raise ValueError
+                cyl = (c[0], c[1], r)
+                xy_lo, xy_hi = c - r, c + r
+            else:
+                raise ValueError
+        except (KeyError, TypeError, ValueError):
+            raise InputError("needs kind polygon (vertices) or circle (center, radius), z_bottom and top.z0",
+                             source=str(p), field=fieldname, row=row) from None
+        corners = np.array([[x, y] for x in (xy_lo[0], xy_hi[0]) for y in (xy_lo[1], xy_hi[1])])
+        ztop = z0 + corners @ np.array([gx, gy])
+        lower = np.array([xy_lo[0], xy_lo[1], zb])
+        upper = np.array([xy_hi[0], xy_hi[1], float(ztop.max())])
+        if not np.all(upper > lower):
+            raise InputError("solid has no volume", source=str(p), field=fieldname, row=row)
+        out.append(ConvexSolid(np.array(hs, float), lower, upper, cyl))
+    return out
+
+
+@njit(cache=True)
+def _merge_kernel(lo, hi, count, los, his):
+    ns = los.shape[0]
+    cap = lo.shape[1]
+    a_ = np.empty(ns)
+    b_ = np.empty(ns)
+    for r in range(lo.shape[0]):
+        m = 0
+        for q in range(ns):
+            if los[q, r] == los[q, r]:  # not NaN
+                a_[m] = los[q, r]
+                b_[m] = his[q, r]
+                m += 1
+        n = 0
+        if m > 0:
+            order = np.argsort(a_[:m])
+            for q in range(m):
+                a = a_[order[q]]
+                b = b_[order[q]]
+                if n > 0 and a <= hi[r, n - 1]:
+                    if b > hi[r, n - 1]:
+                        hi[r, n - 1] = b
+                else:
+                    if n == cap:
+                        count[r] = -1
+                        break
+                    lo[r, n] = a
+                    hi[r, n] = b
+                    n += 1
+        if count[r] >= 0:
+            count[r] = n
 
 
 def _fill_family_boxes(wp: TriDexel, fam: RayFamily, boxes) -> None:
