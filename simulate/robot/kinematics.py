@@ -273,10 +273,12 @@ _FM = {"contract", "arcp", "nsz", "reassoc"}
 
 
 @njit(cache=True, fastmath=_FM)
-def _solve_pose(T, Tinv, g, off, hint4, qout, reach, sing, F, M):
+def _solve_pose(T, Tinv, g, off, hint4, qout, reach, sing, F, M, lower, upper, prune):
     """All 8 branches of one pose: qout (8, 6) [rad, wrapped to [-pi, pi)], reach/sing (8,) bool.
 
-    Returns False when the pose itself is invalid (non-finite, not a rotation).
+    With ``prune``, arm branches whose q1..q3 cannot lie inside [lower, upper] are skipped (not
+    marked reachable) before their wrist is solved. Returns -1 when the pose itself is invalid
+    (non-finite, not a rotation), else the number of branches pruned by the limits.
     """
     a1, a2, b, c1, c2, c3, c4 = g[0], g[1], g[2], g[3], g[4], g[5], g[6]
     # flange pose = T * inv(T_flange_tcp); F (3, 4) and M (3, 3) are scratch arrays
@@ -295,7 +297,7 @@ def _solve_pose(T, Tinv, g, off, hint4, qout, reach, sing, F, M):
         for j in range(6):
             qout[s, j] = np.nan
     if not finite:
-        return False
+        return -1
     # orthonormality of the rotation (columns unit and orthogonal, right-handed)
     err = 0.0
     for c1_ in range(3):
@@ -305,14 +307,15 @@ def _solve_pose(T, Tinv, g, off, hint4, qout, reach, sing, F, M):
     det = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]) - F[0, 1] * (F[1, 0] * F[2, 2] - F[1, 2] * F[2, 0])
            + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
     if err > 1e-6 or det < 0.0:
-        return False
+        return -1
     # wrist centre
     cx = F[0, 3] - c4 * F[0, 2]
     cy = F[1, 3] - c4 * F[1, 2]
     cz = F[2, 3] - c4 * F[2, 2]
     rho2 = cx * cx + cy * cy - b * b
+    pruned = 0
     if rho2 < 0.0:
-        return True
+        return 0
     rho = math.sqrt(rho2)
     psi = math.atan2(cy, cx)
     phi = math.atan2(b, rho)
@@ -325,6 +328,7 @@ def _solve_pose(T, Tinv, g, off, hint4, qout, reach, sing, F, M):
     k2 = a2 * a2 + c3 * c3
     k = math.sqrt(k2)
     psi3 = math.atan2(a2, c3)
+    cS, sS = c3 / k, a2 / k          # cos/sin psi3
     h = cz - c1
     for sh in range(2):
         if sh == 0:
@@ -340,10 +344,15 @@ def _solve_pose(T, Tinv, g, off, hint4, qout, reach, sing, F, M):
         cosv = (r * r + h * h - c2 * c2 - k2) / (2.0 * c2 * k)
         if cosv > 1.0 + 1e-12 or cosv < -1.0 - 1e-12:
             continue
+        if prune and math.isnan(_fit_limits(_wrap_pi(t1 - off[0]), 0.0, lower[0], upper[0])):
+            pruned += 4
+            continue
         cosv = min(1.0, max(-1.0, cosv))
         acv = math.acos(cosv)
         sinv = math.sqrt(1.0 - cosv * cosv)
         a_rh = math.atan2(r, h)
+        rh = math.sqrt(r * r + h * h)
+        cA, sA = (h / rh, r / rh) if rh > 0.0 else (1.0, 0.0)
         for el in range(2):
             ph = acv if el == 0 else -acv          # theta3 + psi3 (OPW)
             sph_ = sinv if el == 0 else -sinv
@@ -353,7 +362,17 @@ def _solve_pose(T, Tinv, g, off, hint4, qout, reach, sing, F, M):
             th1 = t1
             th2 = t2o - 0.5 * math.pi
             th3 = t3o + 0.5 * math.pi
-            c23, s23 = math.cos(th2 + th3), math.sin(th2 + th3)
+            if prune and (math.isnan(_fit_limits(_wrap_pi(th2 - off[1]), 0.0, lower[1], upper[1]))
+                          or math.isnan(_fit_limits(_wrap_pi(th3 - off[2]), 0.0, lower[2], upper[2]))):
+                pruned += 2
+                continue
+            # cos/sin of th2 + th3 = a_rh - beta + ph - psi3 by complex products (no trig)
+            bc, bs = c2 + k * cosv, k * sph_
+            nb = math.sqrt(bc * bc + bs * bs)
+            bc, bs = bc / nb, bs / nb
+            xc, xs = cA * bc + sA * bs, sA * bc - cA * bs          # a_rh - beta
+            yc, ys = xc * cosv - xs * sph_, xs * cosv + xc * sph_  # + ph
+            c23, s23 = yc * cS + ys * sS, ys * cS - yc * sS         # - psi3
             # R36 = R03^T R06 with R03 = [[c1 c23, -s1, c1 s23], [s1 c23, c1, s1 s23], [-s23, 0, c23]]
             for cc in range(3):
                 M[0, cc] = c1t * c23 * F[0, cc] + s1t * c23 * F[1, cc] - s23 * F[2, cc]
@@ -390,7 +409,7 @@ def _solve_pose(T, Tinv, g, off, hint4, qout, reach, sing, F, M):
                 qout[s, 5] = _wrap_pi(tt6 - off[5])
                 reach[s] = True
                 sing[s] = singular
-    return True
+    return pruned
 
 
 @njit(cache=True)
@@ -420,7 +439,7 @@ def _ik_all_kernel(T, Tinv, g, off, lower, upper, q_out, valid, reach_out, sing_
     F = np.empty((3, 4))
     M = np.empty((3, 3))
     for k in range(n):
-        _solve_pose(T[k], Tinv, g, off, 0.0, qs, reach, sing, F, M)
+        _solve_pose(T[k], Tinv, g, off, 0.0, qs, reach, sing, F, M, lower, upper, False)
         for s in range(8):
             reach_out[k, s] = reach[s]
             sing_out[k, s] = sing[s]
@@ -448,16 +467,18 @@ def _ik_nearest_kernel(T, Tinv, g, off, lower, upper, qref, path, q_out, status,
     cand = np.empty(6)
     F = np.empty((3, 4))
     M = np.empty((3, 3))
+    lo = lower - tol
+    hi = upper + tol
     for j in range(6):
         ref[j] = qref[0, j]
     for k in range(n):
         if not path and k > 0:
             for j in range(6):
                 ref[j] = qref[k, j]
-        good = _solve_pose(T[k], Tinv, g, off, ref[3], qs, reach, sing, F, M)
+        code = _solve_pose(T[k], Tinv, g, off, ref[3], qs, reach, sing, F, M, lo, hi, True)
         best = -1
         best_d = np.inf
-        any_reach = False
+        any_reach = code > 0
         for s in range(8):
             if not reach[s]:
                 continue
@@ -488,7 +509,7 @@ def _ik_nearest_kernel(T, Tinv, g, off, lower, upper, qref, path, q_out, status,
         else:
             for j in range(6):
                 q_out[k, j] = np.nan
-            if not good:
+            if code < 0:
                 status[k] = 4
             elif any_reach:
                 status[k] = 3
@@ -531,6 +552,8 @@ def ik(robot: Robot, T) -> IKSolutions:
 def _run_nearest(robot: Robot, T, q_ref, path: bool) -> IKResult:
     T2, _ = _as_T(T)
     n = T2.shape[0]
+    if n == 0:
+        return IKResult(q=np.empty((0, 6)), ok=np.empty(0, dtype=bool), status=np.empty(0, dtype=np.int8))
     qr = np.asarray(q_ref, dtype=float)
     if qr.ndim == 1:
         if qr.shape != (6,):

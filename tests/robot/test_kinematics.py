@@ -182,3 +182,10 @@ def test_non_opw_geometry_is_rejected(robot):
     with pytest.raises(InputError) as ei:
         ik(bent, fk(robot, np.zeros(6)))
     assert ei.value.field == "joint[4].a"
+
+
+def test_empty_input(robot):
+    res = ik_path(robot, np.empty((0, 4, 4)), np.zeros(6))
+    assert res.q.shape == (0, 6) and res.ok.shape == (0,)
+    assert ik_nearest(robot, np.empty((0, 4, 4)), np.zeros(6)).q.shape == (0, 6)
+    assert fk(robot, np.empty((0, 6))).shape == (0, 4, 4)
