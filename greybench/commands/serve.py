@@ -1,0 +1,52 @@
+"""``greybench serve`` (the REST service) and ``greybench bench service`` (load test on loopback)."""
+from __future__ import annotations
+
+import typer
+
+from greybench.support import emit_json, err, guarded, out
+
+
+def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+    @app.command("serve")
+    @guarded
+    def serve(host: str = typer.Option("127.0.0.1", help="interface to listen on (IP address)"),
+              port: int = typer.Option(8000, min=1, max=65535, help="TCP port [-]"),
+              log_level: str = typer.Option("info", help="uvicorn log level (critical, error, warning, info, debug)")):
+        """Start the REST service (uvicorn). Configuration from the environment, validated at start:
+        GREYBENCH_API_KEYS (comma-separated) or GREYBENCH_DEV_MODE=1, GREYBENCH_DATA_DIR, GREYBENCH_WORKERS,
+        GREYBENCH_QUEUE_SIZE, GREYBENCH_MAX_BODY_BYTES [bytes], RAY_ADDRESS, MLFLOW_TRACKING_URI."""
+        import uvicorn
+
+        from service.app import create_app
+        from service.settings import load_settings
+
+        settings = load_settings()
+        if settings.dev_mode and not settings.api_keys:
+            from service.settings import DEV_API_KEY
+            err.print(f"[yellow]development mode:[/] the API key is '{DEV_API_KEY}' (do not expose this server)")
+        uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level)
+
+    @bench_app.command("service")
+    @guarded
+    def bench_service(clients: int = typer.Option(50, min=1, max=1000, help="concurrent clients [-]"),
+                      duration: float = typer.Option(20.0, min=1.0, max=600.0, help="load duration [s]"),
+                      json_out: bool = typer.Option(False, "--json", help="print one JSON object")):
+        """Load test on loopback: a real server, one simulation job, then `clients` clients polling
+        its status and ranking for `duration` seconds; p50/p95 latency [ms] and errors."""
+        from rich.table import Table
+
+        from service.loadtest import run_bench
+
+        res = run_bench(clients=clients, duration=duration)
+        if json_out:
+            emit_json(res)
+            return
+        t = Table(title=f"greybench service on loopback: {clients} clients, {duration:g} s")
+        for col in ("endpoint", "requests", "errors", "p50 [ms]", "p95 [ms]", "max [ms]", "req/s"):
+            t.add_column(col, justify="right" if col != "endpoint" else "left")
+        for row in res["endpoints"]:
+            t.add_row(row["endpoint"], str(row["requests"]), str(row["errors"]), f"{row['p50_ms']:.1f}",
+                      f"{row['p95_ms']:.1f}", f"{row['max_ms']:.1f}", f"{row['rate']:.0f}")
+        out.print(t)
+        out.print(f"job {res['job']['state']} in {res['job']['seconds']:.1f} s "
+                  f"({res['job']['message']}); total {res['requests']} requests, {res['errors']} errors")

@@ -1,0 +1,297 @@
+"""What the jobs compute: pose simulations and ranking, diagnosis, explanation (runs in workers).
+
+The service is a thin layer: every number here comes from :mod:`simulate` and :mod:`identify`.
+A simulation job (paper 3.8, the planner's assistance system) runs, per pose:
+
+1. the program interpolated at the 2 ms cycle (:func:`simulate.toolpath.interpolation.interpolate`),
+2. the workpiece placed and the joint trajectory by inverse kinematics with switching points
+   (:func:`simulate.toolpath.placement.joint_trajectory`),
+3. the axis servos with the chosen friction models (:func:`simulate.robot.servo.simulate_servo`:
+   tracking error, the friction's contribution to the path error),
+4. the coupled machining simulation and virtual CMM (``simulate.machining`` / ``simulate.evaluation``)
+   giving the feature deviations of the paper's Table 2 and the virtual workpiece (GLB),
+
+then ranks the poses. Poses run one after another in the job's worker process, or as Ray tasks
+when a Ray address is configured (``RAY_ADDRESS``); the per-pose function :func:`simulate_pose` is
+the same in both cases and takes everything it needs by value (program text, robot name, friction
+model files as bytes), so the results are identical.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from identify.errors import InputError
+from service.jobs import JobKind
+from service.paths import DATA_DIR
+
+Progress = Callable[[float, str], None]
+
+
+class StageUnavailable(RuntimeError):
+    """A part of the pipeline that another package provides is not installed (yet).
+
+    ``missing`` names the module; the job fails with this reason instead of inventing results.
+    """
+
+    def __init__(self, missing: str, what: str):
+        super().__init__(f"{what} is not available in this installation (missing module {missing})")
+        self.missing = missing
+
+
+def _import_stage(module: str, what: str):
+    import importlib
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        if exc.name and (module == exc.name or module.startswith(exc.name + ".")):
+            raise StageUnavailable(module, what) from None
+        raise
+
+
+def stage_available(module: str) -> bool:
+    import importlib.util
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
+
+
+# ---- per-pose task ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class PoseTask:
+    """Everything one pose simulation needs, by value (picklable for processes and Ray).
+
+    Attributes
+    ----------
+    program_text, program_source : str
+        G-code and the name used in messages.
+    robot : str
+        Robot name (``data/robots/<robot>.toml``).
+    pose : dict
+        ``{"name", "xyz" [m], "rpy" [rad], "description"}`` (see :mod:`simulate.toolpath.placement`).
+    friction_files : dict
+        Axis (1..6, as str) -> {relative path: bytes} of a saved friction model folder; axes not
+        listed keep the robot file's friction.
+    options : dict
+        ``spacing_mm``, ``deflection``, ``friction``, ``switching``, ``material`` (see the schema).
+    """
+
+    program_text: str
+    program_source: str
+    robot: str
+    pose: dict
+    friction_files: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
+
+
+@dataclass
+class PoseOutcome:
+    """Result of one pose: a JSON summary, the feature rows and the virtual workpiece."""
+
+    pose: str
+    summary: dict
+    features: list[dict] | None = None
+    glb: bytes | None = None
+
+
+def _robot_with_models(task: PoseTask, scratch: Path):
+    from simulate.robot.model import FrictionSpec, load_robot
+
+    robot = load_robot(DATA_DIR / "robots" / f"{task.robot}.toml")
+    if not task.friction_files:
+        return robot
+    specs = list(robot.friction)
+    for axis, files in sorted(task.friction_files.items()):
+        folder = scratch / f"axis{axis}"
+        for rel, data in files.items():
+            target = (folder / rel).resolve()
+            if folder.resolve() not in target.parents:
+                raise InputError("model file outside its folder", field=f"friction[{axis}]")
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(data)
+        specs[int(axis) - 1] = FrictionSpec(model=str(folder))
+    return robot.with_changes(friction=tuple(specs))
+
+
+def simulate_pose(task: PoseTask) -> PoseOutcome:
+    """Simulate one pose (steps 1-4 of the module docstring); deterministic."""
+    from simulate.robot.kinematics import fk
+    from simulate.robot.servo import simulate_servo
+    from simulate.toolpath.gcode import parse_program
+    from simulate.toolpath.interpolation import interpolate
+    from simulate.toolpath.placement import joint_trajectory, parse_poses
+
+    opts = task.options
+    program = parse_program(task.program_text, source=task.program_source)
+    interp = interpolate(program)
+    placement = parse_poses({"poses": [task.pose]}, source="request")[0]
+    scratch = Path(tempfile.mkdtemp(prefix="greybench-pose-"))
+    try:
+        robot = _robot_with_models(task, scratch)
+        traj = joint_trajectory(robot, interp, placement, source=task.program_source)
+        servo = simulate_servo(robot, traj.t, traj.q, friction=bool(opts.get("friction", True)),
+                               backlash=bool(opts.get("switching", True)))
+        tcp_err = servo.tcp_error(robot)
+        summary = {
+            "pose": placement.name,
+            "steps": int(len(traj.t)),
+            "duration_s": float(traj.t[-1]),
+            "switching_points": int(np.count_nonzero(traj.switch)),
+            "max_joint_speed_ratio": float(np.max(np.abs(traj.qd) / np.asarray(robot.vmax)[None, :])),
+            "max_tracking_error_m": float(np.max(np.linalg.norm(tcp_err[:, :3], axis=1))),
+            "rms_tracking_error_m": float(np.sqrt(np.mean(np.sum(tcp_err[:, :3] ** 2, axis=1)))),
+        }
+        features, glb, extra = _machine_and_measure(task, robot, program, interp, traj, placement, scratch)
+        summary.update(extra)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return PoseOutcome(pose=placement.name, summary=summary, features=features, glb=glb)
+
+
+def _machine_and_measure(task, robot, program, interp, traj, placement, scratch):
+    """Coupled machining simulation + virtual CMM (issues 7 and 8): features, GLB bytes, summary."""
+    _import_stage("simulate.machining.simulation", "the machining simulation (issue 7)")
+    _import_stage("simulate.evaluation.features", "the virtual CMM and feature evaluation (issue 8)")
+    raise StageUnavailable("simulate.machining.simulation", "the service adapter to the machining simulation")
+
+
+# ---- backends ---------------------------------------------------------------------------
+def run_local(tasks: list[PoseTask], progress: Progress, lo: float = 0.05, hi: float = 0.9) -> list[PoseOutcome]:
+    """Poses one after another in this process."""
+    out = []
+    for i, t in enumerate(tasks):
+        progress(lo + (hi - lo) * i / len(tasks), f"simulating pose '{t.pose['name']}' ({i + 1}/{len(tasks)})")
+        out.append(simulate_pose(t))
+    return out
+
+
+def run_ray(tasks: list[PoseTask], progress: Progress, address: str, lo: float = 0.05,
+            hi: float = 0.9) -> list[PoseOutcome]:
+    """Poses as Ray tasks (``address``: a cluster, or ``local``); results in task order.
+
+    Connects with :func:`ray.init` unless Ray is initialised in this process already (a test
+    may have started a local instance).
+    """
+    try:
+        import ray
+    except ModuleNotFoundError:
+        raise StageUnavailable("ray", "Ray scale-out (install the 'ray' extra)") from None
+    if not ray.is_initialized():
+        ray.init(address=address, log_to_driver=False, include_dashboard=False, ignore_reinit_error=True)
+    remote = ray.remote(num_cpus=1, max_retries=0)(simulate_pose)
+    refs = [remote.remote(t) for t in tasks]
+    index = {ref: i for i, ref in enumerate(refs)}
+    results: list[PoseOutcome | None] = [None] * len(refs)
+    pending = list(refs)
+    progress(lo, f"{len(refs)} pose simulations submitted to Ray")
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1, timeout=1.0)
+        for ref in done:
+            try:
+                results[index[ref]] = ray.get(ref)
+            except ray.exceptions.RayTaskError as exc:
+                cause = exc.as_instanceof_cause()
+                if isinstance(cause, InputError):
+                    raise InputError(cause.message, source=cause.source, field=cause.field, row=cause.row,
+                                     line=cause.line, column=cause.column) from None
+                raise
+        progress(lo + (hi - lo) * (len(refs) - len(pending)) / len(refs),
+                 f"{len(refs) - len(pending)}/{len(refs)} poses done on Ray")
+    return [r for r in results if r is not None]
+
+
+# ---- jobs -------------------------------------------------------------------------------
+def _write_atomic(path: Path, data: bytes | str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    with os.fdopen(fd, "wb") as f:
+        f.write(data.encode() if isinstance(data, str) else data)
+    os.replace(tmp, path)
+
+
+def _model_files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def pose_tasks(request: dict, job_dir: Path, progress: Progress) -> list[PoseTask]:
+    """The per-pose tasks of a validated simulation request (models fetched into the job folder)."""
+    from service import registry
+
+    program_text = (job_dir / "program.nc").read_text()
+    files: dict[str, dict[str, bytes]] = {}
+    for entry in request.get("friction", []):
+        if entry.get("source") != "registry":
+            continue
+        model = registry.ResolvedModel(**{k: entry["model"][k] for k in ("name", "version", "ref", "run_id")})
+        progress(0.02, f"fetching friction model {model.uri}")
+        folder = registry.fetch(model, job_dir / "models" / f"axis{entry['axis']}", request.get("tracking_uri"))
+        files[str(entry["axis"])] = _model_files(folder)
+    return [PoseTask(program_text=program_text, program_source=request["program_source"], robot=request["robot"],
+                     pose=pose, friction_files=files, options=request.get("options", {}))
+            for pose in request["poses"]]
+
+
+def rank(outcomes: list[PoseOutcome]) -> tuple[list[dict], list[dict]]:
+    """Ranking and feature rows from the per-pose feature tables (scoring of issue 8)."""
+    _import_stage("simulate.evaluation.ranking", "the pose ranking (issue 8)")
+    raise StageUnavailable("simulate.evaluation.ranking", "the service adapter to the pose ranking")
+
+
+def report_csv(features: list[dict], poses: list[str]) -> str:
+    """``feature,nominal,tolerance,pose,deviation,in_tolerance`` rows (mm as in Table 2)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["feature", "nominal", "tolerance", "pose", "deviation", "in_tolerance"])
+    for row in features:
+        for pose in poses:
+            dev = row["deviation"].get(pose)
+            ok = None if dev is None else abs(dev) <= row["tolerance"]
+            w.writerow([row["name"], row["nominal"], row["tolerance"], pose, dev, ok])
+    return buf.getvalue()
+
+
+def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address: str | None) -> dict:
+    tasks = pose_tasks(request, job_dir, progress)
+    outcomes = run_ray(tasks, progress, ray_address) if ray_address else run_local(tasks, progress)
+    progress(0.92, "ranking poses")
+    ranking, features = rank(outcomes)
+    poses = [o.pose for o in outcomes]
+    for o in outcomes:
+        if o.glb is not None:
+            _write_atomic(job_dir / "workpiece" / f"{o.pose}.glb", o.glb)
+    report = {"poses": [o.summary for o in outcomes], "features": features}
+    _write_atomic(job_dir / "report.json", json.dumps(report, indent=1))
+    _write_atomic(job_dir / "report.csv", report_csv(features, poses))
+    _write_atomic(job_dir / "ranking.json", json.dumps({"ranking": ranking}, indent=1))
+    return {"ranking": ranking, "poses": poses, "backend": "ray" if ray_address else "local"}
+
+
+def run_diagnose(request: dict, job_dir: Path, progress: Progress) -> dict:
+    _import_stage("identify.diagnosis", "friction diagnosis (issue 4)")
+    raise StageUnavailable("identify.diagnosis", "the service adapter to the friction diagnosis")
+
+
+def run_explain(request: dict, job_dir: Path, progress: Progress) -> dict:
+    _import_stage("simulate.evaluation.explain", "part explanation (issue 9)")
+    raise StageUnavailable("simulate.evaluation.explain", "the service adapter to explain")
+
+
+def run_job(kind: JobKind, request: dict, job_dir: Path, progress: Progress, *, ray_address: str | None = None) -> dict:
+    """Run one job; returns the JSON summary stored with the job record."""
+    if kind is JobKind.simulation:
+        return run_simulation(request, job_dir, progress, ray_address)
+    if kind is JobKind.diagnose:
+        return run_diagnose(request, job_dir, progress)
+    if kind is JobKind.explain:
+        return run_explain(request, job_dir, progress)
+    raise ValueError(f"unknown job kind {kind}")
