@@ -18,7 +18,7 @@ from simulate.robot.prepare import prepare_log
 from simulate.robot.tables import (JOINT_COLUMNS, frame_from_poses, numeric_columns, poses_from_frame, read_table,
                                    write_table)
 
-robot_app = typer.Typer(no_args_is_help=True, help="Robot kinematics: poses [m, unit quaternion] <-> joints [rad].")
+robot_app = typer.Typer(no_args_is_help=True, help="Robot kinematics: poses (m, unit quaternion) <-> joints (rad).")
 
 _EXTS = (".csv", ".parquet", ".pq")
 
@@ -42,12 +42,12 @@ def _parse_q(text: str, name: str) -> np.ndarray:
 
 def fk_cmd(
     robot: str = typer.Option("max100", "--robot", help="Robot name (data/robots) or robot file (.toml)."),
-    in_file: Path = typer.Option(..., "--in", help="Joint table (.csv/.parquet), columns q1..q6 [rad]."),
-    out_file: Path = typer.Option(..., "--out", help="Pose table (.csv/.parquet): x, y, z [m], qw, qx, qy, qz."),
-    flange: bool = typer.Option(False, "--flange", help="Flange pose instead of the TCP pose [m]."),
+    in_file: Path = typer.Option(..., "--in", help="Joint table (.csv/.parquet), columns q1..q6 (rad)."),
+    out_file: Path = typer.Option(..., "--out", help="Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, qz."),
+    flange: bool = typer.Option(False, "--flange", help="Flange pose instead of the TCP pose (m)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object summarising the run."),
 ) -> None:
-    """Forward kinematics: joints [rad] -> TCP poses in the robot base frame [m, unit quaternion]."""
+    """Forward kinematics: joints (rad) -> TCP poses in the robot base frame (m, unit quaternion)."""
     r = load_robot(resolve_robot(robot))
     _check_out(out_file)
     df = read_table(in_file)
@@ -69,13 +69,13 @@ def fk_cmd(
 
 def ik_cmd(
     robot: str = typer.Option("max100", "--robot", help="Robot name (data/robots) or robot file (.toml)."),
-    in_file: Path = typer.Option(..., "--in", help="Pose table (.csv/.parquet): x, y, z [m], qw, qx, qy, qz."),
-    out_file: Path = typer.Option(..., "--out", help="Joint table (.csv/.parquet): q1..q6 [rad], ok, status."),
+    in_file: Path = typer.Option(..., "--in", help="Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, qz."),
+    out_file: Path = typer.Option(..., "--out", help="Joint table (.csv/.parquet): q1..q6 (rad), ok, status."),
     q_start: Optional[str] = typer.Option(None, "--q-start",
-                                          help="Start configuration 'q1,..,q6' [rad]; default: mid of the limits "
+                                          help="Start configuration 'q1,..,q6' (rad); default: mid of the limits "
                                                "for axes 2, 3, 5 (0 for 1, 4, 6)."),
     independent: bool = typer.Option(False, "--independent",
-                                     help="Each pose nearest --q-start [rad] (default: a continuous path)."),
+                                     help="Each pose nearest --q-start (rad) (default: a continuous path)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object summarising the run."),
 ) -> None:
     """Inverse kinematics (analytic, paper 3.2): TCP poses -> joints; unreachable rows get ok=false and NaN."""
@@ -109,12 +109,12 @@ def ik_cmd(
 
 def prepare(
     robot: str = typer.Option("max100", "--robot", help="Robot name (data/robots) or robot file (.toml)."),
-    log: Path = typer.Option(..., "--log", help="Six-axis log: t [s], q1..q6 [rad], tau1..tau6 [Nm], temp1..6 [degC]."),
+    log: Path = typer.Option(..., "--log", help="Six-axis log: t (s), q1..q6 (rad), tau1..tau6 (Nm), temp1..6 (degC)."),
     out_dir: Path = typer.Option(..., "--out-dir", help="Folder for axis1..axis6 records (format of the log)."),
-    window: float = typer.Option(0.021, "--window", help="Savitzky-Golay window for qd, qdd [s]."),
+    window: float = typer.Option(0.021, "--window", help="Savitzky-Golay window for qd, qdd (s)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object with the written files."),
 ) -> None:
-    """Split a six-axis log into axis records with tau_rb (RNEA) and tau_load (gravity/payload) [Nm]."""
+    """Split a six-axis log into axis records with tau_rb (RNEA) and tau_load (gravity/payload), in Nm."""
     r = load_robot(resolve_robot(robot))
     if not window > 0:
         raise InputError("must be > 0 [s]", field="window")
@@ -141,10 +141,10 @@ def _timed(fn) -> tuple[float, float]:
 
 def bench_robot(
     robot: str = typer.Option("max100", "--robot", help="Robot name (data/robots) or robot file (.toml)."),
-    poses: int = typer.Option(1_000_000, "--poses", help="Poses for batch IK [-]."),
-    ref_poses: int = typer.Option(100_000, "--ref-poses", help="Poses for py-opw-kinematics batch_inverse [-]."),
-    samples: int = typer.Option(1_000_000, "--samples", help="RNEA samples [-]."),
-    servo_seconds: float = typer.Option(60.0, "--servo-seconds", help="Simulated servo time [s] at a 2 ms cycle."),
+    poses: int = typer.Option(1_000_000, "--poses", help="Poses for batch IK (-)."),
+    ref_poses: int = typer.Option(100_000, "--ref-poses", help="Poses for py-opw-kinematics batch_inverse (-)."),
+    samples: int = typer.Option(1_000_000, "--samples", help="RNEA samples (-)."),
+    servo_seconds: float = typer.Option(60.0, "--servo-seconds", help="Simulated servo time (s) at a 2 ms cycle."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object with the figures."),
 ) -> None:
     """Batch IK poses/s (numba, 1 core) vs py-opw-kinematics, RNEA samples/s, servo speed vs real time.
