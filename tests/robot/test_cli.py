@@ -114,3 +114,14 @@ def test_prepare_cli(robot, tmp_path):
     r = _run("prepare", "--log", log, "--out-dir", tmp_path / "axes2")
     assert r.exit_code == 2 and "'tau6'" in r.stderr and str(log) in r.stderr
     assert not (tmp_path / "axes2" / "axis1.csv").exists()
+
+
+def test_bad_output_and_options_exit_2(joints, tmp_path):
+    r = _run("robot", "fk", "--in", joints[0], "--out", tmp_path / "poses.txt")
+    assert r.exit_code == 2 and "poses.txt" in r.stderr and ".csv or .parquet" in r.stderr
+    r = _run("robot", "fk", "--in", joints[0], "--out", tmp_path / "nodir" / "poses.csv")
+    assert r.exit_code == 2 and "does not exist" in r.stderr
+    r = _run("robot", "fk", "--in", tmp_path / "missing.csv", "--out", tmp_path / "p.csv")
+    assert r.exit_code == 2 and "missing.csv" in r.stderr and "not found" in r.stderr
+    r = _run("prepare", "--log", joints[0], "--out-dir", tmp_path / "a", "--window", "0")
+    assert r.exit_code == 2 and "'window'" in r.stderr
