@@ -60,27 +60,34 @@ class BodyLimit:
                     return await self._reject(send)
         seen = 0
         started = False
+        rejected = False
 
         async def limited_receive():
-            nonlocal seen
+            # Answer 413 at once when the streamed body passes the limit; whatever the app then
+            # makes of the aborted read (FastAPI turns read errors into 400) is dropped.
+            nonlocal seen, rejected
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
-                if seen > self.limit:
+                if seen > self.limit and not rejected:
+                    rejected = True
+                    if not started:
+                        await self._reject(send)
                     raise BodyTooLarge()
             return message
 
-        async def tracking_send(message):
+        async def guarded_send(message):
             nonlocal started
+            if rejected:
+                return
             if message["type"] == "http.response.start":
                 started = True
             await send(message)
 
         try:
-            await self.app(scope, limited_receive, tracking_send)
+            await self.app(scope, limited_receive, guarded_send)
         except BodyTooLarge:
-            if not started:
-                await self._reject(send)
+            pass
 
     async def _reject(self, send):
         body = json.dumps({"detail": f"request body larger than {self.limit} bytes"}).encode()

@@ -1,0 +1,161 @@
+"""Fixtures of the service tests: settings in a temporary folder, a real uvicorn server on loopback,
+and a friction model registered in a temporary MLflow store."""
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+
+KEY = "test-key-0123456789"
+HEADERS = {"X-API-Key": KEY}
+GREYBENCH = str(Path(sys.executable).parent / "greybench")
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Server:
+    """A ``greybench serve`` process on 127.0.0.1 (own process group, so its workers end with it)."""
+
+    data_dir: Path
+    env: dict
+    port: int = field(default_factory=free_port)
+    proc: subprocess.Popen | None = None
+    log: Path | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def start(self, timeout: float = 60.0) -> "Server":
+        self.log = self.data_dir.parent / f"server-{self.port}-{int(time.time() * 1000)}.log"
+        self.proc = subprocess.Popen([GREYBENCH, "serve", "--port", str(self.port), "--log-level", "warning"],
+                                     env=self.env, stdout=self.log.open("w"), stderr=subprocess.STDOUT,
+                                     start_new_session=True)
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"server exited: {self.log.read_text()}")
+            try:
+                if httpx.get(self.url + "/health", timeout=1.0).status_code == 200:
+                    return self
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.2)
+        raise RuntimeError(f"server did not start: {self.log.read_text()}")
+
+    def kill(self) -> None:
+        """SIGKILL the server process alone (a crash): its worker processes are orphaned."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(10)
+
+    def stop(self) -> None:
+        """End the server and every process of its group (workers included)."""
+        if self.proc is None:
+            return
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.proc.wait(10)
+
+    def client(self, **kw) -> httpx.Client:
+        return httpx.Client(base_url=self.url, headers=HEADERS, timeout=30.0, **kw)
+
+
+def server_env(data_dir: Path, **extra) -> dict:
+    env = dict(os.environ)
+    for k in list(env):
+        if k.startswith("GREYBENCH_") or k == "RAY_ADDRESS":
+            env.pop(k)
+    env.update(GREYBENCH_API_KEYS=KEY, GREYBENCH_DATA_DIR=str(data_dir), GREYBENCH_WORKERS="1",
+               GREYBENCH_QUEUE_SIZE="4", GREYBENCH_RETRY_AFTER="3")
+    env.update({k: str(v) for k, v in extra.items()})
+    return env
+
+
+@pytest.fixture
+def make_server(tmp_path):
+    """Factory: ``make_server(data_dir=None, **env)`` -> started :class:`Server`; all stopped at the end."""
+    started: list[Server] = []
+
+    def make(data_dir: Path | None = None, start: bool = True, **extra) -> Server:
+        d = data_dir or (tmp_path / "svc")
+        srv = Server(data_dir=d, env=server_env(d, **extra))
+        started.append(srv)
+        return srv.start() if start else srv
+
+    yield make
+    for srv in started:
+        srv.stop()
+
+
+@pytest.fixture(scope="module")
+def shared_server(tmp_path_factory):
+    """One server for a whole test module (schemathesis, load)."""
+    d = tmp_path_factory.mktemp("svc") / "data"
+    srv = Server(data_dir=d, env=server_env(d, GREYBENCH_QUEUE_SIZE="2"))
+    srv.start()
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture
+def settings(tmp_path):
+    from service.settings import load_settings
+    return load_settings(api_keys=KEY, data_dir=tmp_path / "data", workers=1, queue_size=0, retry_after=7,
+                         max_body_bytes=64 * 1024)
+
+
+@pytest.fixture
+def client(settings):
+    from fastapi.testclient import TestClient
+
+    from service.app import create_app
+    with TestClient(create_app(settings)) as c:
+        yield c
+
+
+@pytest.fixture(scope="session")
+def registered_model(tmp_path_factory):
+    """A Coulomb-viscous model fitted on a synthetic record, registered as max100-axis1-friction@champion
+    (version 1) in the session's MLflow store; returns (fitted model, a test record, run id)."""
+    import mlflow
+
+    from identify.models import make_model
+    from identify.records import record_from_arrays
+
+    rng = np.random.default_rng(3)
+    t = np.arange(3000) * 1e-3
+    q = 0.4 * np.sin(2 * np.pi * 0.5 * t)
+    qd = 0.4 * 2 * np.pi * 0.5 * np.cos(2 * np.pi * 0.5 * t)
+    qdd = -0.4 * (2 * np.pi * 0.5) ** 2 * np.sin(2 * np.pi * 0.5 * t)
+    tau = 1.2 * np.tanh(qd / 1e-3) + 0.8 * qd + 0.05 * qdd + 0.1 + rng.normal(0, 0.01, t.size)
+    rec = record_from_arrays(t, q, tau, qd=qd, qdd=qdd, source="synthetic")
+    model = make_model("coulomb-viscous").fit(rec)
+    folder = tmp_path_factory.mktemp("model") / "cv"
+    model.save(folder)
+    mlflow.set_tracking_uri(os.environ["MLFLOW_TRACKING_URI"])
+    with mlflow.start_run() as run:
+        mlflow.log_metrics({"test_rmse": 0.0123, "test_r2": 0.99})
+        mlflow.log_artifacts(str(folder), artifact_path="model")
+    client = mlflow.MlflowClient()
+    name = "max100-axis1-friction"
+    client.create_registered_model(name)
+    mv = client.create_model_version(name, f"runs:/{run.info.run_id}/model", run_id=run.info.run_id)
+    client.set_registered_model_alias(name, "champion", mv.version)
+    return model, rec, run.info.run_id
