@@ -23,7 +23,13 @@ Hidden effects (``effect``), each scaled by ``magnitude`` (1 = the default stren
   (Park et al. 2022): ``nu *= exp(-k_nu (T - T_ref))``, ``fc, fs *= 1 - k_fc (T - T_ref)``.
 - ``position``: gear ripple, an additive ``A sin(order*q + phase)``.
 - ``asymmetry``: lower friction levels in the negative direction.
-- ``inertia``: a payload mass change mid-record (the inertia is not constant).
+- ``inertia``: the inertia about the axis follows the payload's radius, which also sets the
+  gearbox load: ``J = J0*(1 + k*(|tau_load|/load_mean - 1))`` with ``k = inertia_step``.
+  (A vertical axis 1 carries the payload's tilting moment m*g*r in its gearbox and its
+  inertia m*r^2 about the axis; as the other axes move the payload out and in, both change
+  together. The linear form is the first-order expansion about the nominal radius. A mass
+  step at an arbitrary time, the earlier form, changed the inertia without the load it
+  implies and cannot be predicted on another record.)
 - ``drift``: a slow linear torque drift in time (e.g. sensor offset drift).
 """
 from __future__ import annotations
@@ -107,7 +113,8 @@ class PlantConfig:
     asymmetry : float
         Relative reduction of the friction levels for negative velocity [-].
     inertia_step : float
-        Relative inertia increase after the record's midpoint (``inertia`` effect) [-].
+        Relative inertia change per relative load change, ``k`` in
+        ``J = J0*(1 + k*(|tau_load|/load_mean - 1))`` (``inertia`` effect) [-].
     drift_rate : float
         Torque drift [Nm/s] (``drift`` effect).
     """
@@ -267,7 +274,9 @@ def synthesize(t: np.ndarray, q: np.ndarray, qd: np.ndarray | None = None, qdd: 
     friction = friction_f[idx]
     inertia = np.full(n, cfg.inertia)
     if effect is Effect.INERTIA:
-        inertia = np.where(t > t[0] + 0.5 * (t[-1] - t[0]), cfg.inertia * (1 + s * cfg.inertia_step), cfg.inertia)
+        # payload radius moves load and inertia together (module docstring); J stays > 0
+        rel = np.abs(load_f[idx]) / cfg.load_mean - 1.0
+        inertia = cfg.inertia * np.clip(1.0 + s * cfg.inertia_step * rel, 0.05, None)
     tau = inertia * qdd + cfg.offset + friction
     if effect is Effect.DRIFT:
         tau = tau + s * cfg.drift_rate * (t - t[0])
