@@ -44,3 +44,7 @@ def load_model(ref: str | os.PathLike) -> FrictionModel:
 
 __all__ = ["MODELS", "FrictionModel", "LuGre", "LuGreTable", "CoulombViscous", "Stribeck", "load_model",
            "make_model", "register"]
+
+from identify.models.extended import LuGreExtended  # noqa: E402  (imports the helpers above)
+
+register(LuGreExtended)
