@@ -9,9 +9,9 @@ import importlib
 
 import typer
 
-app = typer.Typer(no_args_is_help=True, pretty_exceptions_enable=False, add_completion=False,
+app = typer.Typer(no_args_is_help=True, pretty_exceptions_enable=False, add_completion=False, rich_markup_mode=None,
                   help="greybench: friction identification and robot machining simulation (SI units).")
-bench_app = typer.Typer(no_args_is_help=True, help="Benchmarks: tables with ratios measured in one run.")
+bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Benchmarks: tables with ratios measured in one run.")
 app.add_typer(bench_app, name="bench")
 
 # Areas, in the order of the workflow. Each module defines register(app, bench_app).
