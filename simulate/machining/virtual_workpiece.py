@@ -1,0 +1,192 @@
+"""The virtual workpiece: dexel model plus per-step process values, saved, probed and exported
+(paper section 3.3 "Generating a Virtual Workpiece Model", 3.8).
+
+Every dexel end stores the index of the step that created it; :func:`end_attributes` gathers the
+step values (time, program line, force, deflection, tracking error, switching bits) per end.
+Export: a coloured point surface (the dexel ends are exact surface points; PLY with vertex
+colours, GLB as a point cloud) and PNG renderings with a colour bar.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from identify.errors import InputError
+
+from .dexel import RayFamily, TriDexel
+from .simulation import StepTable
+
+VARIABLES = ("deflection", "force", "tracking_error", "time", "line", "switch", "peak_force")
+
+
+@dataclass
+class VirtualWorkpiece:
+    workpiece: TriDexel
+    steps: StepTable
+
+    def save(self, path) -> Path:
+        """Write an npz atomically (temp file + rename)."""
+        p = Path(path)
+        arrays = {"lower": self.workpiece.lower, "upper": self.workpiece.upper,
+                  "spacing": np.array(self.workpiece.spacing), "shape": np.array(self.workpiece.shape)}
+        for f in self.workpiece.families:
+            for name in ("lo", "hi", "lo_step", "hi_step", "count"):
+                arrays[f"f{f.axis}_{name}"] = getattr(f, name)
+        arrays.update(self.steps.as_arrays())
+        fd, tmp = tempfile.mkstemp(dir=p.parent, suffix=".npz")
+        os.close(fd)
+        try:
+            np.savez_compressed(tmp, **arrays)
+            os.replace(tmp, p)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        return p
+
+    @classmethod
+    def load(cls, path) -> "VirtualWorkpiece":
+        p = Path(path)
+        if not p.exists():
+            raise InputError("virtual workpiece not found", source=str(p))
+        z = np.load(p)
+        fams = [RayFamily(a, z[f"f{a}_lo"], z[f"f{a}_hi"], z[f"f{a}_lo_step"], z[f"f{a}_hi_step"], z[f"f{a}_count"])
+                for a in range(3)]
+        wp = TriDexel(z["lower"], z["upper"], float(z["spacing"]), tuple(int(v) for v in z["shape"]), fams)
+        st = StepTable(*(z[f"step_{k}"] for k in StepTable.__dataclass_fields__))
+        return cls(wp, st)
+
+    def end_attributes(self, axis: int):
+        """Dexel ends of one family: points (M, 3) [m], outward sign (M,), and a dict of per-end
+        arrays of the creating step's values (NaN / 0 for stock-surface ends)."""
+        pts, step, sign = self.workpiece.ends(axis)
+        ok = step >= 0
+        attrs = {}
+        for name in VARIABLES:
+            col = getattr(self.steps, name)
+            shape = (len(step),) + col.shape[1:]
+            a = np.full(shape, np.nan if col.dtype.kind == "f" else 0, dtype=col.dtype)
+            a[ok] = col[step[ok]]
+            attrs[name] = a
+        attrs["step"] = step
+        return pts, sign, attrs
+
+    def probe(self, origin, direction):
+        """First material surface hit along axis-aligned rays (the virtual CMM's probe).
+
+        ``origin`` (N, 3) [m], ``direction`` (N, 3) unit vectors along +-x, +-y or +-z. The probe runs
+        on the nearest dexel ray of that axis and returns hit points (N, 3) (NaN where no
+        material) with the exact dexel-end coordinate along the axis.
+        """
+        o = np.atleast_2d(np.asarray(origin, float))
+        d = np.atleast_2d(np.asarray(direction, float))
+        hits = np.full_like(o, np.nan)
+        wp = self.workpiece
+        for i in range(len(o)):
+            axis = int(np.argmax(np.abs(d[i])))
+            if abs(abs(d[i, axis]) - 1) > 1e-9:
+                raise InputError("probe directions must be along x, y or z", field="direction", row=i)
+            sgn = np.sign(d[i, axis])
+            others = [a for a in range(3) if a != axis]
+            idx = np.floor((o[i, others] - wp.lower[others]) / wp.spacing).astype(int)
+            n_o = [wp.shape[a] for a in others]
+            if not (0 <= idx[0] < n_o[0] and 0 <= idx[1] < n_o[1]):
+                continue
+            r = {0: idx[1] * n_o[0] + idx[0], 1: idx[1] * n_o[0] + idx[0], 2: idx[1] * n_o[0] + idx[0]}[axis]
+            f = wp.families[axis]
+            lo, hi = f.lo[r, :f.count[r]], f.hi[r, :f.count[r]]
+            if sgn > 0:
+                cand = lo[lo >= o[i, axis]]
+                if len(cand) == 0:
+                    continue
+                val = cand.min()
+            else:
+                cand = hi[hi <= o[i, axis]]
+                if len(cand) == 0:
+                    continue
+                val = cand.max()
+            hits[i] = o[i]
+            hits[i, others] = wp.lower[others] + (idx + 0.5) * wp.spacing
+            hits[i, axis] = val
+        return hits
+
+
+def _scalar(attrs, variable):
+    v = attrs[variable]
+    return np.linalg.norm(v, axis=1) if v.ndim == 2 else v.astype(float)
+
+
+def machined_points(vw: VirtualWorkpiece, variable: str = "deflection"):
+    """Machined surface points (dexel ends created by the simulation) with a scalar per point."""
+    if variable not in VARIABLES:
+        raise InputError(f"unknown variable '{variable}' (one of {', '.join(VARIABLES)})", field="variable")
+    P, V = [], []
+    for axis in range(3):
+        pts, sign, attrs = vw.end_attributes(axis)
+        ok = attrs["step"] >= 0
+        P.append(pts[ok])
+        V.append(_scalar(attrs, variable)[ok])
+    return np.concatenate(P), np.concatenate(V)
+
+
+def _colours(values):
+    import matplotlib
+
+    v = np.nan_to_num(values)
+    lo, hi = (float(v.min()), float(v.max())) if len(v) else (0.0, 1.0)
+    norm = (v - lo) / (hi - lo) if hi > lo else np.zeros_like(v)
+    return (matplotlib.colormaps["viridis"](norm) * 255).astype(np.uint8), lo, hi
+
+
+def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", max_points: int = 2_000_000):
+    """Write ``surface_<variable>.ply`` and ``.glb`` (coloured surface points of the machined
+    dexel ends, every point an exact surface sample). Returns the written paths."""
+    import trimesh
+
+    pts, vals = machined_points(vw, variable)
+    if len(pts) > max_points:
+        sel = np.random.default_rng(0).choice(len(pts), max_points, replace=False)
+        pts, vals = pts[sel], vals[sel]
+    cols, _, _ = _colours(vals)
+    cloud = trimesh.PointCloud(pts, colors=cols)
+    out_dir = Path(out_dir)
+    paths = []
+    for ext in ("ply", "glb"):
+        p = out_dir / f"surface_{variable}.{ext}"
+        tmp = p.with_suffix(p.suffix + ".tmp")
+        data = cloud.export(file_type=ext)
+        tmp.write_bytes(data if isinstance(data, bytes) else data.encode())
+        os.replace(tmp, p)
+        paths.append(p)
+    return paths
+
+
+def render_png(vw: VirtualWorkpiece, path, variable: str = "deflection", max_points: int = 400_000) -> Path:
+    """Top view of the machined surface coloured by ``variable`` with a colour bar (matplotlib, Agg)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts, vals = machined_points(vw, variable)
+    if len(pts) > max_points:
+        sel = np.random.default_rng(0).choice(len(pts), max_points, replace=False)
+        pts, vals = pts[sel], vals[sel]
+    unit = {"deflection": (1e6, "um"), "tracking_error": (1e6, "um"), "force": (1, "N"), "peak_force": (1, "N"),
+            "time": (1, "s"), "line": (1, "-"), "switch": (1, "bits")}[variable]
+    fig, ax = plt.subplots(figsize=(8, 7), dpi=110)
+    sc = ax.scatter(pts[:, 0] * 1e3, pts[:, 1] * 1e3, c=vals * unit[0], s=0.3, cmap="viridis")
+    fig.colorbar(sc, ax=ax, label=f"{variable.replace('_', ' ')} [{unit[1]}]")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(f"virtual workpiece: {variable.replace('_', ' ')}")
+    p = Path(path)
+    tmp = p.with_name(p.stem + ".tmp.png")
+    fig.savefig(tmp)
+    plt.close(fig)
+    os.replace(tmp, p)
+    return p
