@@ -1,4 +1,5 @@
-"""Friction identification commands: trajectory, synth, fit, predict; ``bench friction``."""
+"""Friction identification commands: trajectory, synth, fit, predict, compare, train-robot,
+promote, ui; ``bench friction``. Fits are tracked in MLflow (:mod:`identify.tracking`)."""
 from __future__ import annotations
 
 import time
@@ -121,21 +122,78 @@ def synth(
                   f"{cfg.static_curve}, noise {cfg.noise} Nm): {len(res.frame)} samples -> {out_file}")
 
 
-def fit(
-    model: str = typer.Option(..., "--model", help=f"Model name: {', '.join(MODELS)}."),
-    train: Path = typer.Option(..., "--train", help="Training axis record (.csv/.parquet, SI columns t, q, tau, ...)."),
-    test: Optional[Path] = typer.Option(None, "--test", help="Test axis record for held-out metrics."),
-    out_dir: Path = typer.Option(..., "--out", help="Folder for the fitted model (params.json with units, + model files)."),
-    seed: int = typer.Option(0, "--seed", help="Random seed of the identification."),
-    as_json: bool = typer.Option(False, "--json", help='Print {"model", "params", "train", "test"} as one JSON object.'),
-) -> None:
-    """Fit a friction model (co-identifying inertia J [kg m^2] and offset c [Nm] unless the
-    record has tau_rb [Nm]); save it and print RMSE [Nm], R^2, NRMSE, max error [Nm]."""
+#: The six models of the paper's comparison (issue 3), in the order of the workflow.
+COMPARE_MODELS = ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox")
+
+
+def _check_axis(axis: Optional[int]) -> None:
+    if axis is not None and not 1 <= axis <= 6:
+        raise InputError(f"axis must be 1..6, got {axis}", field="--axis")
+
+
+def load_axis_record(path: Path, axis: Optional[int]):
+    """An axis record from a file: a plain axis record, or column ``q<axis>``/``tau<axis>`` of a
+    six-axis robot log (``t, q1..q6, tau1..tau6``; tau_i taken as total torque)."""
+    df = read_table(path)
+    is_log = "q" not in df.columns and any(f"q{i}" in df.columns for i in range(1, 7))
+    if not is_log:
+        return validate_frame(df, source=str(path))
+    if axis is None:
+        raise InputError("this is a six-axis robot log (q1..q6): choose the joint with --axis 1..6",
+                         source=str(path), field="--axis")
+    cols = {"t": "t", f"q{axis}": "q", f"tau{axis}": "tau", f"qd{axis}": "qd", f"qdd{axis}": "qdd",
+            f"temp{axis}": "temp", f"tau_rb{axis}": "tau_rb", f"tau_load{axis}": "tau_load"}
+    for need in ("t", f"q{axis}", f"tau{axis}"):
+        if need not in df.columns:
+            raise InputError(f"robot log has no column '{need}'", source=str(path), field=need)
+    sub = df[[c for c in cols if c in df.columns]].rename(columns=cols)
+    return validate_frame(sub, source=f"{path} (axis {axis})")
+
+
+def _make(model: str, seed: int, epochs: Optional[int]) -> FrictionModel:
     if model not in MODELS:
         raise InputError(f"unknown model '{model}' (known: {', '.join(MODELS)})", field="--model")
-    train_rec = load_record(train)
-    test_rec = load_record(test) if test else None
-    est = make_model(model, **({"seed": seed} if "seed" in MODELS[model]().get_hyperparameters() else {}))
+    hp = MODELS[model]().get_hyperparameters()
+    kwargs = {}
+    if "seed" in hp:
+        kwargs["seed"] = seed
+    if epochs is not None:
+        if epochs < 1:
+            raise InputError("must be >= 1", field="--epochs")
+        if "epochs" in hp:
+            kwargs["epochs"] = epochs
+    return make_model(model, **kwargs)
+
+
+def _robot_name(robot: str) -> str:
+    return Path(resolve_robot(robot)).stem
+
+
+def fit(
+    model: str = typer.Option(..., "--model", help=f"Model name: {', '.join(MODELS)}."),
+    train: Path = typer.Option(..., "--train", help="Training axis record, or six-axis robot log with --axis "
+                                                    "(.csv/.parquet; SI: t [s], q [rad], tau [Nm], ...)."),
+    test: Optional[Path] = typer.Option(None, "--test", help="Test record (same format) for held-out metrics [Nm]."),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="Folder for the fitted model (params.json with units, "
+                                                               "+ model files); the MLflow run holds it too."),
+    axis: Optional[int] = typer.Option(None, "--axis", help="Joint 1..6 (picks q<N>, tau<N> [rad, Nm] from a robot log; "
+                                                            "names the registered model). Default 1."),
+    robot: str = typer.Option("max100", "--robot", help="Robot name or file; names the registered model."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of the identification (GA, torch)."),
+    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models (default per model)."),
+    experiment: str = typer.Option("friction", "--experiment", help="MLflow experiment name."),
+    track: bool = typer.Option(True, "--track/--no-track", help="Record the fit as an MLflow run (default on)."),
+    register: bool = typer.Option(True, "--register/--no-register", help="Register the model as <robot>-axis<N>-friction "
+                                                                         "(alias champion if none, else challenger)."),
+    as_json: bool = typer.Option(False, "--json", help='Print {"model", "params", "train", "test", "run"} as one JSON object.'),
+) -> None:
+    """Fit a friction model (co-identifying inertia J [kg m^2] and offset c [Nm] unless the
+    record has tau_rb [Nm]); track it in MLflow, save it, print RMSE [Nm], R^2, NRMSE, max error [Nm]."""
+    _check_axis(axis)
+    est = _make(model, seed, epochs)
+    train_rec = load_axis_record(train, axis)
+    test_rec = load_axis_record(test, axis) if test else None
+    robot_name = _robot_name(robot)
     with progress(f"fitting {model}", total=None, enabled=not as_json):
         t0 = time.perf_counter()
         est.fit(train_rec)
@@ -143,24 +201,45 @@ def fit(
     metrics = {"train": est.train_metrics_}
     if test_rec is not None:
         metrics["test"] = est.score(test_rec)
-    est.save(out_dir)
+    if out_dir is not None:
+        est.save(out_dir)
+    run = None
+    if track:
+        from identify.tracking import log_fit, registered_name
+
+        with progress("logging to MLflow", total=None, enabled=not as_json):
+            run = log_fit(est, train_rec, test_rec, fit_time=fit_time, experiment=experiment, axis=axis or 1,
+                          robot=robot_name, register=registered_name(robot_name, axis or 1) if register else None)
     if as_json:
-        emit_json({"model": model, "params": est.params_, "fit_time": fit_time, "out": str(out_dir),
+        emit_json({"model": model, "params": est.params_, "fit_time": fit_time, "n_parameters": est.n_parameters(),
+                   "out": str(out_dir) if out_dir else None, "run": run.to_dict() if run else None,
                    **{k: v.to_dict() for k, v in metrics.items()}})
     else:
         out.print(_params_table(est))
-        out.print(_metrics_table(f"{model}: fit in {fit_time:.2f} s, saved to {out_dir}", metrics))
+        where = f", saved to {out_dir}" if out_dir else ""
+        out.print(_metrics_table(f"{model}: fit in {fit_time:.2f} s{where}", metrics))
+        if run:
+            reg = f"; registered {run.registered} v{run.version} as {run.alias}" if run.registered else ""
+            out.print(f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}")
+
+
+def _load_any_model(ref: str) -> FrictionModel:
+    from identify.tracking import is_tracked_ref, load_tracked_model
+
+    return load_tracked_model(ref) if is_tracked_ref(ref) else load_model(ref)
 
 
 def predict(
-    model_ref: str = typer.Option(..., "--model", help="Saved model folder."),
-    data: Path = typer.Option(..., "--data", help="Axis record to predict (.csv/.parquet)."),
+    model_ref: str = typer.Option(..., "--model", help="Saved model folder, runs:/<run_id>/model or models:/<name>@<alias>."),
+    data: Path = typer.Option(..., "--data", help="Axis record to predict (.csv/.parquet), or a robot log with --axis."),
     out_file: Path = typer.Option(..., "--out", help="Output table: the input columns plus tau_pred [Nm]."),
+    axis: Optional[int] = typer.Option(None, "--axis", help="Joint 1..6 when --data is a six-axis robot log."),
     as_json: bool = typer.Option(False, "--json", help="Print metrics as one JSON object."),
 ) -> None:
     """Predict the joint torque tau_pred [Nm] of a record with a fitted model."""
-    est = load_model(model_ref)
-    rec = load_record(data)
+    _check_axis(axis)
+    est = _load_any_model(model_ref)
+    rec = load_axis_record(data, axis)
     tau_pred = est.predict(rec)
     frame = rec.frame.copy()
     frame["tau_pred"] = tau_pred
@@ -170,6 +249,195 @@ def predict(
         emit_json({"model": est.name, "out": str(out_file), "metrics": m.to_dict()})
     else:
         out.print(_metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m}))
+
+
+def _parse_models(models: Optional[str]) -> list[str]:
+    if not models:
+        return list(COMPARE_MODELS)
+    names = [m.strip() for m in models.split(",") if m.strip()]
+    if not names:
+        raise InputError("no model named", field="--models")
+    for m in names:
+        if m not in MODELS:
+            raise InputError(f"unknown model '{m}' (known: {', '.join(MODELS)})", field="--models")
+    if len(set(names)) != len(names):
+        raise InputError("a model is named twice", field="--models")
+    return names
+
+
+def compare(
+    train: Path = typer.Option(..., "--train", help="Training axis record (or robot log with --axis), SI units."),
+    test: Path = typer.Option(..., "--test", help="Test axis record (same format); the table is sorted by its RMSE [Nm]."),
+    models: Optional[str] = typer.Option(None, "--models", help=f"Comma-separated models (default: {','.join(COMPARE_MODELS)})."),
+    axis: Optional[int] = typer.Option(None, "--axis", help="Joint 1..6 (robot logs; recorded in the runs)."),
+    robot: str = typer.Option("max100", "--robot", help="Robot name or file (recorded in the runs)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
+    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for the learned models (default per model)."),
+    experiment: str = typer.Option("compare", "--experiment", help="MLflow experiment holding the runs."),
+    track: bool = typer.Option(True, "--track/--no-track", help="Record every fit as an MLflow run (default on)."),
+    as_json: bool = typer.Option(False, "--json", help='Print {"rows": [...]} sorted by test RMSE as one JSON object.'),
+) -> None:
+    """Fit several friction models on one record and rank them by test RMSE [Nm], with R^2,
+    fit time [s] and parameter count; every fit is a run of one MLflow experiment."""
+    _check_axis(axis)
+    names = _parse_models(models)
+    train_rec = load_axis_record(train, axis)
+    test_rec = load_axis_record(test, axis)
+    robot_name = _robot_name(robot)
+    parent = None
+    if track:
+        from identify.tracking import end_run, log_fit, start_parent_run
+
+        parent = start_parent_run(experiment, "compare", {"train_file": str(train), "test_file": str(test),
+                                                           "models": ",".join(names), "axis": axis or 1,
+                                                           "robot": robot_name})
+    rows = []
+    try:
+        with progress("comparing", total=len(names), enabled=not as_json) as advance:
+            for name in names:
+                est = _make(name, seed, epochs)
+                t0 = time.perf_counter()
+                est.fit(train_rec)
+                fit_time = time.perf_counter() - t0
+                te = est.score(test_rec)
+                row = {"model": name, "test_rmse": te.rmse, "test_r2": te.r2, "train_rmse": est.train_metrics_.rmse,
+                       "train_r2": est.train_metrics_.r2, "fit_time_s": fit_time, "n_parameters": est.n_parameters()}
+                if track:
+                    run = log_fit(est, train_rec, test_rec, fit_time=fit_time, experiment=experiment, axis=axis or 1,
+                                  robot=robot_name, parent_run_id=parent)
+                    row["run_id"] = run.run_id
+                rows.append(row)
+                advance(1)
+    except BaseException:
+        if parent:
+            end_run(parent, status="FAILED")
+        raise
+    rows.sort(key=lambda r: r["test_rmse"])
+    if parent:
+        end_run(parent, metrics={"best_test_rmse": rows[0]["test_rmse"]})
+    if as_json:
+        emit_json({"experiment": experiment if track else None, "parent_run_id": parent, "axis": axis or 1,
+                   "rows": rows})
+        return
+    table = Table(title=f"compare on {test} (axis {axis or 1}), sorted by test RMSE")
+    for col in ("rank", "model", "test RMSE [Nm]", "test R^2", "train RMSE [Nm]", "fit time [s]", "parameters"):
+        table.add_column(col, justify="left" if col == "model" else "right")
+    for i, r in enumerate(rows, 1):
+        table.add_row(str(i), r["model"], f"{r['test_rmse']:.4f}", f"{r['test_r2']:.5f}", f"{r['train_rmse']:.4f}",
+                      f"{r['fit_time_s']:.1f}", str(r["n_parameters"]))
+    out.print(table)
+    if parent:
+        out.print(f"MLflow experiment '{experiment}', parent run {parent}; open it with: greybench ui")
+
+
+def train_robot(
+    log: Path = typer.Option(..., "--log", help="Six-axis log: t [s], q1..q6 [rad], tau1..tau6 [Nm] (.csv/.parquet)."),
+    robot: str = typer.Option("max100", "--robot", help="Robot name (data/robots) or robot file (.toml)."),
+    model: str = typer.Option("greybox", "--model", help=f"Model name: {', '.join(MODELS)}."),
+    test: Optional[Path] = typer.Option(None, "--test", help="Six-axis test log (same format) for test metrics [Nm]."),
+    axes: str = typer.Option("1,2,3,4,5,6", "--axes", help="Comma-separated joints 1..6 to fit."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
+    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models."),
+    experiment: str = typer.Option("train-robot", "--experiment", help="MLflow experiment name."),
+    register: bool = typer.Option(True, "--register/--no-register", help="Register each axis as <robot>-axis<N>-friction."),
+    as_json: bool = typer.Option(False, "--json", help='Print {"parent_run_id", "axes": [...]} as one JSON object.'),
+) -> None:
+    """Fit one friction model per robot axis from a six-axis log (split by ``greybench prepare``:
+    tau_rb [Nm] from the rigid-body model), one MLflow run per axis under a parent run."""
+    import tempfile
+
+    from identify.tracking import end_run, log_fit, registered_name, start_parent_run
+    from simulate.robot.model import load_robot
+    from simulate.robot.prepare import prepare_log
+
+    try:
+        axis_list = sorted({int(a) for a in axes.split(",") if a.strip()})
+    except ValueError:
+        raise InputError(f"not a list of joint numbers: {axes!r}", field="--axes") from None
+    if not axis_list:
+        raise InputError("no axis given", field="--axes")
+    for a in axis_list:
+        _check_axis(a)
+    _make(model, seed, epochs)  # unknown names fail before any work
+    rob = load_robot(resolve_robot(robot))
+    robot_name = _robot_name(robot)
+    ext = Path(log).suffix.lower()
+    with tempfile.TemporaryDirectory(prefix="greybench-train-robot-") as tmp:
+        train_paths = prepare_log(rob, log, Path(tmp) / "train").paths
+        test_paths = prepare_log(rob, test, Path(tmp) / "test").paths if test else None
+        parent = start_parent_run(experiment, f"train-robot {robot_name} {model}",
+                                  {"log": str(log), "test_log": str(test) if test else "", "robot": robot_name,
+                                   "model": model, "axes": ",".join(map(str, axis_list)), "format": ext})
+        rows = []
+        try:
+            with progress(f"train-robot {model}", total=len(axis_list), enabled=not as_json) as advance:
+                for a in axis_list:
+                    rec = load_record(train_paths[a - 1])
+                    rec_t = load_record(test_paths[a - 1]) if test_paths else None
+                    est = _make(model, seed, epochs)
+                    t0 = time.perf_counter()
+                    est.fit(rec)
+                    fit_time = time.perf_counter() - t0
+                    run = log_fit(est, rec, rec_t, fit_time=fit_time, experiment=experiment, axis=a, robot=robot_name,
+                                  run_name=f"{model} axis {a}", parent_run_id=parent,
+                                  register=registered_name(robot_name, a) if register else None)
+                    row = {"axis": a, "train_rmse": est.train_metrics_.rmse, "train_r2": est.train_metrics_.r2,
+                           "fit_time_s": fit_time, **run.to_dict()}
+                    if rec_t is not None:
+                        m = est.score(rec_t)
+                        row.update(test_rmse=m.rmse, test_r2=m.r2)
+                    rows.append(row)
+                    advance(1)
+        except BaseException:
+            end_run(parent, status="FAILED")
+            raise
+        end_run(parent)
+    if as_json:
+        emit_json({"parent_run_id": parent, "experiment": experiment, "model": model, "robot": robot_name,
+                   "axes": rows})
+        return
+    table = Table(title=f"train-robot {robot_name}: {model} per axis (parent run {parent})")
+    for col in ("axis", "train RMSE [Nm]", "train R^2", "test RMSE [Nm]", "fit time [s]", "registered", "run"):
+        table.add_column(col)
+    for r in rows:
+        table.add_row(str(r["axis"]), f"{r['train_rmse']:.4f}", f"{r['train_r2']:.4f}",
+                      f"{r['test_rmse']:.4f}" if "test_rmse" in r else "-", f"{r['fit_time_s']:.1f}",
+                      f"{r['registered']} v{r['version']} ({r['alias']})" if r["registered"] else "-", r["run_id"])
+    out.print(table)
+
+
+def promote(
+    name: str = typer.Option(..., "--name", help="Registered model, e.g. max100-axis1-friction."),
+    as_json: bool = typer.Option(False, "--json", help="Print the decision as one JSON object (RMSE in Nm)."),
+) -> None:
+    """Move the 'champion' alias to the 'challenger' version if its test RMSE [Nm] is lower; say by how much."""
+    from identify.tracking import promote as do_promote
+
+    res = do_promote(name)
+    if as_json:
+        emit_json(res.to_dict())
+    else:
+        out.print(res.message(), soft_wrap=True, highlight=False)
+
+
+def ui(
+    host: str = typer.Option("127.0.0.1", "--host", help="Interface to listen on."),
+    port: int = typer.Option(5000, "--port", help="TCP port."),
+    print_only: bool = typer.Option(False, "--print-only", help="Print the mlflow ui command instead of running it."),
+) -> None:
+    """Start the MLflow UI on the tracking store (MLFLOW_TRACKING_URI or ./mlruns.db)."""
+    import shlex
+    import subprocess
+
+    from identify.tracking import ui_command
+
+    if not 0 < port < 65536:
+        raise InputError("must be 1..65535", field="--port")
+    cmd = ui_command(host, port)
+    out.print(" ".join(shlex.quote(c) for c in cmd), highlight=False, soft_wrap=True)
+    if print_only:
+        return
+    raise typer.Exit(code=subprocess.call(cmd))
 
 
 def bench_friction(
@@ -244,4 +512,8 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     app.command("synth")(guarded(synth))
     app.command("fit")(guarded(fit))
     app.command("predict")(guarded(predict))
+    app.command("compare")(guarded(compare))
+    app.command("train-robot")(guarded(train_robot))
+    app.command("promote")(guarded(promote))
+    app.command("ui")(guarded(ui))
     bench_app.command("friction")(guarded(bench_friction))

@@ -11,11 +11,17 @@ from identify.errors import InputError
 from identify.models.base import FrictionModel, read_params
 from identify.models.lugre import LuGre, LuGreTable
 from identify.models.static import CoulombViscous, Stribeck
+from identify.models.greybox import GreyBoxLuGre
+from identify.models.lstm import LSTMFriction
+from identify.models.residual import ResidualLuGre
 
 MODELS: dict[str, type[FrictionModel]] = {
     CoulombViscous.name: CoulombViscous,
     Stribeck.name: Stribeck,
     LuGre.name: LuGre,
+    LSTMFriction.name: LSTMFriction,
+    ResidualLuGre.name: ResidualLuGre,
+    GreyBoxLuGre.name: GreyBoxLuGre,
 }
 
 
@@ -42,7 +48,8 @@ def load_model(ref: str | os.PathLike) -> FrictionModel:
     return MODELS[name].from_document(doc, directory)
 
 
-__all__ = ["MODELS", "FrictionModel", "LuGre", "LuGreTable", "CoulombViscous", "Stribeck", "load_model",
+__all__ = ["MODELS", "FrictionModel", "LuGre", "LuGreTable", "CoulombViscous", "Stribeck", "GreyBoxLuGre",
+           "ResidualLuGre", "LSTMFriction", "load_model",
            "make_model", "register"]
 
 from identify.models.extended import LuGreExtended  # noqa: E402  (imports the helpers above)

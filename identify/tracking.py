@@ -1,0 +1,458 @@
+"""MLflow tracking of friction fits: runs, plots, pyfunc models, registry aliases, promotion.
+
+Store: ``MLFLOW_TRACKING_URI`` when set (a real ``mlflow server`` works unchanged), else an
+embedded SQLite store ``sqlite:///<cwd>/mlruns.db`` with artifacts in ``<cwd>/mlartifacts``.
+
+Every fit is one run with
+- params: the model name, its hyperparameters, axis, robot, record files and sizes, and the
+  fitted parameters (``fitted.<name>``, SI units as in ``params.json``);
+- metrics: ``loss`` per epoch (learned models), and ``train_rmse``, ``train_r2``,
+  ``test_rmse``, ``test_r2`` [Nm, -] (test when a test record is given), ``fit_time_s``,
+  ``n_parameters``;
+- artifacts: the model (an MLflow pyfunc wrapping the saved model folder: ``mlflow.pyfunc.
+  load_model(uri).predict(frame)`` takes a DataFrame with the axis-record columns and returns
+  the torque [Nm]) and three plots: prediction and measurement over time, the parity plot of
+  measured against predicted friction (paper Fig. 3), and the friction-velocity hysteresis.
+
+Registered models are named per robot and axis (:func:`registered_name`, e.g.
+``max100-axis1-friction``); a new version becomes ``champion`` when there is none, otherwise
+``challenger``; :func:`promote` moves ``champion`` only when the challenger's test RMSE is
+lower.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from identify.errors import InputError
+from identify.metrics import Metrics
+from identify.models import FrictionModel, load_model
+from identify.records import AxisRecord, validate_frame
+
+DB_FILE = "mlruns.db"
+ARTIFACT_DIR = "mlartifacts"
+MODEL_ARTIFACT = "model"
+CHAMPION = "champion"
+CHALLENGER = "challenger"
+#: Key of the saved model folder inside the pyfunc's artifacts.
+PYFUNC_ARTIFACT = "friction_model"
+
+
+def tracking_uri(cwd: str | os.PathLike | None = None) -> str:
+    """``MLFLOW_TRACKING_URI`` if set, else ``sqlite:///<cwd>/mlruns.db``."""
+    env = os.environ.get("MLFLOW_TRACKING_URI")
+    if env:
+        return env
+    return f"sqlite:///{Path(cwd or os.getcwd()).resolve() / DB_FILE}"
+
+
+def artifact_root(uri: str) -> str | None:
+    """Artifact folder for an embedded SQLite store (beside the database); None for servers."""
+    if uri.startswith("sqlite:///"):
+        return (Path(uri[len("sqlite:///"):]).resolve().parent / ARTIFACT_DIR).as_uri()
+    return None
+
+
+def _mlflow():
+    """mlflow, pointed at the store, with its chatter kept off stdout."""
+    import logging
+
+    import mlflow
+
+    logging.getLogger("mlflow").setLevel(logging.ERROR)
+    logging.getLogger("alembic").setLevel(logging.ERROR)
+    warnings.filterwarnings("ignore", module="mlflow")
+    mlflow.set_tracking_uri(tracking_uri())
+    mlflow.set_registry_uri(tracking_uri())
+    return mlflow
+
+
+def ensure_experiment(name: str) -> str:
+    """Id of the experiment ``name``, created (with the local artifact root) when missing."""
+    mlflow = _mlflow()
+    exp = mlflow.get_experiment_by_name(name)
+    if exp is not None:
+        return exp.experiment_id
+    root = artifact_root(tracking_uri())
+    location = f"{root}/{name}" if root else None
+    return mlflow.create_experiment(name, artifact_location=location)
+
+
+def registered_name(robot: str, axis: int) -> str:
+    """Registered-model name per robot and axis, e.g. ``max100-axis1-friction``."""
+    return f"{robot}-axis{axis}-friction"
+
+
+def is_tracked_ref(ref: str) -> bool:
+    """True for MLflow model URIs (``runs:/...``, ``models:/...``)."""
+    return str(ref).startswith(("runs:/", "models:/"))
+
+
+# ---- pyfunc ----------------------------------------------------------------------------
+try:
+    import mlflow.pyfunc as _pyfunc
+
+    _PythonModel = _pyfunc.PythonModel
+except Exception:  # pragma: no cover - mlflow is a dependency
+    _PythonModel = object
+
+
+class FrictionPyfunc(_PythonModel):
+    """MLflow pyfunc wrapper: a DataFrame of axis-record columns in, total torque [Nm] out."""
+
+    def load_context(self, context):
+        self.model = load_model(context.artifacts[PYFUNC_ARTIFACT])
+
+    def predict(self, context, model_input, params=None):
+        frame = model_input if isinstance(model_input, pd.DataFrame) else pd.DataFrame(model_input)
+        if "tau" not in frame.columns:  # prediction needs no measurement; the record format does
+            frame = frame.assign(tau=0.0)
+        record = validate_frame(frame, source="pyfunc input")
+        return pd.Series(self.model.predict(record), name="tau_pred")
+
+
+def _find_model_folder(root: Path) -> Path:
+    hits = sorted(root.rglob("params.json"))
+    hits = [h for h in hits if h.parent.name != "lugre" or not (h.parent.parent / "params.json").exists()]
+    if not hits:
+        raise InputError("no friction model (params.json) in the MLflow artifact", source=str(root))
+    return min(hits, key=lambda h: len(h.parts)).parent
+
+
+def load_tracked_model(ref: str) -> FrictionModel:
+    """Load a friction model from ``runs:/<id>/model`` or ``models:/<name>@<alias>`` (or /<version>)."""
+    mlflow = _mlflow()
+    from mlflow.exceptions import MlflowException
+
+    dst = Path(tempfile.mkdtemp(prefix="greybench-model-"))
+    try:
+        local = Path(mlflow.artifacts.download_artifacts(artifact_uri=ref, dst_path=str(dst)))
+    except MlflowException as exc:
+        raise InputError(f"cannot resolve MLflow model: {exc.message.splitlines()[0]}", source=ref) from None
+    return load_model(_find_model_folder(local))
+
+
+# ---- plots -----------------------------------------------------------------------------
+def figures(model: FrictionModel, record: AxisRecord, label: str) -> dict[str, "object"]:
+    """The three diagnostic figures of a fit on ``record`` (matplotlib, Agg).
+
+    Returns a dict file name -> Figure: ``prediction_time.png`` (measured and predicted
+    torque over time, with the error), ``parity.png`` (measured vs predicted friction torque
+    with the identity line, paper Fig. 3) and ``hysteresis.png`` (friction vs velocity).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    pred = model.predict(record)
+    rigid = model.rigid_part(record)
+    f_meas = record.tau - rigid
+    f_pred = pred - rigid
+    out = {}
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    ax1.plot(record.t, record.tau, lw=0.6, label="measured")
+    ax1.plot(record.t, pred, lw=0.6, label=f"{model.name}")
+    ax1.set_ylabel("torque [Nm]")
+    ax1.legend(loc="upper right")
+    ax1.set_title(f"{model.name} on {label}")
+    ax2.plot(record.t, pred - record.tau, lw=0.5, color="C3")
+    ax2.set_ylabel("error [Nm]")
+    ax2.set_xlabel("t [s]")
+    fig.tight_layout()
+    out["prediction_time.png"] = fig
+
+    fig, ax = plt.subplots(figsize=(5.5, 5.5))
+    ax.scatter(f_meas, f_pred, s=1, alpha=0.3)
+    lim = [float(min(f_meas.min(), f_pred.min())), float(max(f_meas.max(), f_pred.max()))]
+    ax.plot(lim, lim, color="red", lw=1)
+    ax.set_xlabel("measured friction torque [Nm]")
+    ax.set_ylabel("predicted friction torque [Nm]")
+    ax.set_title(f"parity, {model.name} on {label}")
+    fig.tight_layout()
+    out["parity.png"] = fig
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    ax.scatter(record.qd, f_meas, s=1, alpha=0.2, label="measured")
+    ax.plot(record.qd, f_pred, lw=0.5, color="C1", label=model.name)
+    ax.set_xscale("symlog", linthresh=1e-3)
+    ax.set_xlabel("qd [rad/s] (symlog)")
+    ax.set_ylabel("friction torque [Nm]")
+    ax.legend(loc="upper left")
+    ax.set_title(f"friction-velocity hysteresis, {label}")
+    fig.tight_layout()
+    out["hysteresis.png"] = fig
+    return out
+
+
+# ---- runs ------------------------------------------------------------------------------
+@dataclass
+class FitRun:
+    """A tracked fit.
+
+    Attributes
+    ----------
+    run_id : str
+    experiment : str
+    model_uri : str
+        ``runs:/<run_id>/model``.
+    registered : str or None
+        Registered-model name, when registered.
+    version : str or None
+        Its new version.
+    alias : str or None
+        ``champion`` or ``challenger`` (the alias the new version got).
+    """
+
+    run_id: str
+    experiment: str
+    model_uri: str
+    registered: str | None = None
+    version: str | None = None
+    alias: str | None = None
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def _pip_requirements() -> list[str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    reqs = []
+    for pkg in ("torch", "numpy", "pandas", "scipy", "numba", "pygad", "mlflow"):
+        try:
+            reqs.append(f"{pkg}=={version(pkg)}")
+        except PackageNotFoundError:  # pragma: no cover
+            pass
+    return reqs
+
+
+def log_fit(model: FrictionModel, train: AxisRecord, test: AxisRecord | None = None, *, fit_time: float,
+            experiment: str = "friction", run_name: str | None = None, axis: int | None = None,
+            robot: str | None = None, register: str | None = None, parent_run_id: str | None = None,
+            extra_params: dict | None = None, plots: bool = True) -> FitRun:
+    """Record a fitted model as one MLflow run (see the module docstring); optionally register it.
+
+    Parameters
+    ----------
+    model : FrictionModel
+        Fitted.
+    train, test : AxisRecord
+        The records it was fitted and tested on (plots use the test record when given).
+    fit_time : float
+        Fit wall time [s].
+    experiment : str
+        Experiment name (created when missing).
+    register : str, optional
+        Registered-model name; the new version gets ``champion`` if there is none, else
+        ``challenger``.
+    parent_run_id : str, optional
+        Nest the run under this parent (``train-robot``).
+    """
+    mlflow = _mlflow()
+    from mlflow.entities import Metric
+    from mlflow.tracking import MlflowClient
+
+    import matplotlib.pyplot as plt
+
+    exp_id = ensure_experiment(experiment)
+    tags = {"mlflow.parentRunId": parent_run_id} if parent_run_id else {}
+    client = MlflowClient()
+    run = client.create_run(exp_id, run_name=run_name or model.name, tags=tags)
+    run_id = run.info.run_id
+    try:
+        params = {"model": model.name, "train_file": train.source, "train_samples": train.n,
+                  **{f"hp.{k}": v for k, v in model.get_hyperparameters().items()},
+                  **{f"fitted.{k}": f"{v:.8g}" for k, v in model.params_.items()}}
+        if test is not None:
+            params.update(test_file=test.source, test_samples=test.n)
+        if axis is not None:
+            params["axis"] = axis
+        if robot is not None:
+            params["robot"] = robot
+        params.update(extra_params or {})
+        with mlflow.start_run(run_id=run_id, nested=bool(parent_run_id)):
+            mlflow.log_params({k: str(v)[:6000] for k, v in params.items()})
+            if axis is not None:
+                mlflow.set_tag("axis", str(axis))
+            if robot is not None:
+                mlflow.set_tag("robot", robot)
+            history = getattr(model, "history_", None)
+            if history is not None and history.loss:
+                now = int(1000 * __import__("time").time())
+                metrics = [Metric("loss", float(v), now, i + 1) for i, v in enumerate(history.loss)]
+                for i in range(0, len(metrics), 1000):
+                    client.log_batch(run_id, metrics=metrics[i:i + 1000])
+            scores: dict[str, Metrics] = {"train": model.score(train)}
+            if test is not None:
+                scores["test"] = model.score(test)
+            final = {"fit_time_s": fit_time, "n_parameters": model.n_parameters()}
+            for part, m in scores.items():
+                final.update({f"{part}_rmse": m.rmse, f"{part}_r2": m.r2, f"{part}_nrmse": m.nrmse,
+                              f"{part}_max_error": m.max_error})
+            mlflow.log_metrics(final)
+            if plots:
+                rec, label = (test, "test record") if test is not None else (train, "training record")
+                for fname, fig in figures(model, rec, label).items():
+                    mlflow.log_figure(fig, f"plots/{fname}")
+                    plt.close(fig)
+            with tempfile.TemporaryDirectory() as tmp:
+                folder = model.save(Path(tmp) / "friction_model")
+                mlflow.log_artifact(str(folder / "params.json"))
+                mlflow.pyfunc.log_model(name=MODEL_ARTIFACT, python_model=FrictionPyfunc(),
+                                        artifacts={PYFUNC_ARTIFACT: str(folder)},
+                                        pip_requirements=_pip_requirements())
+    except BaseException:
+        client.set_terminated(run_id, status="FAILED")
+        raise
+    result = FitRun(run_id=run_id, experiment=experiment, model_uri=f"runs:/{run_id}/{MODEL_ARTIFACT}")
+    if register:
+        version, alias = register_version(result.model_uri, register)
+        result.registered, result.version, result.alias = register, version, alias
+    return result
+
+
+def register_version(model_uri: str, name: str) -> tuple[str, str]:
+    """Register ``model_uri`` under ``name``; alias ``champion`` if none yet, else ``challenger``."""
+    mlflow = _mlflow()
+    from mlflow.exceptions import MlflowException
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient()
+    mv = mlflow.register_model(model_uri, name)
+    try:
+        client.get_model_version_by_alias(name, CHAMPION)
+        alias = CHALLENGER
+    except MlflowException:
+        alias = CHAMPION
+    client.set_registered_model_alias(name, alias, mv.version)
+    return str(mv.version), alias
+
+
+@dataclass
+class Promotion:
+    """Outcome of :func:`promote`.
+
+    Attributes
+    ----------
+    name : str
+        Registered-model name.
+    promoted : bool
+        Whether ``champion`` moved to the challenger.
+    champion_version, challenger_version : str
+        Versions compared (champion before the decision).
+    champion_rmse, challenger_rmse : float
+        Their test RMSE [Nm].
+    improvement : float
+        champion_rmse - challenger_rmse [Nm] (positive: the challenger is better).
+    improvement_pct : float
+        The same relative to the champion [%].
+    """
+
+    name: str
+    promoted: bool
+    champion_version: str
+    challenger_version: str
+    champion_rmse: float
+    challenger_rmse: float
+    improvement: float
+    improvement_pct: float
+
+    def message(self) -> str:
+        if self.promoted:
+            return (f"{self.name}: champion moved to version {self.challenger_version} (test RMSE "
+                    f"{self.challenger_rmse:.4f} Nm, better by {self.improvement:.4f} Nm = {self.improvement_pct:.1f}% "
+                    f"than version {self.champion_version} at {self.champion_rmse:.4f} Nm)")
+        return (f"{self.name}: champion stays version {self.champion_version} (test RMSE {self.champion_rmse:.4f} Nm); "
+                f"challenger version {self.challenger_version} at {self.challenger_rmse:.4f} Nm is not better "
+                f"(worse by {-self.improvement:.4f} Nm = {-self.improvement_pct:.1f}%)")
+
+    def to_dict(self) -> dict:
+        return {**self.__dict__, "message": self.message()}
+
+
+def _version_test_rmse(client, name: str, mv) -> float:
+    run = client.get_run(mv.run_id)
+    rmse = run.data.metrics.get("test_rmse")
+    if rmse is None:
+        raise InputError(f"version {mv.version} has no test_rmse (fit it with --test)", source=name,
+                         field="test_rmse")
+    return float(rmse)
+
+
+def promote(name: str) -> Promotion:
+    """Move ``champion`` to the ``challenger`` version when its test RMSE is lower.
+
+    Raises
+    ------
+    InputError
+        Unknown registered model, no champion or challenger alias, or a version without
+        ``test_rmse``.
+    """
+    _mlflow()
+    from mlflow.exceptions import MlflowException
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient()
+    try:
+        client.get_registered_model(name)
+    except MlflowException:
+        raise InputError("no such registered model", source=tracking_uri(), field=name) from None
+    versions = {}
+    for alias in (CHAMPION, CHALLENGER):
+        try:
+            versions[alias] = client.get_model_version_by_alias(name, alias)
+        except MlflowException:
+            raise InputError(f"has no '{alias}' alias (register another fit first)", source=name,
+                             field=alias) from None
+    champ, chall = versions[CHAMPION], versions[CHALLENGER]
+    r_champ = _version_test_rmse(client, name, champ)
+    r_chall = _version_test_rmse(client, name, chall)
+    better = r_chall < r_champ
+    if better:
+        client.set_registered_model_alias(name, CHAMPION, chall.version)
+        client.delete_registered_model_alias(name, CHALLENGER)
+    diff = r_champ - r_chall
+    return Promotion(name=name, promoted=better, champion_version=str(champ.version),
+                     challenger_version=str(chall.version), champion_rmse=r_champ, challenger_rmse=r_chall,
+                     improvement=diff, improvement_pct=100.0 * diff / r_champ if r_champ > 0 else float("nan"))
+
+
+def start_parent_run(experiment: str, run_name: str, params: dict | None = None) -> str:
+    """Create a parent run (e.g. ``train-robot``) and return its id; end it with :func:`end_run`."""
+    _mlflow()
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient()
+    run = client.create_run(ensure_experiment(experiment), run_name=run_name)
+    for k, v in (params or {}).items():
+        client.log_param(run.info.run_id, k, str(v))
+    return run.info.run_id
+
+
+def end_run(run_id: str, status: str = "FINISHED", metrics: dict | None = None) -> None:
+    _mlflow()
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient()
+    for k, v in (metrics or {}).items():
+        client.log_metric(run_id, k, float(v))
+    client.set_terminated(run_id, status=status)
+
+
+def ui_command(host: str = "127.0.0.1", port: int = 5000) -> list[str]:
+    """The ``mlflow ui`` command line for the current store."""
+    import sys
+
+    uri = tracking_uri()
+    cmd = [sys.executable, "-m", "mlflow", "ui", "--backend-store-uri", uri, "--host", host, "--port", str(port)]
+    root = artifact_root(uri)
+    if root:
+        cmd += ["--default-artifact-root", root]
+    return cmd
