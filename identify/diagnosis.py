@@ -11,8 +11,9 @@ Method
    its structure is known, stationary and direction-symmetric, so whatever the record holds
    beyond it stays in the residual. A flexible baseline hides part of an effect: the grey-box
    LuGre's learned static curve g(qd) sees the signed velocity and absorbs a direction
-   asymmetry into itself (paper 2.3.1, Fig. 2). The grey-box model, when installed, is
-   reported beside it for reference (:func:`reference_models`).
+   asymmetry into itself (paper 2.3.1, Fig. 2), and a residual network (paper, ref. [62])
+   absorbs whatever correlates with velocity. So the diagnosis names causes against the
+   conventional LuGre; the grey-box models are compared separately (``greybench fit``).
 2. **Candidates with physical structure.** Each candidate cause is a small set of regressors
    built from the record and the baseline's internals, the dry (bristle) friction
    ``F_dry = s0*z + s1*zdot`` and the velocity ``qd`` (paper eqs. 7-9); ``dL = |tau_load| - L_ref``,

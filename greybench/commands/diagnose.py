@@ -188,9 +188,20 @@ def bench_diagnose(
             t0 = time.perf_counter()
             save_diagnosis(res, a, b, Path(tmp) / "out", track=False)
             t_save = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            save_diagnosis(res, a, b, Path(tmp) / "out2", track=True, experiment="bench-diagnose")
-            t_track = time.perf_counter() - t0
+            # a throwaway MLflow store: the bench must not write runs into the user's store
+            import os
+
+            old_uri = os.environ.get("MLFLOW_TRACKING_URI")
+            os.environ["MLFLOW_TRACKING_URI"] = f"sqlite:///{Path(tmp) / 'mlruns.db'}"
+            try:
+                t0 = time.perf_counter()
+                save_diagnosis(res, a, b, Path(tmp) / "out2", track=True, experiment="bench-diagnose")
+                t_track = time.perf_counter() - t0
+            finally:
+                if old_uri is None:
+                    os.environ.pop("MLFLOW_TRACKING_URI", None)
+                else:
+                    os.environ["MLFLOW_TRACKING_URI"] = old_uri
     table = Table(title=f"bench diagnose: {cases} cases of {duration:.0f} s records, one run")
     for col in ("item", "measured", "target", "note"):
         table.add_column(col)
