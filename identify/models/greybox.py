@@ -224,6 +224,28 @@ class GreyBoxLuGreNet(nn.Module):
         return {k: float(v.detach()) for k, v in p.items()}
 
 
+def forward_recurrent(net: GreyBoxLuGreNet, qd: torch.Tensor, qdd: torch.Tensor, dt: torch.Tensor) -> torch.Tensor:
+    """The same model as ``net(qd, qdd, dt).total``, stepped sample by sample in Python.
+
+    The straightforward recurrent implementation (what the scan replaces): per step the level
+    network, the exact update and the friction output. Reference for tests and the benchmark
+    baseline only: O(n) Python steps.
+    """
+    s0, s1, nu = net.s0, net.s1, net.nu
+    v_int = interval_velocity(qd)
+    w = net.level(qd[:1])[0] * torch.sign(qd[0])
+    out = []
+    for k in range(qd.shape[0]):
+        v = qd[k:k + 1]
+        g = net.level(v)[0]
+        f = w + s1 * (qd[k] - qd[k].abs() * w / g) + nu * qd[k]
+        out.append(f + net.J * qdd[k] + net.c if net.rigid else f)
+        gi = net.level(v_int[k:k + 1])[0]
+        a = torch.exp(-s0 * v_int[k].abs() * dt[k] / gi)
+        w = a * w + (1.0 - a) * gi * torch.sign(v_int[k])
+    return torch.stack(out)
+
+
 def record_tensors(record: AxisRecord) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """(qd, qdd, dt, friction target) of a record as float64 tensors."""
     as_t = lambda x: torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)

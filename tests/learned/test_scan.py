@@ -57,3 +57,16 @@ def test_bristle_scan_matches_numba_kernel():
         scale = np.max(np.abs(z_ref))
         assert np.max(np.abs(z - z_ref)) <= 1e-6 * scale
         np.testing.assert_allclose(z[np.abs(z_ref) > 1e-3 * scale], z_ref[np.abs(z_ref) > 1e-3 * scale], rtol=1e-6)
+
+
+def test_greybox_scan_forward_equals_recurrent_loop():
+    from identify.models.greybox import GreyBoxLuGreNet, forward_recurrent
+
+    n = 400
+    t = torch.arange(n, dtype=torch.float64) * 1e-3
+    qd = 0.8 * torch.sin(2 * torch.pi * 3 * t) * torch.exp(-t)
+    qdd = torch.gradient(qd, spacing=1e-3)[0]
+    dt = torch.full((n,), 1e-3, dtype=torch.float64)
+    net = GreyBoxLuGreNet(1.0, 2.0, 10.0, s0=2e4, s1=5.0, nu=0.4, J=0.5, c=0.05)
+    with torch.no_grad():
+        torch.testing.assert_close(net(qd, qdd, dt).total, forward_recurrent(net, qd, qdd, dt), rtol=1e-10, atol=1e-12)
