@@ -380,15 +380,18 @@ def _grid_range(vmin, vmax, lower, s, n):
 
 @njit(parallel=True, cache=True)
 def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, nz,
-                      p0, p1, R, rc, L, step, sample, samp_ang, samp_eng, samp_cnt, layer_removed):
+                      p0, p1, R, rc, L, step, sample, samp_ang, samp_eng, samp_cnt, layer_removed,
+                      ztop=1e300):
     """Remove the swept cutter from x- and y-rays, one z-layer per parallel task.
 
     Engagement samples of layer ``k0 + kk`` go to row ``kk`` of ``samp_ang`` (angle [rad] about the
     cutter axis at ``p1``, from +x counter-clockwise) and ``samp_eng`` (1 if material was there
-    before the cut). Returns ``(k0, n_layers, status)``; status 1: a ray overflowed its capacity.
+    before the cut). ``ztop`` [m]: highest material in the cutter's footprint (from the z-rays);
+    layers above it hold no material and are skipped. Returns ``(k0, n_layers, status)``; status 1:
+    a ray overflowed its capacity.
     """
     zmin = min(p0[2], p1[2])
-    zmax = max(p0[2], p1[2]) + L
+    zmax = min(max(p0[2], p1[2]) + L, max(ztop, zmin - 2.0 * s) + s)
     k0, k1 = _grid_range(zmin, zmax, lower[2], s, nz)
     j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
     i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
@@ -473,13 +476,17 @@ def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower,
 
 @njit(parallel=True, cache=True)
 def remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, step):
-    """Remove the swept cutter from the z-rays; returns (removed volume [m^3] seen by z-rays, status)."""
+    """Remove the swept cutter from the z-rays.
+
+    Returns (removed volume [m^3] seen by z-rays, status, highest material top [m] in the cutter's
+    footprint before the cut, -1e300 if none)."""
     j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
     i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
     nj = j1 - j0 + 1
     if nj <= 0 or i1 < i0:
-        return 0.0, 0
+        return 0.0, 0, -1e300
     rem = np.zeros(nj)
+    tops = np.full(nj, -1e300)
     overflow = np.zeros(nj, np.int32)
     for jj in prange(nj):
         j = j0 + jj
@@ -489,6 +496,8 @@ def remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L
             ridx = j * nx + i
             if zcnt[ridx] == 0:
                 continue
+            if zhi[ridx, zcnt[ridx] - 1] > tops[jj]:
+                tops[jj] = zhi[ridx, zcnt[ridx] - 1]
             xc = lower[0] + (i + 0.5) * s
             a, b = swept_interval(2, xc, yc, p0, p1, R, rc, L)
             if a < b:
@@ -498,7 +507,7 @@ def remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L
                 else:
                     acc += got
         rem[jj] = acc
-    return rem.sum() * s * s, 1 if overflow.sum() > 0 else 0
+    return rem.sum() * s * s, 1 if overflow.sum() > 0 else 0, tops.max()
 
 
 class RemovalBuffers:
@@ -528,13 +537,13 @@ def remove_step(workpiece, cutter, p0, p1, step: int, buffers: RemovalBuffers | 
     fx, fy, fz = workpiece.families
     R, rc, L = cutter.radius, cutter.corner_radius, cutter.length
     nx, ny, nz = workpiece.shape
+    _, st2, ztop = remove_vertical(fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count, workpiece.lower,
+                                   workpiece.spacing, nx, ny, p0, p1, R, rc, L, step)
     k0, nl, st = remove_horizontal(fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count,
                                    fy.lo, fy.hi, fy.lo_step, fy.hi_step, fy.count,
                                    workpiece.lower, workpiece.spacing, nx, ny, nz, p0, p1, R, rc, L, step,
                                    sample, buffers.samp_ang, buffers.samp_eng, buffers.samp_cnt,
-                                   buffers.layer_removed)
-    _, st2 = remove_vertical(fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count, workpiece.lower,
-                             workpiece.spacing, nx, ny, p0, p1, R, rc, L, step)
+                                   buffers.layer_removed, ztop)
     if st or st2:
         raise RuntimeError("dexel ray capacity exceeded; rebuild the workpiece with a larger capacity")
     return k0, nl, buffers

@@ -132,12 +132,12 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     for k in range(1, n):
         p1 = xyz[k] + defl + err[k]
         c0 = time.perf_counter()
+        vz, s2, ztop = remove_vertical(fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count, lower, s, nx, ny,
+                                       p0, p1, R, rc, L, k)
         k0, nl, s1 = remove_horizontal(fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count,
                                        fy.lo, fy.hi, fy.lo_step, fy.hi_step, fy.count,
                                        lower, s, nx, ny, nz, p0, p1, R, rc, L, k, forces,
-                                       buf.samp_ang, buf.samp_eng, buf.samp_cnt, buf.layer_removed)
-        vz, s2 = remove_vertical(fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count, lower, s, nx, ny,
-                                 p0, p1, R, rc, L, k)
+                                       buf.samp_ang, buf.samp_eng, buf.samp_cnt, buf.layer_removed, ztop)
         if s1 or s2:
             raise RuntimeError(f"dexel ray capacity exceeded at step {k}; use a larger capacity")
         removed_z += vz

@@ -66,7 +66,7 @@ class VirtualWorkpiece:
         ok = step >= 0
         attrs = {}
         for name in VARIABLES:
-            col = getattr(self.steps, name)
+            col = getattr(self.steps, "t" if name == "time" else name)
             shape = (len(step),) + col.shape[1:]
             a = np.full(shape, np.nan if col.dtype.kind == "f" else 0, dtype=col.dtype)
             a[ok] = col[step[ok]]
