@@ -39,7 +39,12 @@ def make_model(name: str, **hyperparameters) -> FrictionModel:
 
 
 def load_model(ref: str | os.PathLike) -> FrictionModel:
-    """Load a fitted model from a saved folder (``params.json`` + model files)."""
+    """Load a fitted model from a saved folder (``params.json`` + model files), or from an MLflow
+    model URI (``runs:/<run_id>/model``, ``models:/<name>@<alias>``, see :mod:`identify.tracking`)."""
+    if str(ref).startswith(("runs:/", "models:/")):
+        from identify.tracking import load_tracked_model  # lazy: tracking imports this module
+
+        return load_tracked_model(str(ref))
     directory = Path(ref)
     doc = read_params(directory)
     name = doc["model"]

@@ -44,7 +44,7 @@ class LSTMFrictionNet(nn.Module):
         Co-identify J and c.
     """
 
-    def __init__(self, v_scale: float, a_scale: float, tau_scale: float, hidden: int = 24, rigid: bool = True):
+    def __init__(self, v_scale: float, a_scale: float, tau_scale: float, hidden: int = 16, rigid: bool = True):
         super().__init__()
         self.rigid = rigid
         self.register_buffer("v_scale", torch.tensor(float(v_scale), dtype=DTYPE))
@@ -103,7 +103,7 @@ class LSTMFriction(FrictionModel):
     name = "lstm"
     units = {"J": "kg m^2", "c": "Nm"}
 
-    def __init__(self, hidden: int = 24, window: int = 400, warmup: int = 100, epochs: int = 150, lr: float = 0.01,
+    def __init__(self, hidden: int = 16, window: int = 400, warmup: int = 100, epochs: int = 60, lr: float = 0.02,
                  seed: int = 0):
         self.hidden = hidden
         self.window = window

@@ -23,6 +23,12 @@ def _pair(curve: str, duration: float):
 
 
 @pytest.fixture(scope="session")
+def record_pair():
+    """``record_pair(curve, duration)`` -> (train UT frame, test frame)."""
+    return _pair
+
+
+@pytest.fixture(scope="session")
 def hump_frames():
     return _pair("hump", 20.0)
 
