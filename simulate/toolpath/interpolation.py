@@ -37,6 +37,7 @@ sample is the first cycle at or after the end of motion, holding the end point.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -244,10 +245,16 @@ def interpolate(program: Program, limits: PathLimits | None = None) -> Interpola
     Returns
     -------
     Interpolation
-        Samples at ``t = k * cycle``; positions follow the exact segment geometry.
+        Samples at ``t = k * cycle``; positions follow the exact segment geometry. Motion starts at
+        the target of the program's opening rapid (G0): where the tool was before it is unknown.
     """
     lim = limits or PathLimits()
     lim.validate()
+    # The opening rapid starts wherever the robot happens to be, not at the program's origin (which
+    # may lie inside the stock): motion starts at its target, as on the machine after positioning.
+    first = 1 if len(program.segments) > 1 and isinstance(program.segments[0], Linear) and \
+        program.segments[0].rapid else 0
+    program = dataclasses.replace(program, segments=program.segments[first:])
     segs = program.segments
     if not segs:
         raise InputError("program has no motion", source=program.source)
@@ -319,7 +326,7 @@ def interpolate(program: Program, limits: PathLimits | None = None) -> Interpola
     cum = np.concatenate(([0.0], np.cumsum(lengths)))
     xyz = _geometry(segs, seg_idx, s_loc, lengths)
     line = np.array([s.line for s in segs], dtype=np.int64)[seg_idx]
-    return Interpolation(t=t, line=line, segment=seg_idx.astype(np.int64), xyz=xyz, s=cum[seg_idx] + s_loc,
+    return Interpolation(t=t, line=line, segment=seg_idx.astype(np.int64) + first, xyz=xyz, s=cum[seg_idx] + s_loc,
                          v=v, a=a, j=j, cycle=T, junction_speed=vj)
 
 
