@@ -98,16 +98,21 @@ def magnitude_for(effect: str, ratio: float, t, q, qd, qdd, seed: int, noise: fl
 
 
 def generated_cases(n_cases: int, seed: int = 0, ratios=(2.0, 3.0, 5.0, 10.0), clean_share: float = 0.25):
-    """Seeded cases ``(effect, ratio, train_seed, test_seed)``: each effect drawn at random, or
-    ``none`` with probability ``clean_share``; ratio = effect RMS / noise RMS."""
+    """Seeded cases ``(effect, ratio, train_seed, test_seed)``.
+
+    A share ``clean_share`` of the cases is clean (``none``); the rest cycle through the six
+    effects so each appears about equally often, in a seeded random order, each at a ratio
+    (identifiable effect RMS / noise RMS, :func:`effect_rms`) drawn from ``ratios``.
+    """
     rng = np.random.default_rng(seed)
     effects = [c.value for c in CANDIDATES]
+    n_clean = int(round(clean_share * n_cases))
+    kinds = ["none"] * n_clean + [effects[i % len(effects)] for i in range(n_cases - n_clean)]
+    kinds = [kinds[i] for i in rng.permutation(len(kinds))]
     cases = []
-    for i in range(n_cases):
-        if rng.random() < clean_share:
-            cases.append(("none", 0.0, 1000 + i, 5000 + i))
-        else:
-            cases.append((str(rng.choice(effects)), float(rng.choice(ratios)), 1000 + i, 5000 + i))
+    for i, effect in enumerate(kinds):
+        ratio = 0.0 if effect == "none" else float(rng.choice(ratios))
+        cases.append((effect, ratio, 1000 + i, 5000 + i))
     return cases
 
 
