@@ -131,6 +131,15 @@ def _program(body) -> tuple[str, str]:
     return text, source
 
 
+def _stock(body: SimulationRequest) -> tuple[str, str]:
+    """(text, source) of the stock description: named, or the named program's."""
+    name = body.stock or body.program
+    if name is None:
+        raise InputError("inline G-code needs a stock description: give 'stock' (e.g. iso160)", field="stock")
+    path = named_file("programs", name, ".stock.json", "stock")
+    return path.read_text(), path.name
+
+
 def _robot(name: str) -> str:
     named_file("robots", name, ".toml", "robot")
     return name[:-5] if name.endswith(".toml") else name
@@ -251,13 +260,19 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
               responses={**not_found, 429: {"model": ErrorBody}})
     def submit_simulation(body: SimulationRequest, request: Request) -> JSONResponse:
         text, source = _program(body)
+        stock_text, stock_source = _stock(body)
         robot = _robot(body.robot)
         poses = _poses(body)
         friction = _friction(body, robot, settings.mlflow_tracking_uri)
-        job = {"program_source": source, "robot": robot, "poses": poses, "friction": friction,
-               "options": body.options.model_dump(), "tracking_uri": settings.mlflow_tracking_uri}
-        rec = request.app.state.manager.submit(JobKind.simulation, job,
-                                               prepare=lambda d: (d / "program.nc").write_text(text))
+        job = {"program_source": source, "stock_source": stock_source, "robot": robot, "poses": poses,
+               "friction": friction, "options": body.options.model_dump(),
+               "tracking_uri": settings.mlflow_tracking_uri}
+
+        def prepare(d: Path) -> None:
+            (d / "program.nc").write_text(text)
+            (d / "stock.json").write_text(stock_text)
+
+        rec = request.app.state.manager.submit(JobKind.simulation, job, prepare=prepare)
         return JSONResponse(status_code=202, content=_status(rec).model_dump(mode="json"),
                             headers={"Location": f"/simulations/{rec.id}"})
 

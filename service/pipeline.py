@@ -35,6 +35,7 @@ from service.jobs import JobKind
 from service.paths import DATA_DIR
 
 Progress = Callable[[float, str], None]
+MM = 1e-3
 
 
 class StageUnavailable(RuntimeError):
@@ -75,6 +76,8 @@ class PoseTask:
     ----------
     program_text, program_source : str
         G-code and the name used in messages.
+    stock_text, stock_source : str
+        Stock description JSON (:mod:`simulate.toolpath.testpiece`, m) and its name.
     robot : str
         Robot name (``data/robots/<robot>.toml``).
     pose : dict
@@ -88,6 +91,8 @@ class PoseTask:
 
     program_text: str
     program_source: str
+    stock_text: str
+    stock_source: str
     robot: str
     pose: dict
     friction_files: dict = field(default_factory=dict)
@@ -123,46 +128,92 @@ def _robot_with_models(task: PoseTask, scratch: Path):
     return robot.with_changes(friction=tuple(specs))
 
 
-def simulate_pose(task: PoseTask) -> PoseOutcome:
-    """Simulate one pose (steps 1-4 of the module docstring); deterministic."""
-    from simulate.robot.kinematics import fk
+def simulate_pose(task: PoseTask, advance: Callable[[float], None] | None = None) -> PoseOutcome:
+    """Simulate one pose (steps 1-4 of the module docstring); deterministic.
+
+    The composition follows ``greybench machine`` (issue 7): tool and spindle from the stock
+    description and the program's S word, compliance at the commanded joints, servo tracking
+    error mapped to the workpiece frame; the virtual CMM and Table-2 rows of issue 8.
+    ``advance(fraction)`` reports progress of the machining loop (0..1).
+    """
+    from simulate.machining.cutting import Spindle, load_material
+    from simulate.machining.dexel import TriDexel
+    from simulate.machining.simulation import simulate_machining, workpiece_compliance
+    from simulate.machining.tools import make_cutter
+    from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes
+    from simulate.evaluation.cmm import probe
+    from simulate.evaluation.features import evaluate_scan
     from simulate.robot.servo import simulate_servo
     from simulate.toolpath.gcode import parse_program
     from simulate.toolpath.interpolation import interpolate
     from simulate.toolpath.placement import joint_trajectory, parse_poses
+    from simulate.toolpath.testpiece import iso_test_piece
 
     opts = task.options
     program = parse_program(task.program_text, source=task.program_source)
     interp = interpolate(program)
     placement = parse_poses({"poses": [task.pose]}, source="request")[0]
+    try:
+        stock = json.loads(task.stock_text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"invalid JSON: {exc}", source=task.stock_source, line=exc.lineno) from None
+    if not isinstance(stock, dict) or stock.get("size_mm") not in (160, 320):
+        raise InputError("the ranking needs an ISO 10791-7 test-piece stock (size_mm 160 or 320)",
+                         source=task.stock_source, field="size_mm")
+    piece = iso_test_piece(int(stock["size_mm"]))
     scratch = Path(tempfile.mkdtemp(prefix="greybench-pose-"))
     try:
         robot = _robot_with_models(task, scratch)
         traj = joint_trajectory(robot, interp, placement, source=task.program_source)
-        servo = simulate_servo(robot, traj.t, traj.q, friction=bool(opts.get("friction", True)),
-                               backlash=bool(opts.get("switching", True)))
-        tcp_err = servo.tcp_error(robot)
-        summary = {
-            "pose": placement.name,
-            "steps": int(len(traj.t)),
-            "duration_s": float(traj.t[-1]),
-            "switching_points": int(np.count_nonzero(traj.switch)),
-            "max_joint_speed_ratio": float(np.max(np.abs(traj.qd) / np.asarray(robot.vmax)[None, :])),
-            "max_tracking_error_m": float(np.max(np.linalg.norm(tcp_err[:, :3], axis=1))),
-            "rms_tracking_error_m": float(np.sqrt(np.mean(np.sum(tcp_err[:, :3] ** 2, axis=1)))),
-        }
-        features, glb, extra = _machine_and_measure(task, robot, program, interp, traj, placement, scratch)
-        summary.update(extra)
+        Rm = placement.T[:3, :3]
+        compliance = workpiece_compliance(robot, traj.q, Rm) if opts.get("deflection", True) else None
+        err = None
+        if opts.get("friction", True):
+            servo = simulate_servo(robot, traj.t, traj.q, friction=True)
+            err = servo.tcp_error(robot) @ Rm  # base -> workpiece frame, row-wise R^T e
+        switch = traj.switch if opts.get("switching", True) else None
+        (scratch / "stock.json").write_text(task.stock_text)
+        wp = TriDexel.from_stock_file(scratch / "stock.json", float(opts.get("spacing_mm", 0.5)) * 1e-3)
+        tool = stock.get("tool", {})
+        cutter = make_cutter(tool.get("type", "flat"), float(tool.get("diameter", 0.01)),
+                             flutes=int(tool.get("flutes", 4)), helix_deg=float(tool.get("helix_deg", 30.0)),
+                             length=float(tool.get("length", 0.03)))
+        rpm = max((getattr(sg, "spindle", 0.0) or 0.0 for sg in program.segments), default=0.0) or 12000.0
+        material = load_material(opts.get("material") or "Al7075")
+        n = len(traj.t)
+        done = [0]
+
+        def step(k: int) -> None:
+            done[0] += k
+            if advance is not None:
+                advance(done[0] / n)
+
+        res = simulate_machining(wp, cutter, traj.t, traj.line, traj.xyz, material, Spindle.from_rpm(rpm),
+                                 compliance=compliance, tracking_error=err, switch=switch, advance=step)
+        table = evaluate_scan(probe(wp, piece), piece)
+        vw = VirtualWorkpiece(wp, res.steps)
+        export_meshes(vw, scratch, "deflection")
+        glb = (scratch / "surface_deflection.glb").read_bytes()
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+    terr = np.zeros((n, 3)) if err is None else err
+    summary = {
+        "pose": placement.name,
+        "steps": int(n),
+        "simulated_time_s": float(res.simulated_time),
+        "switching_points": int(np.count_nonzero(traj.switch)),
+        "removed_volume_m3": float(res.removed_volume),
+        "peak_force_n": float(res.steps.peak_force.max()),
+        "peak_deflection_m": float(np.linalg.norm(res.steps.deflection, axis=1).max()),
+        "max_tracking_error_m": float(np.linalg.norm(terr, axis=1).max()),
+        "score": table.score,
+        "in_tolerance": table.n_in_tolerance,
+        "worst_feature": table.worst.name,
+    }
+    features = [{"name": r.name, "nominal": r.nominal_display(), "nominal_text": r.nominal_text(),
+                 "tolerance": r.tolerance / MM, "deviation": float(r.deviation) / MM,
+                 "worst_instance": r.worst_instance} for r in table.rows]
     return PoseOutcome(pose=placement.name, summary=summary, features=features, glb=glb)
-
-
-def _machine_and_measure(task, robot, program, interp, traj, placement, scratch):
-    """Coupled machining simulation + virtual CMM (issues 7 and 8): features, GLB bytes, summary."""
-    _import_stage("simulate.machining.simulation", "the machining simulation (issue 7)")
-    _import_stage("simulate.evaluation.features", "the virtual CMM and feature evaluation (issue 8)")
-    raise StageUnavailable("simulate.machining.simulation", "the service adapter to the machining simulation")
 
 
 # ---- backends ---------------------------------------------------------------------------
@@ -170,8 +221,17 @@ def run_local(tasks: list[PoseTask], progress: Progress, lo: float = 0.05, hi: f
     """Poses one after another in this process."""
     out = []
     for i, t in enumerate(tasks):
-        progress(lo + (hi - lo) * i / len(tasks), f"simulating pose '{t.pose['name']}' ({i + 1}/{len(tasks)})")
-        out.append(simulate_pose(t))
+        a, b = lo + (hi - lo) * i / len(tasks), lo + (hi - lo) * (i + 1) / len(tasks)
+        label = f"simulating pose '{t.pose['name']}' ({i + 1}/{len(tasks)})"
+        progress(a, label)
+        last = [0.0]
+
+        def advance(f: float, a=a, b=b, label=label, last=last) -> None:
+            if f - last[0] >= 0.02:  # every 2 %: progress (and a pending cancel) without flooding the store
+                last[0] = f
+                progress(a + (b - a) * f, label)
+
+        out.append(simulate_pose(t, advance))
     return out
 
 
@@ -228,6 +288,7 @@ def pose_tasks(request: dict, job_dir: Path, progress: Progress) -> list[PoseTas
     from service import registry
 
     program_text = (job_dir / "program.nc").read_text()
+    stock_text = (job_dir / "stock.json").read_text()
     files: dict[str, dict[str, bytes]] = {}
     for entry in request.get("friction", []):
         if entry.get("source") != "registry":
@@ -236,15 +297,28 @@ def pose_tasks(request: dict, job_dir: Path, progress: Progress) -> list[PoseTas
         progress(0.02, f"fetching friction model {model.uri}")
         folder = registry.fetch(model, job_dir / "models" / f"axis{entry['axis']}", request.get("tracking_uri"))
         files[str(entry["axis"])] = _model_files(folder)
-    return [PoseTask(program_text=program_text, program_source=request["program_source"], robot=request["robot"],
+    return [PoseTask(program_text=program_text, program_source=request["program_source"], stock_text=stock_text,
+                     stock_source=request["stock_source"], robot=request["robot"],
                      pose=pose, friction_files=files, options=request.get("options", {}))
             for pose in request["poses"]]
 
 
 def rank(outcomes: list[PoseOutcome]) -> tuple[list[dict], list[dict]]:
-    """Ranking and feature rows from the per-pose feature tables (scoring of issue 8)."""
-    _import_stage("simulate.evaluation.ranking", "the pose ranking (issue 8)")
-    raise StageUnavailable("simulate.evaluation.ranking", "the service adapter to the pose ranking")
+    """Ranking and Table-2 rows (mm) with one deviation per pose.
+
+    Score of issue 8 (:attr:`simulate.evaluation.features.FeatureTable.score`): the sum over the
+    ten rows of |deviation| / tolerance, lower is better; ties broken by more rows in tolerance.
+    """
+    order = sorted(outcomes, key=lambda o: (o.summary["score"], -o.summary["in_tolerance"], o.pose))
+    ranking = [{"pose": o.pose, "score": o.summary["score"], "rank": i + 1, "in_tolerance": o.summary["in_tolerance"],
+                "worst_feature": o.summary["worst_feature"]} for i, o in enumerate(order)]
+    features = []
+    for j, row in enumerate(outcomes[0].features or []):
+        features.append({"name": row["name"], "nominal": row["nominal"], "nominal_text": row["nominal_text"],
+                         "tolerance": row["tolerance"],
+                         "deviation": {o.pose: o.features[j]["deviation"] for o in outcomes},
+                         "worst_instance": {o.pose: o.features[j]["worst_instance"] for o in outcomes}})
+    return ranking, features
 
 
 def report_csv(features: list[dict], poses: list[str]) -> str:

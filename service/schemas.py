@@ -89,6 +89,8 @@ class SimulationOptions(Strict):
 class SimulationRequest(Strict):
     program: Name | None = Field(None, description="named program in data/programs (e.g. iso160); or give gcode")
     gcode: str | None = Field(None, max_length=MAX_PROGRAM_CHARS, description="G-code text (mm, as in the program)")
+    stock: Name | None = Field(None, description="stock description data/programs/<stock>.stock.json "
+                                                 "(ISO test piece, m); default: the named program's")
     robot: Name = Field("max100", description="robot name in data/robots")
     pose_set: Name | None = Field(None, description="named pose file in data/poses (e.g. iso160); or give poses")
     poses: list[PoseIn] | None = Field(None, min_length=1, max_length=32, description="workpiece placements")
@@ -115,12 +117,6 @@ class SimulationRequest(Strict):
             if len(set(names)) != len(names):
                 raise ValueError("pose names must be unique")
         return self
-
-
-class JobLinks(Strict):
-    self_: str = Field(alias="self")
-    ranking: str | None = None
-    report: str | None = None
 
 
 class JobStatus(Strict):
