@@ -1,0 +1,56 @@
+"""Ranking end to end on the 160 test piece (slow: full machining simulations)."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from simulate.evaluation.ranking import Components, RankSettings, rank_poses
+from simulate.toolpath.placement import load_poses
+
+PROGRAM = "data/programs/iso160.nc"
+ROBOT = "data/robots/max100.toml"
+
+
+@pytest.mark.slow
+def test_ideal_robot_gives_near_zero_deviations(piece160):
+    pl = load_poses("data/poses/iso160.json")[:1]
+    r = rank_poses(PROGRAM, ROBOT, pl, settings=RankSettings(spacing=2e-3, size=160),
+                   components=Components(deflection=False, servo=False), workers=1)
+    table = r.results[pl[0].name].table
+    for row in table.rows:
+        if row.name == "slope height zMZ":
+            # The zig-zag finishing of the slope with a flat end mill leaves ridges between its passes
+            # (the tool bottom follows the plane only on each pass centre line): at most
+            # tan(3 deg) * (R - sqrt(R^2 - dy^2)) with dy up to the stepover / 2.
+            R = 5e-3
+            assert 0 <= row.deviation <= math.tan(piece160.slope_angle) * R
+        else:
+            assert abs(row.deviation) < 1e-6, row.name
+
+
+@pytest.mark.slow
+def test_stiffer_robot_scores_better():
+    pl = load_poses("data/poses/iso160.json")[:1]
+    soft = rank_poses(PROGRAM, ROBOT, pl, settings=RankSettings(spacing=2e-3, size=160, stiffness_scale=0.2))
+    stiff = rank_poses(PROGRAM, ROBOT, pl, settings=RankSettings(spacing=2e-3, size=160, stiffness_scale=20.0))
+    name = pl[0].name
+    assert stiff.results[name].score < soft.results[name].score
+
+
+@pytest.mark.slow
+def test_report_for_the_four_poses(tmp_path):
+    from simulate.evaluation.report import write_report
+
+    pl = load_poses("data/poses/iso320.json")
+    r = rank_poses("data/programs/iso320.nc", ROBOT, pl, settings=RankSettings(spacing=2e-3), out_dir=tmp_path)
+    assert [e.rank for e in r.entries] == [1, 2, 3, 4]
+    path = write_report(r, tmp_path, program="data/programs/iso320.nc", trajectories=r.trajectories)
+    text = path.read_text()
+    for p in pl:
+        assert (tmp_path / p.name / "scan.csv").exists()
+        assert (tmp_path / "images" / f"{p.name}_deviation.png").exists()
+        assert (tmp_path / "images" / f"{p.name}_process.png").exists()
+        assert (tmp_path / "images" / f"{p.name}_switching.png").exists()
+        assert f"### {p.name}" in text
+    assert "greybench trace --workpiece" in text and "Why the best pose wins" in text
