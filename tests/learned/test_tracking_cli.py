@@ -80,7 +80,7 @@ def test_promote_moves_champion_only_when_better(mlflow_store, short_files):
     res = _run("promote", "--name", name)
     assert res.exit_code == 0 and "champion moved to version 3" in res.stdout and "better by" in res.stdout
     client = mlflow.MlflowClient(mlflow_store)
-    assert client.get_model_version_by_alias(name, "champion").version == "3"
+    assert str(client.get_model_version_by_alias(name, "champion").version) == "3"
     res = _run("promote", "--name", name)  # no challenger left
     assert res.exit_code == 2 and "challenger" in res.output
     res = _run("promote", "--name", "nope-axis9-friction")
