@@ -107,3 +107,14 @@ def test_plant_inertia_follows_the_load(trajectories):
     b = synthesize(tr.t, tr.q, tr.qd, tr.qdd, seed=2, effect="inertia", magnitude=0.5).frame
     expect = cfg.inertia * 0.5 * cfg.inertia_step * (np.abs(a["tau_load"]) / cfg.load_mean - 1) * a["qdd"]
     np.testing.assert_allclose(b["tau"] - a["tau"], expect, atol=1e-12)
+
+
+def test_records_without_optional_columns_skip_their_candidates(make_pair):
+    """No temp/tau_load columns: only position, asymmetry and drift can be tested, and are."""
+    def strip(frame):
+        return frame.drop(columns=["temp", "tau_load"])
+
+    train, test = make_pair("drift", 0.5, seed=51, extra=strip)
+    res = diagnose(train, test, generations=GENERATIONS)
+    assert {s.cause for s in res.analysis.ranking} == {Cause.POSITION, Cause.ASYMMETRY, Cause.DRIFT}
+    assert res.cause is Cause.DRIFT
