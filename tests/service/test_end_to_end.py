@@ -1,0 +1,87 @@
+"""End to end on loopback: submit the 160 test piece with two poses, poll, fetch ranking, report (JSON
+and CSV) and the virtual workpieces (GLB); the results stay readable after a restart.
+
+Slow: the coupled machining simulation of two poses takes minutes on 2 shared cores.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import time
+
+import pytest
+
+from service.loadtest import load
+
+KEY = "test-key-0123456789"
+
+
+def poll(c, job: str, timeout: float) -> dict:
+    deadline = time.time() + timeout
+    seen = []
+    while True:
+        st = c.get(f"/simulations/{job}").json()
+        seen.append(st["progress"])
+        if st["state"] in ("succeeded", "failed", "cancelled"):
+            return st, seen
+        assert time.time() < deadline, f"job still {st['state']} after {timeout} s: {st}"
+        time.sleep(1.0)
+
+
+def check_results(c, job: str, poses: list[str]) -> dict:
+    ranking = c.get(f"/simulations/{job}/ranking")
+    assert ranking.status_code == 200, ranking.text
+    entries = ranking.json()["ranking"]
+    assert sorted(e["pose"] for e in entries) == sorted(poses)
+    assert [e["rank"] for e in entries] == [1, 2]
+    assert entries[0]["score"] <= entries[1]["score"]
+
+    report = c.get(f"/simulations/{job}/report").json()
+    names = [f["name"] for f in report["features"]]
+    assert len(names) == 10 and names[0] == "circle height zMZ" and names[-1] == "slope angle"
+    for f in report["features"]:
+        assert set(f["deviation"]) == set(poses) and f["tolerance"] > 0
+    # the ranking score is the sum of |deviation| / tolerance over the rows (issue 8)
+    for e in entries:
+        total = sum(abs(f["deviation"][e["pose"]]) / f["tolerance"] for f in report["features"])
+        assert total == pytest.approx(e["score"], rel=1e-9)
+    assert {p["pose"] for p in report["poses"]} == set(poses)
+
+    text = c.get(f"/simulations/{job}/report", params={"format": "csv"})
+    assert text.status_code == 200 and text.headers["content-type"].startswith("text/csv")
+    rows = list(csv.DictReader(io.StringIO(text.text)))
+    assert len(rows) == 10 * len(poses)
+    first = next(r for r in rows if r["feature"] == "circle diameter" and r["pose"] == poses[0])
+    dev = next(f for f in report["features"] if f["name"] == "circle diameter")["deviation"][poses[0]]
+    assert float(first["deviation"]) == pytest.approx(dev)
+
+    for pose in poses:
+        glb = c.get(f"/simulations/{job}/workpiece/{pose}.glb")
+        assert glb.status_code == 200 and glb.headers["content-type"] == "model/gltf-binary"
+        assert glb.content[:4] == b"glTF" and len(glb.content) > 1000
+    assert c.get(f"/simulations/{job}/workpiece/nope.glb").status_code == 404
+    return report
+
+
+@pytest.mark.slow
+def test_submit_poll_rank_report_glb_and_restart(make_server):
+    srv = make_server(GREYBENCH_WORKERS="1")
+    poses = ["near", "far_rotated"]
+    with srv.client() as c:
+        r = c.post("/simulations", json={"program": "iso160", "pose_set": "iso160", "select": poses,
+                                         "options": {"spacing_mm": 1.0}})
+        assert r.status_code == 202
+        job = r.json()["id"]
+        st, seen = poll(c, job, timeout=3600)
+        assert st["state"] == "succeeded", st
+        assert st["progress"] == 1.0 and seen == sorted(seen)  # progress never goes back
+        report = check_results(c, job, poses)
+    # a short load on the finished job's status and ranking
+    res = load(srv.url, {"X-API-Key": KEY}, [f"/simulations/{job}", f"/simulations/{job}/ranking"],
+               clients=20, duration=3.0)
+    assert res["errors"] == 0, res
+    srv.stop()
+    srv2 = make_server(data_dir=srv.data_dir)
+    with srv2.client() as c:
+        assert c.get(f"/simulations/{job}").json()["state"] == "succeeded"
+        assert check_results(c, job, poses) == report
