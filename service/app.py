@@ -360,7 +360,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
             (d / "train.csv").write_text(body.train_csv)
             (d / "test.csv").write_text(body.test_csv)
 
-        rec = request.app.state.manager.submit(JobKind.diagnose, {"baseline": body.baseline}, prepare=prepare)
+        rec = request.app.state.manager.submit(JobKind.diagnose, {"seed": body.seed, "generations": body.generations},
+                                               prepare=prepare)
         return JSONResponse(status_code=202, content=_status(rec).model_dump(mode="json"),
                             headers={"Location": f"/jobs/{rec.id}"})
 
@@ -383,7 +384,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
             p = placements[body.pose]
             pose = {"name": p.name, "xyz": p.xyz.tolist(), "rpy": p.rpy.tolist(), "description": p.description}
         else:
-            pose = parse_poses({"poses": [body.pose.model_dump()]}, source="pose") and body.pose.model_dump()
+            parse_poses({"poses": [body.pose.model_dump()]}, source="pose")  # same checks as pose files
+            pose = body.pose.model_dump()
 
         def prepare(d: Path) -> None:
             (d / "program.nc").write_text(text)

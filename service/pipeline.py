@@ -351,8 +351,21 @@ def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address
 
 
 def run_diagnose(request: dict, job_dir: Path, progress: Progress) -> dict:
-    _import_stage("identify.diagnosis", "friction diagnosis (issue 4)")
-    raise StageUnavailable("identify.diagnosis", "the service adapter to the friction diagnosis")
+    """Friction diagnosis (issue 4) of the uploaded records; report and models in ``diagnosis/``."""
+    diagnosis = _import_stage("identify.diagnosis", "friction diagnosis (issue 4)")
+    from identify.records import load_record
+
+    train = load_record(job_dir / "train.csv")
+    test = load_record(job_dir / "test.csv")
+    if (train.tau_rb is None) != (test.tau_rb is None):
+        raise InputError("both records need a 'tau_rb' column, or neither", source="test.csv", field="tau_rb")
+    progress(0.05, "diagnosing: baseline fit, held-out tests, extended refit")
+    result = diagnosis.diagnose(train, test, seed=int(request.get("seed", 0)),
+                                generations=int(request.get("generations", 30)))
+    progress(0.9, "writing the report")
+    # no MLflow runs from the service: a job's outputs stay in its folder
+    diagnosis.save_diagnosis(result, train, test, job_dir / "diagnosis", track=False)
+    return result.to_json()
 
 
 def run_explain(request: dict, job_dir: Path, progress: Progress) -> dict:

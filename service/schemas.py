@@ -193,7 +193,8 @@ class DiagnoseRequest(Strict):
     train_csv: str = Field(min_length=1, max_length=MAX_PROGRAM_CHARS * 8,
                            description="training axis record, CSV with t [s], q [rad], tau [Nm] (+ optional columns)")
     test_csv: str = Field(min_length=1, max_length=MAX_PROGRAM_CHARS * 8, description="held-out axis record, same format")
-    baseline: str = Field("lugre", pattern=NAME_PATTERN, description="baseline friction model name")
+    seed: int = Field(0, ge=0, le=2**31 - 1, description="seed of the LuGre baseline's genetic algorithm [-]")
+    generations: int = Field(30, ge=1, le=200, description="GA generations of the LuGre baseline [-]")
 
 
 class ExplainRequest(Strict):

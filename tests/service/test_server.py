@@ -4,6 +4,7 @@ from __future__ import annotations
 import time
 
 import httpx
+import numpy as np
 import pytest
 
 from service.jobs import RESTART_REASON
@@ -77,3 +78,25 @@ def test_bounded_load_on_status_and_ranking_has_no_errors(shared_server):
     assert res["errors"] == 0, res
     assert res["requests"] >= 100
     assert all(row["requests"] > 0 for row in res["endpoints"])
+
+
+def _record_csv(seed: int, n: int = 2000) -> str:
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 2e-3
+    q = 0.5 * np.sin(2 * np.pi * 0.7 * t)
+    qd = 0.5 * 2 * np.pi * 0.7 * np.cos(2 * np.pi * 0.7 * t)
+    tau = 1.0 * np.tanh(qd / 2e-3) + 0.6 * qd + rng.normal(0, 0.02, n)
+    lines = ["t,q,qd,tau"] + [f"{a:.6f},{b:.9f},{c:.9f},{d:.9f}" for a, b, c, d in zip(t, q, qd, tau)]
+    return "\n".join(lines) + "\n"
+
+
+def test_diagnose_runs_as_a_job(shared_server):
+    with shared_server.client() as c:
+        r = c.post("/diagnose", json={"train_csv": _record_csv(1), "test_csv": _record_csv(2), "generations": 3})
+        assert r.status_code == 202 and r.headers["Location"] == f"/jobs/{r.json()['id']}"
+        assert r.json()["kind"] == "diagnose"
+        st = wait_for(c, r.json()["id"], ("succeeded", "failed"), timeout=300)
+    assert st["state"] == "succeeded", st
+    res = st["result"]
+    assert set(res) >= {"cause", "ranking", "baseline", "extended", "gain"}
+    assert res["baseline"]["test_rmse"] > 0 and np.isfinite(res["gain"])
