@@ -1,7 +1,8 @@
 """What the jobs compute: pose simulations and ranking, diagnosis, explanation (runs in workers).
 
 The service is a thin layer: every number here comes from :mod:`simulate` and :mod:`identify`.
-A simulation job (paper 3.8, the planner's assistance system) runs, per pose:
+A simulation job (paper 3.8, the planner's assistance system) runs, per pose, the pose ranking of
+issue 8 (:func:`simulate.evaluation.ranking.rank_poses` with that one placement):
 
 1. the program interpolated at the 2 ms cycle (:func:`simulate.toolpath.interpolation.interpolate`),
 2. the workpiece placed and the joint trajectory by inverse kinematics with switching points
@@ -109,49 +110,40 @@ class PoseOutcome:
     glb: bytes | None = None
 
 
-def _robot_with_models(task: PoseTask, scratch: Path):
-    from simulate.robot.model import FrictionSpec, load_robot
+def _robot_file(task: PoseTask, scratch: Path) -> Path:
+    """The robot file of the task; with registry friction models, a copy referring to their folders."""
+    from simulate.robot.model import FrictionSpec, load_robot, save_robot
 
-    robot = load_robot(DATA_DIR / "robots" / f"{task.robot}.toml")
+    path = DATA_DIR / "robots" / f"{task.robot}.toml"
     if not task.friction_files:
-        return robot
+        return path
+    robot = load_robot(path)
     specs = list(robot.friction)
     for axis, files in sorted(task.friction_files.items()):
-        folder = scratch / f"axis{axis}"
+        folder = (scratch / "models" / f"axis{axis}").resolve()
         for rel, data in files.items():
             target = (folder / rel).resolve()
-            if folder.resolve() not in target.parents:
+            if folder not in target.parents:
                 raise InputError("model file outside its folder", field=f"friction[{axis}]")
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_bytes(data)
         specs[int(axis) - 1] = FrictionSpec(model=str(folder))
-    return robot.with_changes(friction=tuple(specs))
+    return save_robot(robot.with_changes(friction=tuple(specs)), scratch / f"{task.robot}.toml")
 
 
-def simulate_pose(task: PoseTask, advance: Callable[[float], None] | None = None) -> PoseOutcome:
-    """Simulate one pose (steps 1-4 of the module docstring); deterministic.
+def simulate_pose(task: PoseTask) -> PoseOutcome:
+    """Simulate, measure and score one pose; deterministic.
 
-    The composition follows ``greybench machine`` (issue 7): tool and spindle from the stock
-    description and the program's S word, compliance at the commanded joints, servo tracking
-    error mapped to the workpiece frame; the virtual CMM and Table-2 rows of issue 8.
-    ``advance(fraction)`` reports progress of the machining loop (0..1).
+    One call of :func:`simulate.evaluation.ranking.rank_poses` (issue 8) with this single placement
+    and one in-process worker, so the service computes exactly what ``greybench rank-poses`` does;
+    the virtual workpiece it saves is exported as GLB (coloured by deflection,
+    :func:`simulate.machining.virtual_workpiece.export_meshes`).
     """
-    from simulate.machining.cutting import Spindle, load_material
-    from simulate.machining.dexel import TriDexel
-    from simulate.machining.simulation import simulate_machining, workpiece_compliance
-    from simulate.machining.tools import make_cutter
+    ranking_mod = _import_stage("simulate.evaluation.ranking", "the pose ranking (issue 8)")
     from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes
-    from simulate.evaluation.cmm import probe
-    from simulate.evaluation.features import evaluate_scan
-    from simulate.robot.servo import simulate_servo
-    from simulate.toolpath.gcode import parse_program
-    from simulate.toolpath.interpolation import interpolate
-    from simulate.toolpath.placement import joint_trajectory, parse_poses
-    from simulate.toolpath.testpiece import iso_test_piece
+    from simulate.toolpath.placement import parse_poses
 
     opts = task.options
-    program = parse_program(task.program_text, source=task.program_source)
-    interp = interpolate(program)
     placement = parse_poses({"poses": [task.pose]}, source="request")[0]
     try:
         stock = json.loads(task.stock_text)
@@ -160,56 +152,50 @@ def simulate_pose(task: PoseTask, advance: Callable[[float], None] | None = None
     if not isinstance(stock, dict) or stock.get("size_mm") not in (160, 320):
         raise InputError("the ranking needs an ISO 10791-7 test-piece stock (size_mm 160 or 320)",
                          source=task.stock_source, field="size_mm")
-    piece = iso_test_piece(int(stock["size_mm"]))
+    settings = ranking_mod.RankSettings(spacing=float(opts.get("spacing_mm", 2.0)) * MM,
+                                        material=opts.get("material") or "Al7075", size=int(stock["size_mm"]))
+    components = ranking_mod.Components(deflection=bool(opts.get("deflection", True)),
+                                        friction=bool(opts.get("friction", True)),
+                                        switching=bool(opts.get("switching", True)))
     scratch = Path(tempfile.mkdtemp(prefix="greybench-pose-"))
     try:
-        robot = _robot_with_models(task, scratch)
-        traj = joint_trajectory(robot, interp, placement, source=task.program_source)
-        Rm = placement.T[:3, :3]
-        compliance = workpiece_compliance(robot, traj.q, Rm) if opts.get("deflection", True) else None
-        err = None
-        if opts.get("friction", True):
-            servo = simulate_servo(robot, traj.t, traj.q, friction=True)
-            err = servo.tcp_error(robot) @ Rm  # base -> workpiece frame, row-wise R^T e
-        switch = traj.switch if opts.get("switching", True) else None
-        (scratch / "stock.json").write_text(task.stock_text)
-        wp = TriDexel.from_stock_file(scratch / "stock.json", float(opts.get("spacing_mm", 0.5)) * 1e-3)
-        tool = stock.get("tool", {})
-        cutter = make_cutter(tool.get("type", "flat"), float(tool.get("diameter", 0.01)),
-                             flutes=int(tool.get("flutes", 4)), helix_deg=float(tool.get("helix_deg", 30.0)),
-                             length=float(tool.get("length", 0.03)))
-        rpm = max((getattr(sg, "spindle", 0.0) or 0.0 for sg in program.segments), default=0.0) or 12000.0
-        material = load_material(opts.get("material") or "Al7075")
-        n = len(traj.t)
-        done = [0]
-
-        def step(k: int) -> None:
-            done[0] += k
-            if advance is not None:
-                advance(done[0] / n)
-
-        res = simulate_machining(wp, cutter, traj.t, traj.line, traj.xyz, material, Spindle.from_rpm(rpm),
-                                 compliance=compliance, tracking_error=err, switch=switch, advance=step)
-        table = evaluate_scan(probe(wp, piece), piece)
-        vw = VirtualWorkpiece(wp, res.steps)
-        export_meshes(vw, scratch, "deflection")
-        glb = (scratch / "surface_deflection.glb").read_bytes()
+        program = scratch / "program.nc"
+        program.write_text(task.program_text)
+        (scratch / "program.stock.json").write_text(task.stock_text)  # rank_poses finds it next to the program
+        robot = _robot_file(task, scratch)
+        try:
+            ranking = ranking_mod.rank_poses(program, robot, [placement], settings=settings, components=components,
+                                             shares=bool(opts.get("shares", False)), out_dir=scratch / "out",
+                                             workers=1)
+        except InputError as exc:  # name the program as the client knows it, not the scratch copy
+            if exc.source == str(program):
+                exc = InputError(exc.message, source=task.program_source, field=exc.field, row=exc.row,
+                                 line=exc.line, column=exc.column)
+            raise exc from None
+        res = ranking.results[placement.name]
+        vw = VirtualWorkpiece.load(res.workpiece_file)
+        glb_path = next(p for p in export_meshes(vw, scratch, "deflection") if p.suffix == ".glb")
+        glb = glb_path.read_bytes()
+        steps = res.steps
+        table = res.table
+        shares = ranking.shares(placement.name) if opts.get("shares") else None
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    terr = np.zeros((n, 3)) if err is None else err
+    terr = np.zeros((len(steps.t), 3)) if res.tcp_error is None else res.tcp_error
     summary = {
         "pose": placement.name,
-        "steps": int(n),
-        "simulated_time_s": float(res.simulated_time),
-        "switching_points": int(np.count_nonzero(traj.switch)),
-        "removed_volume_m3": float(res.removed_volume),
-        "peak_force_n": float(res.steps.peak_force.max()),
-        "peak_deflection_m": float(np.linalg.norm(res.steps.deflection, axis=1).max()),
+        "steps": int(len(steps.t)),
+        "simulated_time_s": float(steps.t[-1] - steps.t[0]) if len(steps.t) > 1 else 0.0,
+        "switching_points": int(np.count_nonzero(res.switch)) if res.switch is not None else 0,
+        "peak_force_n": float(steps.peak_force.max()),
+        "peak_deflection_m": float(np.linalg.norm(steps.deflection, axis=1).max()),
         "max_tracking_error_m": float(np.linalg.norm(terr, axis=1).max()),
-        "score": table.score,
-        "in_tolerance": table.n_in_tolerance,
+        "score": float(table.score),
+        "in_tolerance": int(table.n_in_tolerance),
         "worst_feature": table.worst.name,
     }
+    if shares is not None:
+        summary["shares"] = shares
     features = [{"name": r.name, "nominal": r.nominal_display(), "nominal_text": r.nominal_text(),
                  "tolerance": r.tolerance / MM, "deviation": float(r.deviation) / MM,
                  "worst_instance": r.worst_instance} for r in table.rows]
@@ -218,20 +204,12 @@ def simulate_pose(task: PoseTask, advance: Callable[[float], None] | None = None
 
 # ---- backends ---------------------------------------------------------------------------
 def run_local(tasks: list[PoseTask], progress: Progress, lo: float = 0.05, hi: float = 0.9) -> list[PoseOutcome]:
-    """Poses one after another in this process."""
+    """Poses one after another in this process (progress and cancellation between poses)."""
     out = []
     for i, t in enumerate(tasks):
-        a, b = lo + (hi - lo) * i / len(tasks), lo + (hi - lo) * (i + 1) / len(tasks)
-        label = f"simulating pose '{t.pose['name']}' ({i + 1}/{len(tasks)})"
-        progress(a, label)
-        last = [0.0]
-
-        def advance(f: float, a=a, b=b, label=label, last=last) -> None:
-            if f - last[0] >= 0.02:  # every 2 %: progress (and a pending cancel) without flooding the store
-                last[0] = f
-                progress(a + (b - a) * f, label)
-
-        out.append(simulate_pose(t, advance))
+        progress(lo + (hi - lo) * i / len(tasks), f"simulating pose '{t.pose['name']}' ({i + 1}/{len(tasks)})")
+        out.append(simulate_pose(t))
+    progress(hi, f"{len(tasks)} poses simulated")
     return out
 
 
@@ -369,8 +347,8 @@ def run_diagnose(request: dict, job_dir: Path, progress: Progress) -> dict:
 
 
 def run_explain(request: dict, job_dir: Path, progress: Progress) -> dict:
-    _import_stage("simulate.evaluation.explain", "part explanation (issue 9)")
-    raise StageUnavailable("simulate.evaluation.explain", "the service adapter to explain")
+    _import_stage("simulate.explain", "part explanation (issue 9)")
+    raise StageUnavailable("simulate.explain", "the service adapter to explain (its API was not published yet)")
 
 
 def run_job(kind: JobKind, request: dict, job_dir: Path, progress: Progress, *, ray_address: str | None = None) -> dict:

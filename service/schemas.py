@@ -79,11 +79,13 @@ class AxisFriction(Strict):
 
 
 class SimulationOptions(Strict):
-    spacing_mm: float = Field(0.5, gt=0.05, le=10.0, description="dexel spacing of the virtual workpiece [mm]")
+    spacing_mm: float = Field(2.0, gt=0.05, le=5.0, description="dexel spacing of the virtual workpiece [mm]")
     deflection: bool = Field(True, description="robot deflection under the cutting forces in the loop")
     friction: bool = Field(True, description="friction in the axis servos (tracking error) in the loop")
     switching: bool = Field(True, description="reversal effects at axis switching points (gear backlash)")
-    material: Name | None = Field(None, description="workpiece material in data/materials.toml (default: its default)")
+    material: Name | None = Field(None, description="workpiece material in data/materials.toml (default Al7075)")
+    shares: bool = Field(False, description="also re-run each pose with deflection, friction and switching off in "
+                                            "turn (3 more simulations per pose) to report each component's share")
 
 
 class SimulationRequest(Strict):
