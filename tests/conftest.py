@@ -3,6 +3,13 @@ import os
 
 import pytest
 
+try:  # one intra-op thread: the suite's fits are small, and two threads thrash on a shared 2-core machine
+    import torch
+
+    torch.set_num_threads(1)
+except ImportError:  # pragma: no cover
+    pass
+
 
 @pytest.fixture(autouse=True, scope="session")
 def _isolated_tracking(tmp_path_factory):
