@@ -6,8 +6,9 @@ Design
   in SQLite (WAL journal, so the worker processes can write progress while the server reads).
   Every server start has a *boot id*; on start, :meth:`JobStore.recover` marks the jobs another boot
   left ``queued`` or ``running`` as ``failed`` with the reason (the process that ran them is gone).
-  A worker only finishes a job whose row is still ``running`` under its own boot id, so a worker
-  orphaned by a killed server cannot overwrite what the new server recorded.
+  Workers end themselves when the server process disappears; and a worker only finishes a job
+  whose row is still ``running`` under its own boot id, so a worker orphaned by a killed server
+  cannot overwrite what the new server recorded.
 - :class:`JobManager` runs jobs in a :class:`concurrent.futures.ProcessPoolExecutor` (``spawn``
   start method: safe next to the server's threads) and admits at most ``workers + queue_size``
   unfinished jobs; beyond that :class:`QueueFull` (the API answers 429 with ``Retry-After``).
@@ -208,6 +209,24 @@ class JobStore:
 
 
 # ---- worker side ---------------------------------------------------------------------
+def _exit_with_parent(parent_pid: int, interval: float = 0.5) -> None:
+    """Pool initializer: end this worker when the server process is gone.
+
+    A killed server leaves its workers orphaned (re-parented); without this they would run their
+    job to the end and burn the shared cores. The job's row stays ``running`` and the next start
+    marks it failed with the reason.
+    """
+    import os
+
+    def watch() -> None:
+        while True:
+            if os.getppid() != parent_pid:
+                os._exit(3)
+            time.sleep(interval)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 def run_in_worker(db_path: str, boot: str, job_id: str, kind: str, request: dict, job_dir: str,
                   ray_address: str | None) -> str:
     """Entry point of a worker process: run one job and record its end in the store.
@@ -273,7 +292,10 @@ class JobManager:
         self.ray_address = ray_address
         self.boot = uuid.uuid4().hex
         self.recovered = store.recover(self.boot)
-        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        import os
+
+        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                         initializer=_exit_with_parent, initargs=(os.getpid(),))
         self._futures: dict[str, Future] = {}
         self._lock = threading.Lock()
 
