@@ -554,7 +554,10 @@ def bench_friction(
 
     with progress("solve_ivp LSODA", enabled=True):
         t0 = time.perf_counter()
-        sol = solve_ivp(rhs, (tr.t[0], tr.t[-1]), [z[0]], method="LSODA", t_eval=tr.t, rtol=1e-6, atol=1e-10)
+        # max_step = one sample: the velocity input changes every sample, and a free step size lets LSODA
+        # stride over the small low-velocity reversals at the end of the trajectory.
+        sol = solve_ivp(rhs, (tr.t[0], tr.t[-1]), [z[0]], method="LSODA", t_eval=tr.t, rtol=1e-6, atol=1e-10,
+                        max_step=float(tr.t[1] - tr.t[0]))
         t_lsoda = time.perf_counter() - t0
     agree = float(np.sqrt(np.mean((cfg.s0 * sol.y[0] - cfg.s0 * z) ** 2)))
 
