@@ -32,7 +32,7 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                       duration: float = typer.Option(20.0, min=1.0, max=600.0, help="load duration [s]"),
                       json_out: bool = typer.Option(False, "--json", help="print one JSON object")):
         """Load test on loopback: a real server, one simulation job, then `clients` clients polling
-        its status and ranking for `duration` seconds; p50/p95 latency [ms] and errors."""
+        its status and ranking for `duration` seconds; p50/p95 latency (ms) and errors."""
         from rich.table import Table
 
         from service.loadtest import run_bench
@@ -42,11 +42,15 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
             emit_json(res)
             return
         t = Table(title=f"greybench service on loopback: {clients} clients, {duration:g} s")
-        for col in ("endpoint", "requests", "errors", "p50 [ms]", "p95 [ms]", "max [ms]", "req/s"):
+        # (unit) not [unit]: rich reads square brackets as markup
+        for col in ("endpoint", "requests", "errors", "p50 (ms)", "p95 (ms)", "max (ms)", "p95/p50", "rate (1/s)"):
             t.add_column(col, justify="right" if col != "endpoint" else "left")
         for row in res["endpoints"]:
-            t.add_row(row["endpoint"], str(row["requests"]), str(row["errors"]), f"{row['p50_ms']:.1f}",
-                      f"{row['p95_ms']:.1f}", f"{row['max_ms']:.1f}", f"{row['rate']:.0f}")
+            label = "GET /simulations/{id}/ranking" if row["endpoint"].endswith("/ranking") else "GET /simulations/{id}"
+            t.add_row(label, str(row["requests"]), str(row["errors"]), f"{row['p50_ms']:.1f}",
+                      f"{row['p95_ms']:.1f}", f"{row['max_ms']:.1f}", f"{row['p95_ms'] / row['p50_ms']:.1f}",
+                      f"{row['rate']:.0f}")
         out.print(t)
-        out.print(f"job {res['job']['state']} in {res['job']['seconds']:.1f} s "
-                  f"({res['job']['message']}); total {res['requests']} requests, {res['errors']} errors")
+        out.print(f"simulation job (160 test piece, 2 poses, 2 mm dexels): {res['job']['state']} in "
+                  f"{res['job']['seconds']:.1f} s; load: {res['requests']} requests in {res['duration']:.1f} s, "
+                  f"{res['errors']} errors, p50 {res['p50_ms']:.1f} ms, p95 {res['p95_ms']:.1f} ms")
