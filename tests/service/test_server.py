@@ -3,12 +3,15 @@ from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 
 import httpx
 import numpy as np
 import pytest
 
 from service.jobs import RESTART_REASON
+
+DATA = Path(__file__).resolve().parents[2] / "data"
 
 #: Placed 9 m from the robot: the job's inverse kinematics fails and names the program line.
 UNREACHABLE = {"program": "iso160", "poses": [{"name": "far", "xyz": [9.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}]}
@@ -60,6 +63,14 @@ def test_restart_during_a_job_keeps_the_records(make_server, tmp_path):
         assert wait_for(c, again, ("failed",))["error"]["line"] >= 1
 
 
+def short_program() -> str:
+    """The 160 test piece's header and its last finishing pass (the slope's inner wall): a real but
+    short cut, so a two-pose job takes seconds (the full program runs in test_end_to_end, slow)."""
+    lines = (DATA / "programs" / "iso160.nc").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("(slope inner wall"))
+    return "\n".join(lines[:7] + lines[start:]) + "\n"
+
+
 def test_bounded_load_on_status_and_ranking_has_no_errors(shared_server):
     from service.loadtest import load
 
@@ -71,8 +82,34 @@ def test_bounded_load_on_status_and_ranking_has_no_errors(shared_server):
     res = load(shared_server.url, {"X-API-Key": "test-key-0123456789"}, paths, clients=50, duration=2.0,
                expect={paths[1]: 409})
     assert res["errors"] == 0, res
-    assert res["requests"] >= 100
-    assert all(row["requests"] > 0 for row in res["endpoints"])
+    assert res["requests"] >= 100 and all(row["requests"] > 0 for row in res["endpoints"])
+
+
+@pytest.mark.slow  # about a minute on 2 shared cores: each worker process compiles the machining kernels
+def test_short_job_results_and_bounded_load_without_errors(shared_server):
+    from service.loadtest import load
+
+    with shared_server.client() as c:
+        r = c.post("/simulations", json={"gcode": short_program(), "stock": "iso160", "pose_set": "iso160",
+                                         "options": {"spacing_mm": 2.0}})
+        assert r.status_code == 202, r.text
+        job = r.json()["id"]
+        st = wait_for(c, job, ("succeeded", "failed"), timeout=600)
+        assert st["state"] == "succeeded", st
+        ranking = c.get(f"/simulations/{job}/ranking").json()["ranking"]
+        assert sorted(e["pose"] for e in ranking) == ["far_rotated", "near"] and ranking[0]["rank"] == 1
+        report = c.get(f"/simulations/{job}/report").json()
+        assert len(report["features"]) == 10
+        for e in ranking:  # the score is the sum of |deviation| / tolerance (issue 8)
+            assert e["score"] == pytest.approx(sum(abs(f["deviation"][e["pose"]]) / f["tolerance"]
+                                                   for f in report["features"]), rel=1e-9)
+        assert len(c.get(f"/simulations/{job}/report?format=csv").text.strip().splitlines()) == 1 + 20
+        glb = c.get(f"/simulations/{job}/workpiece/near.glb")
+        assert glb.status_code == 200 and glb.content[:4] == b"glTF"
+    paths = [f"/simulations/{job}", f"/simulations/{job}/ranking"]
+    res = load(shared_server.url, {"X-API-Key": "test-key-0123456789"}, paths, clients=50, duration=2.0)
+    assert res["errors"] == 0, res
+    assert res["requests"] >= 100 and all(row["requests"] > 0 for row in res["endpoints"])
 
 
 def _record_csv(seed: int, n: int = 2000) -> str:
