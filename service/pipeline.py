@@ -325,7 +325,8 @@ def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address
     _write_atomic(job_dir / "report.json", json.dumps(report, indent=1))
     _write_atomic(job_dir / "report.csv", report_csv(features, poses))
     _write_atomic(job_dir / "ranking.json", json.dumps({"ranking": ranking}, indent=1))
-    return {"ranking": ranking, "poses": poses, "backend": "ray" if ray_address else "local"}
+    return {"ranking": ranking, "poses": poses, "backend": "ray" if ray_address else "local",
+            "friction": request.get("friction", [])}
 
 
 def run_diagnose(request: dict, job_dir: Path, progress: Progress) -> dict:

@@ -132,3 +132,18 @@ def test_diagnose_runs_as_a_job(shared_server):
     res = st["result"]
     assert set(res) >= {"cause", "ranking", "baseline", "extended", "gain"}
     assert res["baseline"]["test_rmse"] > 0 and np.isfinite(res["gain"])
+
+
+def test_friction_models_are_pinned_and_loaded_into_the_simulation(shared_server, registered_model):
+    """Axis 1 takes the registered champion (a Coulomb-viscous model, version 1): the job fetches it
+    and the servo refuses it for lack of a LuGre form, naming the model; 'robot' keeps the file's."""
+    body = {"program": "iso160", "pose_set": "iso160", "select": ["near"], "friction": [{"axis": 1}]}
+    with shared_server.client() as c:
+        r = c.post("/simulations", json=body)
+        assert r.status_code == 202, r.text
+        st = wait_for(c, r.json()["id"], ("succeeded", "failed"), timeout=300)
+        assert st["state"] == "failed"
+        assert "no LuGre form" in st["error"]["message"] and "axis1" in st["error"]["message"]
+        assert st["error"]["field"] == "joint[1].friction.model"
+        r = c.post("/simulations", json={**body, "friction": [{"axis": 1, "model": "9"}]})
+        assert r.status_code == 404 and "max100-axis1-friction" in r.json()["detail"]
