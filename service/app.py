@@ -131,7 +131,7 @@ def _program(body) -> tuple[str, str]:
     return text, source
 
 
-def _stock(body: SimulationRequest) -> tuple[str, str]:
+def _stock(body: SimulationRequest | ExplainRequest) -> tuple[str, str]:
     """(text, source) of the stock description: named, or the named program's."""
     name = body.stock or body.program
     if name is None:
@@ -371,6 +371,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         from simulate.toolpath.placement import parse_poses
 
         text, source = _program(body)
+        stock_text, _ = _stock(body)
         robot = _robot(body.robot)
         scan = _read_csv(body.scan_csv, "scan.csv")
         for col in ("feature", "x", "y", "z"):
@@ -389,10 +390,12 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
         def prepare(d: Path) -> None:
             (d / "program.nc").write_text(text)
+            (d / "program.stock.json").write_text(stock_text)
             (d / "scan.csv").write_text(body.scan_csv)
 
-        rec = request.app.state.manager.submit(JobKind.explain, {"program_source": source, "robot": robot,
-                                                                 "pose": pose}, prepare=prepare)
+        job = {"program_source": source, "robot": robot, "pose": pose, "spacing_mm": body.spacing_mm,
+               "max_sims": body.max_sims}
+        rec = request.app.state.manager.submit(JobKind.explain, job, prepare=prepare)
         return JSONResponse(status_code=202, content=_status(rec).model_dump(mode="json"),
                             headers={"Location": f"/jobs/{rec.id}"})
 

@@ -348,8 +348,38 @@ def run_diagnose(request: dict, job_dir: Path, progress: Progress) -> dict:
 
 
 def run_explain(request: dict, job_dir: Path, progress: Progress) -> dict:
-    _import_stage("simulate.explain", "part explanation (issue 9)")
-    raise StageUnavailable("simulate.explain", "the service adapter to explain (its API was not published yet)")
+    """Explain a measured part (issue 9): name the cause, calibrate, report; outputs in ``explain/``.
+
+    Same steps as ``greybench explain`` (:func:`simulate.explain.pipeline.explain_part`).
+    """
+    pipeline_mod = _import_stage("simulate.explain.pipeline", "part explanation (issue 9)")
+    from simulate.explain.measured import read_measured_scan
+    from simulate.explain.report import write_report
+    from simulate.explain.simulation import load_setup
+    from simulate.robot.model import load_robot, save_robot
+
+    robot = load_robot(DATA_DIR / "robots" / f"{request['robot']}.toml")
+    (job_dir / "pose.json").write_text(json.dumps({"poses": [request["pose"]]}))
+    setup = load_setup(job_dir / "program.nc", job_dir / "pose.json", request["pose"]["name"],
+                       stock=job_dir / "program.stock.json", spacing=float(request.get("spacing_mm", 1.0)) * MM)
+    measured = read_measured_scan(job_dir / "scan.csv", setup.piece)
+    progress(0.05, "simulating the nominal part")
+    setup.trajectory(robot)  # reachability errors before the long part
+    stages = [0.05]
+
+    def advance(stage: str) -> None:
+        stages[0] = min(0.9, stages[0] + 0.1)
+        progress(stages[0], str(stage))
+
+    ex = pipeline_mod.explain_part(measured, robot, setup, max_sims=int(request.get("max_sims", 3)), advance=advance)
+    progress(0.92, "writing the report")
+    out = job_dir / "explain"
+    out.mkdir(parents=True, exist_ok=True)
+    save_robot(ex.calibrated_robot, out / "robot_calibrated.toml")
+    write_report(ex, out, "scan.csv")
+    result = ex.as_json()
+    _write_atomic(out / "explain.json", json.dumps(result, indent=1))
+    return result
 
 
 def run_job(kind: JobKind, request: dict, job_dir: Path, progress: Progress, *, ray_address: str | None = None) -> dict:

@@ -204,9 +204,13 @@ class ExplainRequest(Strict):
                           description="measured CMM points, CSV feature,x,y,z (workpiece frame) [m]")
     program: Name | None = Field(None, description="named program in data/programs; or give gcode")
     gcode: str | None = Field(None, max_length=MAX_PROGRAM_CHARS, description="G-code text")
-    robot: Name = Field("max100", description="robot name in data/robots")
+    stock: Name | None = Field(None, description="stock description data/programs/<stock>.stock.json "
+                                                 "(ISO test piece, m); default: the named program's")
+    robot: Name = Field("max100", description="nominal robot name in data/robots")
     pose_set: Name | None = Field(None, description="named pose file in data/poses; or give pose")
     pose: PoseIn | Name = Field(description="the pose (a placement, or a name in pose_set)")
+    spacing_mm: float = Field(1.0, gt=0.05, le=5.0, description="dexel spacing of the simulation [mm]")
+    max_sims: int = Field(3, ge=1, le=10, description="re-simulations for the calibration [-]")
 
     @model_validator(mode="after")
     def _one_program(self) -> "ExplainRequest":

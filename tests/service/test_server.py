@@ -147,3 +147,27 @@ def test_friction_models_are_pinned_and_loaded_into_the_simulation(shared_server
         assert st["error"]["field"] == "joint[1].friction.model"
         r = c.post("/simulations", json={**body, "friction": [{"axis": 1, "model": "9"}]})
         assert r.status_code == 404 and "max100-axis1-friction" in r.json()["detail"]
+
+
+@pytest.mark.slow  # a simulation, its sensitivities and a calibration: minutes on 2 shared cores
+def test_explain_runs_as_a_job_and_names_no_cause_for_the_nominal_robot(shared_server, tmp_path):
+    from simulate.evaluation.ranking import RankSettings, rank_poses
+    from simulate.toolpath.placement import load_poses
+
+    program = tmp_path / "short.nc"
+    program.write_text(short_program())
+    (tmp_path / "short.stock.json").write_text((DATA / "programs" / "iso160.stock.json").read_text())
+    near = [p for p in load_poses(DATA / "poses" / "iso160.json") if p.name == "near"]
+    rank_poses(program, DATA / "robots" / "max100.toml", near, settings=RankSettings(spacing=2e-3, size=160),
+               out_dir=tmp_path / "measured", workers=1)
+    scan = (tmp_path / "measured" / "near" / "scan.csv").read_text()
+    body = {"scan_csv": scan, "gcode": short_program(), "stock": "iso160", "pose_set": "iso160", "pose": "near",
+            "spacing_mm": 2.0, "max_sims": 1}
+    with shared_server.client() as c:
+        r = c.post("/explain", json=body)
+        assert r.status_code == 202, r.text
+        st = wait_for(c, r.json()["id"], ("succeeded", "failed"), timeout=1800)
+    assert st["state"] == "succeeded", st
+    res = st["result"]
+    assert set(res) >= {"cause", "ranking", "calibrated", "rms_before", "rms_after", "gain"}
+    assert res["cause"] == "none"
