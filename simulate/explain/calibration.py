@@ -108,7 +108,7 @@ def calibrate(robot: Robot, setup, measured, comparison: PointComparison, X: np.
     for it in range(max(1, int(max_sims))):
         try:
             rob, off, sim, cmp = run(theta)
-        except RuntimeError:
+        except RuntimeError as exc:
             # the coupled loop failed for this parameter (e.g. a joint so soft that the step-to-step
             # deflection feedback diverges): back off half-way towards the last good value
             history.append((theta.copy(), float("inf")))

@@ -5,12 +5,13 @@ candidate cause predicts a *field* of tool-position changes along the program, a
 pattern of deviations on the part. The discrepancy ``r = measured - simulated`` at the probe points is
 compared with each pattern.
 
-Sensitivities (per unit of the cause's parameter theta; ``k*`` the simulation step that created the
+Sensitivities: a robot with the change theta would make a part whose deviations are those of the
+nominal simulation plus ``X theta``, so ``r ~ X theta`` (per unit of the cause's parameter theta; ``k*`` the simulation step that created the
 surface at a probe point, ``n`` the nominal outward normal; first order, the envelope of the cutter is
 moved by the tool-position change at the step that made it):
 
 =================  ==============================  ================================================
-cause              theta                           column ``dr/dtheta`` at a probe point
+cause              theta                           column ``d(deviation)/dtheta`` at a point
 =================  ==============================  ================================================
 ``stiffness:i``    change of joint compliance      ``n . R^T j_i j_i^T R F(k*-1)``: deflection is
                    ``1/k_i`` [rad/Nm]              linear in compliance, ``C = J K^-1 J^T``; the
@@ -192,8 +193,38 @@ def step_fields(robot: Robot, setup, sim, causes: list[Cause]) -> dict[str, np.n
     return out
 
 
-def sensitivities(robot: Robot, setup, sim, comparison, causes: list[Cause]) -> Sensitivities:
-    """Columns at the compared points (module table); points on stock surface get 0."""
+def resimulated_column(robot: Robot, setup, comparison, cause: Cause, step: float) -> np.ndarray:
+    """``d(simulated deviation)/dtheta`` at the compared points by machining again with ``theta = step``
+    (a secant over the range that matters; includes the loop's force feedback), (n,)."""
+    from simulate.explain.comparison import feature_geometry, probe_simulated
+    from simulate.explain.simulation import simulate_part
+
+    sim1 = simulate_part(apply(robot, cause, step), setup)
+    geos = feature_geometry(setup.piece)
+    col = np.zeros(len(comparison.residual))
+    for f in comparison.features():
+        m = comparison.feature == f
+        d1, _ = probe_simulated(sim1.workpiece, geos[f], comparison.points[m], comparison.normals[m])
+        col[m] = np.nan_to_num((d1 - comparison.simulated[m]) / step)
+    return col
+
+
+def sensitivities(robot: Robot, setup, sim, comparison, causes: list[Cause], resimulate_stiffness: bool = True
+                  ) -> Sensitivities:
+    """Columns at the compared points (module table); points on stock surface get 0.
+
+    With ``resimulate_stiffness`` the stiffness columns come from machining again with the joint's
+    compliance doubled (:func:`resimulated_column`) rather than from the fixed force history: the chip,
+    and so the force, follows the deflection, which the first-order field misses.
+    """
+    if resimulate_stiffness:
+        out = sensitivities(robot, setup, sim, comparison, [c for c in causes if c.kind != "stiffness"], False)
+        for c in causes:
+            if c.kind == "stiffness":
+                out.columns[c.name] = resimulated_column(robot, setup, comparison, c,
+                                                          1.0 / float(robot.stiffness[c.axis - 1]))[:, None]
+                out.causes[c.name] = c
+        return out
     fields = step_fields(robot, setup, sim, causes)
     k = np.clip(comparison.step, 0, None)
     made = (comparison.step >= 0).astype(float)

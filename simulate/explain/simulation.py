@@ -179,7 +179,8 @@ def stock_workpiece(setup: PartSetup):
             lower[2] = floor
             sd = replace(sd, halfspaces=hs, lower=lower)
         solids.append(sd)
-    return TriDexel.from_solids(solids, setup.spacing)
+    # extra ray capacity: slightly different tool paths leave thin slivers that split rays many times
+    return TriDexel.from_solids(solids, setup.spacing, capacity=(32, 32, 16))
 
 
 def cutter_of(robot: Robot):
