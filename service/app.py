@@ -22,7 +22,7 @@ from identify.errors import InputError
 from service import registry
 from service.auth import require_key
 from service.jobs import JobKind, JobManager, JobRecord, JobState, JobStore, QueueFull
-from service.paths import DATA_DIR, JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside, named_file
+from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside, named_file
 from service.schemas import (DiagnoseRequest, ErrorBody, ExplainRequest, FrictionPredictRequest,
                              FrictionPredictResponse, Health, JobStatus, ModelList, QueueInfo, Ranking, Report,
                              SimulationRequest)

@@ -29,7 +29,7 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 #: Reason recorded for jobs cut off by a restart.
 RESTART_REASON = "the service stopped while this job was {state} (server restart); submit it again"

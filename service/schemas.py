@@ -7,7 +7,6 @@ Friction references name registered MLflow models ``<robot>-axis<N>-friction`` b
 """
 from __future__ import annotations
 
-from enum import Enum
 from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
