@@ -35,7 +35,7 @@ from numba import njit
 
 from identify.errors import InputError
 
-from .engagement import nearest_engaged, sort_layer
+from .engagement import nearest_engaged, sort_layers
 from .removal import radius_at
 
 MATERIALS_FILE = Path(__file__).resolve().parents[2] / "data" / "materials.toml"
@@ -174,21 +174,39 @@ def step_forces(samp_ang, samp_eng, samp_cnt, k0, n_layers, lower_z, s, p0, p1, 
     out[3] = 0.0
     if n_layers <= 0 or vx * vx + vy * vy + vz * vz == 0.0:
         return
-    t_tooth = 2.0 * math.pi / (omega * N)
-    a_in = R - rc
-    klow = -1
-    for kk in range(n_layers):
-        if samp_cnt[kk] > 0:
-            sort_layer(samp_ang[kk], samp_eng[kk], samp_cnt[kk])
-            if klow < 0:
-                klow = kk
+    klow = sort_layers(samp_ang, samp_eng, samp_cnt, n_layers)
     if klow < 0:
         return
+    vel = np.array([vx, vy, vz])
+    step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z, s, p1, vel, dt, t_end,
+                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, np.zeros(3), np.zeros((n_sub, 3)), out)
+
+
+@njit(cache=True)
+def step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z, s, p1, vel, dt, t_end,
+                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, acc, inst, out):
+    """The force part of :func:`step_forces` on already sorted samples (``klow``: first layer
+    with samples), with scratch ``acc`` (3,) and ``inst`` (>= n_sub, 3): no allocation.
+
+    ``p1`` [m] places the disks (tool tip at the end of the step), ``vel`` [m/s] is the tool
+    velocity that sets the chip thickness ``h = T_tooth (vel . n)``.
+    """
+    vx = vel[0]
+    vy = vel[1]
+    vz = vel[2]
+    out[0] = 0.0
+    out[1] = 0.0
+    out[2] = 0.0
+    out[3] = 0.0
+    if n_layers <= 0 or klow < 0 or vx * vx + vy * vy + vz * vz == 0.0:
+        return
+    t_tooth = 2.0 * math.pi / (omega * N)
+    a_in = R - rc
     grid_bottom = lower_z
     vxy = math.sqrt(vx * vx + vy * vy)
     theta = math.atan2(vy, vx)
-    acc = np.zeros(3)
-    inst = np.zeros((n_sub, 3))
+    acc[:] = 0.0
+    inst[:n_sub] = 0.0
     for kk in range(klow, n_layers):
         cnt = samp_cnt[kk]
         if cnt == 0:

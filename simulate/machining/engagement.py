@@ -66,14 +66,46 @@ def engagement_map(workpiece, k0: int, n_layers: int, buffers) -> EngagementMap:
     return EngagementMap(np.array(zs), angs, engs)
 
 
+_SHELL_GAPS = np.array([701, 301, 132, 57, 23, 10, 4, 1], np.int64)  # Ciura's gap sequence
+
+
 @njit(cache=True)
 def sort_layer(ang, eng, m):
-    """Sort the first m samples of one layer in place by angle."""
-    o = np.argsort(ang[:m])
-    a2 = ang[:m][o].copy()
-    e2 = eng[:m][o].copy()
-    ang[:m] = a2
-    eng[:m] = e2
+    """Sort the first m samples of one layer in place by angle (Shell sort: no allocation)."""
+    for gi in range(_SHELL_GAPS.shape[0]):
+        gap = _SHELL_GAPS[gi]
+        if gap >= m:
+            continue
+        for i in range(gap, m):
+            a = ang[i]
+            e = eng[i]
+            j = i
+            while j >= gap and ang[j - gap] > a:
+                ang[j] = ang[j - gap]
+                eng[j] = eng[j - gap]
+                j -= gap
+            ang[j] = a
+            eng[j] = e
+
+
+@njit(cache=True)
+def sort_layers(samp_ang, samp_eng, samp_cnt, n_layers):
+    """Sort the samples of every layer; returns the first layer with samples (-1 if none)."""
+    klow = -1
+    for kk in range(n_layers):
+        m = samp_cnt[kk]
+        if m > 0:
+            ang = samp_ang[kk]
+            done = True
+            for i in range(1, m):   # layers written sorted (full-radius layers) are skipped
+                if ang[i] < ang[i - 1]:
+                    done = False
+                    break
+            if not done:
+                sort_layer(ang, samp_eng[kk], m)
+            if klow < 0:
+                klow = kk
+    return klow
 
 
 @njit(cache=True)

@@ -219,7 +219,8 @@ def swept_interval(axis, c1, c2, p0, p1, R, rc, L):
     R, rc, L : float
         Cutter radius, corner radius, fluted length [m].
     """
-    d = p1 - p0
+    # a tuple, not ``p1 - p0``: an array would be allocated on every ray visit
+    d = (p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2])
     if axis == 2:
         fx = c1 - p0[0]
         fy = c2 - p0[1]
@@ -378,6 +379,256 @@ def _grid_range(vmin, vmax, lower, s, n):
     return i0, i1
 
 
+@njit(cache=True)
+def sample_layer(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, k, kk, ju0, ju1, iu0, iu1, p1, R, rc, L,
+                 samp_ang, samp_eng, samp_cnt):
+    """Engagement samples of z-layer ``k`` into row ``kk``: where the x- and y-rays cross the
+    cutter circle at ``p1``, the angle [rad] and whether material is there (read *before* the cut).
+    Rays beyond the grid or without material still give (non-engaged) samples, so the engaged
+    arcs end where the material ends."""
+    zc = lower[2] + (k + 0.5) * s
+    m = 0
+    r1 = radius_at(zc - p1[2], R, rc, L)
+    mcap = samp_ang.shape[1]
+    if r1 > 0.0:
+        for j in range(ju0, ju1 + 1):
+            yc = lower[1] + (j + 0.5) * s
+            de = yc - p1[1]
+            if de * de < r1 * r1 and m + 2 <= mcap:
+                w = math.sqrt(r1 * r1 - de * de)
+                samp_ang[kk, m] = math.atan2(de, -w)
+                samp_ang[kk, m + 1] = math.atan2(de, w)
+                if 0 <= j < ny:
+                    ridx = k * ny + j
+                    samp_eng[kk, m] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] - w + _ETA) else 0
+                    samp_eng[kk, m + 1] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] + w - _ETA) else 0
+                else:
+                    samp_eng[kk, m] = 0
+                    samp_eng[kk, m + 1] = 0
+                m += 2
+        for i in range(iu0, iu1 + 1):
+            xc = lower[0] + (i + 0.5) * s
+            de = xc - p1[0]
+            if de * de < r1 * r1 and m + 2 <= mcap:
+                w = math.sqrt(r1 * r1 - de * de)
+                samp_ang[kk, m] = math.atan2(-w, de)
+                samp_ang[kk, m + 1] = math.atan2(w, de)
+                if 0 <= i < nx:
+                    ridx = k * nx + i
+                    samp_eng[kk, m] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] - w + _ETA) else 0
+                    samp_eng[kk, m + 1] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] + w - _ETA) else 0
+                else:
+                    samp_eng[kk, m] = 0
+                    samp_eng[kk, m + 1] = 0
+                m += 2
+    samp_cnt[kk] = m
+
+
+@njit(cache=True)
+def circle_samples(p1, R, lower, s, ju0, ju1, iu0, iu1, mcap, pair_ray, pair_w, sorted_ang, perm):
+    """The engagement sample layout of a layer where the cutter has its full radius R at ``p1``.
+
+    The same on every such layer (only the material flags differ), so it is computed once per
+    step, in the order and with the arithmetic of :func:`sample_layer`: pair q is x-ray row
+    ``pair_ray[q, 1]`` (``pair_ray[q, 0] == 0``) or y-ray column (``== 1``), possibly outside the
+    grid, with half-chord ``pair_w[q]``. ``sorted_ang`` gets the sample angles sorted, ``perm`` the sample
+    index of each sorted position. Returns the number of samples m.
+    """
+    m = 0
+    r1 = R
+    for j in range(ju0, ju1 + 1):
+        yc = lower[1] + (j + 0.5) * s
+        de = yc - p1[1]
+        if de * de < r1 * r1 and m + 2 <= mcap:
+            w = math.sqrt(r1 * r1 - de * de)
+            sorted_ang[m] = math.atan2(de, -w)
+            sorted_ang[m + 1] = math.atan2(de, w)
+            pair_ray[m // 2, 0] = 0
+            pair_ray[m // 2, 1] = j
+            pair_w[m // 2] = w
+            m += 2
+    for i in range(iu0, iu1 + 1):
+        xc = lower[0] + (i + 0.5) * s
+        de = xc - p1[0]
+        if de * de < r1 * r1 and m + 2 <= mcap:
+            w = math.sqrt(r1 * r1 - de * de)
+            sorted_ang[m] = math.atan2(-w, de)
+            sorted_ang[m + 1] = math.atan2(w, de)
+            pair_ray[m // 2, 0] = 1
+            pair_ray[m // 2, 1] = i
+            pair_w[m // 2] = w
+            m += 2
+    for q in range(m):
+        perm[q] = q
+    # Shell sort of (angle, index) pairs
+    gaps = (701, 301, 132, 57, 23, 10, 4, 1)
+    for gap in gaps:
+        if gap >= m:
+            continue
+        for i in range(gap, m):
+            a = sorted_ang[i]
+            e = perm[i]
+            j = i
+            while j >= gap and sorted_ang[j - gap] > a:
+                sorted_ang[j] = sorted_ang[j - gap]
+                perm[j] = perm[j - gap]
+                j -= gap
+            sorted_ang[j] = a
+            perm[j] = e
+    return m
+
+
+@njit(cache=True)
+def sample_layer_full(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k, kk, p1, m, pair_ray, pair_w, sorted_ang, perm,
+                      samp_ang, samp_eng, samp_cnt):
+    """:func:`sample_layer` for a full-radius layer from the step's :func:`circle_samples`: the
+    same samples, written already sorted by angle."""
+    for q in range(m):
+        src = perm[q]
+        pr = src // 2
+        ray = pair_ray[pr, 1]
+        w = pair_w[pr]
+        side = src - 2 * pr   # 0: the -w end, 1: the +w end
+        e = 0
+        if pair_ray[pr, 0] == 0:
+            if 0 <= ray < ny:
+                t = p1[0] - w + _ETA if side == 0 else p1[0] + w - _ETA
+                e = 1 if material_at(xlo, xhi, xcnt, k * ny + ray, t) else 0
+        else:
+            i = ray
+            if 0 <= i < nx:
+                t = p1[1] - w + _ETA if side == 0 else p1[1] + w - _ETA
+                e = 1 if material_at(ylo, yhi, ycnt, k * nx + i, t) else 0
+        samp_ang[kk, q] = sorted_ang[q]
+        samp_eng[kk, q] = e
+    samp_cnt[kk] = m
+
+
+@njit(cache=True)
+def column_intervals(p0, p1, R, lower, s, nx, ny, ju0, ju1, iu0, iu1, colx, coly):
+    """Swept intervals of the x- and y-ray columns for a horizontal move, shared by all layers.
+
+    For a horizontal move every layer at a height where the cutter has its full radius R sees the
+    same stadium, so :func:`swept_interval` gives the same interval on every layer: computed here
+    once per step (the same call, so the same numbers). ``colx[j] = (lo, hi)`` for the x-rays of
+    row j, ``coly[i]`` for the y-rays of column i. Returns False (nothing written) for other moves.
+    """
+    if abs(p1[2] - p0[2]) >= 1e-15:
+        return False
+    for j in range(max(ju0, 0), min(ju1, ny - 1) + 1):
+        yc = lower[1] + (j + 0.5) * s
+        colx[j, 0], colx[j, 1] = stadium_interval(p0[0], p0[1], p1[0], p1[1], R, yc)
+    for i in range(max(iu0, 0), min(iu1, nx - 1) + 1):
+        xc = lower[0] + (i + 0.5) * s
+        coly[i, 0], coly[i, 1] = stadium_interval(p0[1], p0[0], p1[1], p1[0], R, xc)
+    return True
+
+
+@njit(cache=True)
+def cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k, kk, ju0, ju1, iu0, iu1,
+              p0, p1, R, rc, L, step, layer_removed, use_cols, colx, coly):
+    """Subtract the swept cutter from the x- and y-rays of z-layer ``k``; ``layer_removed[kk]`` gets
+    the volume seen by the x-rays [m^3]. Returns 1 if a ray overflowed its capacity, else 0.
+
+    A ray whose material lies entirely outside the swept box along its axis is rejected before
+    the swept interval is computed (it could not lose anything). With ``use_cols`` (a horizontal
+    move, see :func:`column_intervals`) layers where the cutter has its full radius take the
+    column intervals instead of recomputing them.
+    """
+    zc = lower[2] + (k + 0.5) * s
+    xa = min(p0[0], p1[0]) - R
+    xb = max(p0[0], p1[0]) + R
+    ya = min(p0[1], p1[1]) - R
+    yb = max(p0[1], p1[1]) + R
+    cols = False
+    if use_cols:
+        cols = radius_at(zc - p0[2], R, rc, L) == R
+    overflow = 0
+    rem = 0.0
+    for j in range(max(ju0, 0), min(ju1, ny - 1) + 1):
+        ridx = k * ny + j
+        n = xcnt[ridx]
+        if n == 0 or xlo[ridx, 0] >= xb or xhi[ridx, n - 1] <= xa:
+            continue
+        if cols:
+            a = colx[j, 0]
+            b = colx[j, 1]
+        else:
+            yc = lower[1] + (j + 0.5) * s
+            a, b = swept_interval(0, yc, zc, p0, p1, R, rc, L)
+        if a < b:
+            got = subtract_interval(xlo, xhi, xls, xhs, xcnt, ridx, a, b, step)
+            if got < 0.0:
+                overflow = 1
+            else:
+                rem += got
+    for i in range(max(iu0, 0), min(iu1, nx - 1) + 1):
+        ridx = k * nx + i
+        n = ycnt[ridx]
+        if n == 0 or ylo[ridx, 0] >= yb or yhi[ridx, n - 1] <= ya:
+            continue
+        if cols:
+            a = coly[i, 0]
+            b = coly[i, 1]
+        else:
+            xc = lower[0] + (i + 0.5) * s
+            a, b = swept_interval(1, xc, zc, p0, p1, R, rc, L)
+        if a < b:
+            got = subtract_interval(ylo, yhi, yls, yhs, ycnt, ridx, a, b, step)
+            if got < 0.0:
+                overflow = 1
+    layer_removed[kk] = rem * s * s
+    return overflow
+
+
+@njit(cache=True)
+def horizontal_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k, kk,
+                     ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample, samp_ang, samp_eng, samp_cnt,
+                     layer_removed, use_cols, colx, coly):
+    """Engagement samples (if ``sample``) then removal on the x- and y-rays of z-layer ``k`` (row
+    ``kk`` of the buffers). Each sample reads only its own ray, so sampling the whole layer first
+    equals sampling each ray just before cutting it. Returns 1 if a ray overflowed, else 0."""
+    if sample:
+        sample_layer(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, k, kk, ju0, ju1, iu0, iu1, p1, R, rc, L,
+                     samp_ang, samp_eng, samp_cnt)
+    else:
+        samp_cnt[kk] = 0
+    return cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k, kk, ju0, ju1,
+                     iu0, iu1, p0, p1, R, rc, L, step, layer_removed, use_cols, colx, coly)
+
+
+@njit(cache=True)
+def horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop):
+    """Layer and ray ranges of a step: ``(k0, k1, ju0, ju1, iu0, iu1)``.
+
+    Layers from the lowest tip position to the top of the cutter, clipped to one layer above
+    ``ztop`` (the highest material in the footprint, from the z-rays). Ray ranges are unclipped
+    (rays beyond the grid give non-engaged samples) and cover the swept box and the circle at p1.
+    """
+    zmin = min(p0[2], p1[2])
+    zmax = min(max(p0[2], p1[2]) + L, max(ztop, zmin - 2.0 * s) + s)
+    k0, k1 = _grid_range(zmin, zmax, lower[2], s, nz)
+    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
+    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
+    ju0 = int(math.ceil((p1[1] - R - lower[1]) / s - 0.5))
+    ju1 = int(math.floor((p1[1] + R - lower[1]) / s - 0.5))
+    iu0 = int(math.ceil((p1[0] - R - lower[0]) / s - 0.5))
+    iu1 = int(math.floor((p1[0] + R - lower[0]) / s - 0.5))
+    return k0, k1, min(ju0, j0), max(ju1, j1), min(iu0, i0), max(iu1, i1)
+
+
+@njit(parallel=True, cache=True)
+def _horizontal_layers_parallel(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k0, nl,
+                                ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample, samp_ang, samp_eng,
+                                samp_cnt, layer_removed, use_cols, colx, coly):
+    overflow = np.zeros(nl, np.int32)
+    for kk in prange(nl):
+        overflow[kk] = horizontal_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny,
+                                        k0 + kk, kk, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample,
+                                        samp_ang, samp_eng, samp_cnt, layer_removed, use_cols, colx, coly)
+    return 1 if overflow.sum() > 0 else 0
+
+
 @njit(parallel=True, cache=True)
 def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, nz,
                       p0, p1, R, rc, L, step, sample, samp_ang, samp_eng, samp_cnt, layer_removed,
@@ -388,95 +639,93 @@ def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower,
     cutter axis at ``p1``, from +x counter-clockwise) and ``samp_eng`` (1 if material was there
     before the cut). ``ztop`` [m]: highest material in the cutter's footprint (from the z-rays);
     layers above it hold no material and are skipped. Returns ``(k0, n_layers, status)``; status 1:
-    a ray overflowed its capacity.
+    a ray overflowed its capacity, 2: more layers than the buffers hold.
     """
-    zmin = min(p0[2], p1[2])
-    zmax = min(max(p0[2], p1[2]) + L, max(ztop, zmin - 2.0 * s) + s)
-    k0, k1 = _grid_range(zmin, zmax, lower[2], s, nz)
-    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
-    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
-    # unclipped ray index ranges around the circle at p1 (for the engagement samples)
-    ju0 = int(math.ceil((p1[1] - R - lower[1]) / s - 0.5))
-    ju1 = int(math.floor((p1[1] + R - lower[1]) / s - 0.5))
-    iu0 = int(math.ceil((p1[0] - R - lower[0]) / s - 0.5))
-    iu1 = int(math.floor((p1[0] + R - lower[0]) / s - 0.5))
-    ju0 = min(ju0, j0)
-    ju1 = max(ju1, j1)
-    iu0 = min(iu0, i0)
-    iu1 = max(iu1, i1)
+    k0, k1, ju0, ju1, iu0, iu1 = horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop)
     nl = k1 - k0 + 1
     if nl <= 0:
         return k0, 0, 0
     if nl > samp_cnt.shape[0]:
         return k0, 0, 2
-    mcap = samp_ang.shape[1]
+    colx = np.empty((ny, 2))
+    coly = np.empty((nx, 2))
+    use_cols = column_intervals(p0, p1, R, lower, s, nx, ny, ju0, ju1, iu0, iu1, colx, coly)
     overflow = np.zeros(nl, np.int32)
     for kk in prange(nl):
-        k = k0 + kk
-        zc = lower[2] + (k + 0.5) * s
-        r1 = radius_at(zc - p1[2], R, rc, L)
-        m = 0
-        rem = 0.0
-        for j in range(ju0, ju1 + 1):
-            # rays beyond the grid or without material still give (non-engaged) samples, so the
-            # engaged arcs end where the material ends
-            inside = 0 <= j < ny
-            ridx = k * ny + j
-            yc = lower[1] + (j + 0.5) * s
-            if sample and r1 > 0.0:
-                de = yc - p1[1]
-                if de * de < r1 * r1 and m + 2 <= mcap:
-                    w = math.sqrt(r1 * r1 - de * de)
-                    samp_ang[kk, m] = math.atan2(de, -w)
-                    samp_ang[kk, m + 1] = math.atan2(de, w)
-                    if inside:
-                        samp_eng[kk, m] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] - w + _ETA) else 0
-                        samp_eng[kk, m + 1] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] + w - _ETA) else 0
-                    else:
-                        samp_eng[kk, m] = 0
-                        samp_eng[kk, m + 1] = 0
-                    m += 2
-            if not inside or xcnt[ridx] == 0:
-                continue
-            a, b = swept_interval(0, yc, zc, p0, p1, R, rc, L)
-            if a < b:
-                got = subtract_interval(xlo, xhi, xls, xhs, xcnt, ridx, a, b, step)
-                if got < 0.0:
-                    overflow[kk] = 1
-                else:
-                    rem += got
-        for i in range(iu0, iu1 + 1):
-            inside = 0 <= i < nx
-            ridx = k * nx + i
-            xc = lower[0] + (i + 0.5) * s
-            if sample and r1 > 0.0:
-                de = xc - p1[0]
-                if de * de < r1 * r1 and m + 2 <= mcap:
-                    w = math.sqrt(r1 * r1 - de * de)
-                    samp_ang[kk, m] = math.atan2(-w, de)
-                    samp_ang[kk, m + 1] = math.atan2(w, de)
-                    if inside:
-                        samp_eng[kk, m] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] - w + _ETA) else 0
-                        samp_eng[kk, m + 1] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] + w - _ETA) else 0
-                    else:
-                        samp_eng[kk, m] = 0
-                        samp_eng[kk, m + 1] = 0
-                    m += 2
-            if not inside or ycnt[ridx] == 0:
-                continue
-            a, b = swept_interval(1, xc, zc, p0, p1, R, rc, L)
-            if a < b:
-                got = subtract_interval(ylo, yhi, yls, yhs, ycnt, ridx, a, b, step)
-                if got < 0.0:
-                    overflow[kk] = 1
-        samp_cnt[kk] = m
-        layer_removed[kk] = rem * s * s
+        overflow[kk] = horizontal_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny,
+                                        k0 + kk, kk, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample,
+                                        samp_ang, samp_eng, samp_cnt, layer_removed, use_cols, colx, coly)
     return k0, nl, 1 if overflow.sum() > 0 else 0
+
+
+@njit(cache=True)
+def vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j, i0, i1, p0, p1, R, rc, L, step, out):
+    """Remove the swept cutter from the z-rays of row ``j``, columns ``i0..i1``.
+
+    Writes ``out[0]`` = removed length [m] summed over the row, ``out[1]`` = highest material top
+    [m] before the cut (-1e300 if none), ``out[2]`` = 1 if a ray overflowed. Rays whose top is at
+    or below the lowest tip position are rejected before the swept interval is computed (the
+    swept solid lies above ``min(p0_z, p1_z)`` for every cutter shape).
+    """
+    yc = lower[1] + (j + 0.5) * s
+    zfloor = min(p0[2], p1[2])
+    # the footprint (stadium of radius R, slightly enlarged so rounding cannot drop a ray) along
+    # this row: rays outside it only give their top
+    xa, xb = stadium_interval(p0[0], p0[1], p1[0], p1[1], R * (1.0 + 1e-9) + 1e-12, yc)
+    acc = 0.0
+    top = -1e300
+    overflow = 0.0
+    for i in range(i0, i1 + 1):
+        ridx = j * nx + i
+        n = zcnt[ridx]
+        if n == 0:
+            continue
+        h = zhi[ridx, n - 1]
+        if h > top:
+            top = h
+        if h <= zfloor:
+            continue
+        xc = lower[0] + (i + 0.5) * s
+        if xc < xa or xc > xb:
+            continue
+        a, b = swept_interval(2, xc, yc, p0, p1, R, rc, L)
+        if a < b:
+            got = subtract_interval(zlo, zhi, zls, zhs, zcnt, ridx, a, b, step)
+            if got < 0.0:
+                overflow = 1.0
+            else:
+                acc += got
+    out[0] = acc
+    out[1] = top
+    out[2] = overflow
+
+
+@njit(cache=True)
+def remove_vertical_serial(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, step, row_out):
+    """Serial :func:`remove_vertical` with a scratch ``row_out`` (3,): no allocation per step.
+
+    Returns (removed volume [m^3] seen by z-rays, status, highest material top [m] in the cutter's
+    footprint before the cut, -1e300 if none)."""
+    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
+    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
+    if j1 < j0 or i1 < i0:
+        return 0.0, 0, -1e300
+    rem = 0.0
+    top = -1e300
+    status = 0
+    for j in range(j0, j1 + 1):
+        vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j, i0, i1, p0, p1, R, rc, L, step, row_out)
+        rem += row_out[0]
+        if row_out[1] > top:
+            top = row_out[1]
+        if row_out[2] > 0.0:
+            status = 1
+    return rem * s * s, status, top
 
 
 @njit(parallel=True, cache=True)
 def remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, step):
-    """Remove the swept cutter from the z-rays.
+    """Remove the swept cutter from the z-rays, one row of the footprint per parallel task.
 
     Returns (removed volume [m^3] seen by z-rays, status, highest material top [m] in the cutter's
     footprint before the cut, -1e300 if none)."""
@@ -485,29 +734,10 @@ def remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L
     nj = j1 - j0 + 1
     if nj <= 0 or i1 < i0:
         return 0.0, 0, -1e300
-    rem = np.zeros(nj)
-    tops = np.full(nj, -1e300)
-    overflow = np.zeros(nj, np.int32)
+    rows = np.zeros((nj, 3))
     for jj in prange(nj):
-        j = j0 + jj
-        yc = lower[1] + (j + 0.5) * s
-        acc = 0.0
-        for i in range(i0, i1 + 1):
-            ridx = j * nx + i
-            if zcnt[ridx] == 0:
-                continue
-            if zhi[ridx, zcnt[ridx] - 1] > tops[jj]:
-                tops[jj] = zhi[ridx, zcnt[ridx] - 1]
-            xc = lower[0] + (i + 0.5) * s
-            a, b = swept_interval(2, xc, yc, p0, p1, R, rc, L)
-            if a < b:
-                got = subtract_interval(zlo, zhi, zls, zhs, zcnt, ridx, a, b, step)
-                if got < 0.0:
-                    overflow[jj] = 1
-                else:
-                    acc += got
-        rem[jj] = acc
-    return rem.sum() * s * s, 1 if overflow.sum() > 0 else 0, tops.max()
+        vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j0 + jj, i0, i1, p0, p1, R, rc, L, step, rows[jj])
+    return rows[:, 0].sum() * s * s, 1 if rows[:, 2].max() > 0 else 0, rows[:, 1].max()
 
 
 class RemovalBuffers:
@@ -521,6 +751,13 @@ class RemovalBuffers:
         self.samp_eng = np.zeros((nz, 4 * across), np.int8)
         self.samp_cnt = np.zeros(nz, np.int64)
         self.layer_removed = np.zeros(nz)
+        self.colx = np.zeros((ny, 2))   # per-step column intervals of horizontal moves [m]
+        self.coly = np.zeros((nx, 2))
+        m = 4 * across
+        self.pair_ray = np.zeros((m // 2 + 1, 2), np.int64)   # full-radius sample layout of a step
+        self.pair_w = np.zeros(m // 2 + 1)
+        self.sorted_ang = np.zeros(m)
+        self.perm = np.zeros(m, np.int64)
 
 
 def remove_step(workpiece, cutter, p0, p1, step: int, buffers: RemovalBuffers | None = None,

@@ -20,8 +20,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .cutting import Material, Spindle, step_forces, substeps
-from .removal import RemovalBuffers, remove_horizontal, remove_vertical
+import numba
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
+
+from .cutting import Material, Spindle, step_forces_sorted, substeps
+from .engagement import sort_layers
+from .removal import (RemovalBuffers, _horizontal_layers_parallel, circle_samples, column_intervals, cut_layer,
+                      horizontal_range, radius_at, remove_vertical, sample_layer_full,
+                      remove_vertical_serial, sample_layer)
 from .tools import Cutter
 
 
@@ -61,22 +69,180 @@ class MachiningResult:
     steps : StepTable
     removed_volume : float  m^3
     wall_time : float  s
-    timings : dict  seconds spent in removal, forces (engagement + force model), robot coupling
+    timings : dict  seconds (wall) spent in removal, engagement (samples + sorting), forces, robot
+        coupling (deflection), from the CPU's time-stamp counter inside the compiled loop
+    cpu_time : float  s, CPU time of this process during the loop (all threads)
     """
 
     steps: StepTable
     removed_volume: float
     wall_time: float
     timings: dict = field(default_factory=dict)
+    cpu_time: float = 0.0
 
     @property
     def simulated_time(self) -> float:
         return float(self.steps.t[-1] - self.steps.t[0]) if len(self.steps.t) > 1 else 0.0
 
 
+@intrinsic
+def _cycles(typingctx):
+    """The CPU's time-stamp counter (``llvm.readcyclecounter``): a constant-rate wall clock of a
+    few ns cost, used to split the loop's time into removal / engagement / forces / robot."""
+    def codegen(context, builder, signature, args):
+        fn = builder.module.declare_intrinsic("llvm.readcyclecounter", fnty=ir.FunctionType(ir.IntType(64), []))
+        return builder.call(fn, [])
+    return types.int64(), codegen
+
+
+#: Ray visits in one step above which the step's removal runs in parallel over layers / rows
+#: (when numba has more than one thread). Finishing steps visit a few thousand rays: a parallel
+#: region costs tens of microseconds to launch and far more on a loaded machine, so they stay serial.
+PARALLEL_WORK = 200_000
+
+#: Relaxation of the step-to-step deflection update ``d_k = d_(k-1) + w (C_k F_k - d_(k-1))``.
+#: The deflection is quasi-static, ``d = C F(d)``, solved by one fixed-point step per 2 ms step.
+#: With w = 1 (plain explicit coupling) that iteration diverges once the loop gain ``C dF/dd`` (robot
+#: compliance times the process's force-per-engagement stiffness) exceeds 1, which happens for this
+#: class of robot (C ~ 5e-6 m/N, about 1e5 N/m per mm of radial engagement in finishing): the force
+#: then alternates between zero and a runaway value every step. w = 0.5 keeps the same equilibrium
+#: and converges for gains up to 3; its lag of a few 2 ms steps is far below the arm's structural
+#: time constants (natural frequencies of 10-30 Hz), which could not follow faster changes anyway.
+RELAXATION = 0.5
+
+#: Status codes of :func:`coupled_steps`.
+STATUS_OK, STATUS_OVERFLOW, STATUS_LAYERS = 0, 1, 2
+
+
+@njit(cache=True)
+def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, zlo, zhi, zls, zhs, zcnt,
+                  lower, s, nx, ny, nz, xyz, err, t, C, use_compliance, R, rc, L, N, tan_helix, omega, phase,
+                  kc, ke, n_sub, forces, relaxation, parallel_work, samp_ang, samp_eng, samp_cnt, layer_removed, colx, coly,
+                  pair_ray, pair_w, sorted_ang, perm, state, force, peak, deflection, ticks):
+    """Steps ``k_from .. k_to - 1`` of the coupled loop (paper Figure 4) in one compiled call.
+
+    Per step k: tool tip ``p1 = xyz[k] + deflection(k-1) + err[k]``; removal of the cutter swept
+    from the previous actual tip on the z-rays (giving the material top in the footprint) and on
+    the x/y-rays of the layers up to that top; engagement samples at ``p1``; revolution-mean and
+    peak force; deflection ``C[k] F`` for the next step. Serial over steps (each depends on the
+    previous deflection); a step's removal runs in parallel only when it visits more than
+    ``parallel_work`` rays (0: never; the caller passes 0 when numba has one thread). Nothing is
+    allocated per step.
+
+    ``state`` (7,) carries ``[p0 (3), deflection (3), removed z-ray volume [m^3]]`` between calls;
+    ``ticks`` (5,) accumulates time-stamp-counter ticks of removal, engagement, forces, robot, and
+    the z-ray part of the removal.
+    Returns ``(status, step)``: status 0, or 1 (ray capacity exceeded) / 2 (more layers than the
+    buffers) at ``step``.
+    """
+    p0 = state[0:3].copy()
+    defl = state[3:6].copy()
+    p1 = np.empty(3)
+    row = np.empty(3)
+    acc = np.empty(3)
+    vel = np.empty(3)
+    inst = np.empty((max(n_sub, 1), 3))
+    out = np.zeros(4)
+    removed = state[6]
+    par_ok = parallel_work > 0
+    for k in range(k_from, k_to):
+        for a in range(3):
+            p1[a] = xyz[k, a] + defl[a] + err[k, a]
+        c0 = _cycles()
+        # ---- removal on the z-rays (also gives the material top in the footprint)
+        j0 = max(0, int(math.ceil((min(p0[1], p1[1]) - R - lower[1]) / s - 0.5)))
+        j1 = min(ny - 1, int(math.floor((max(p0[1], p1[1]) + R - lower[1]) / s - 0.5)))
+        i0 = max(0, int(math.ceil((min(p0[0], p1[0]) - R - lower[0]) / s - 0.5)))
+        i1 = min(nx - 1, int(math.floor((max(p0[0], p1[0]) + R - lower[0]) / s - 0.5)))
+        zwork = max(0, j1 - j0 + 1) * max(0, i1 - i0 + 1)
+        if par_ok and zwork > parallel_work:
+            vz, st2, ztop = remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, k)
+        else:
+            vz, st2, ztop = remove_vertical_serial(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, k,
+                                                   row)
+        if st2 != 0:
+            return STATUS_OVERFLOW, k
+        removed += vz
+        # ---- x/y-rays: engagement samples, then removal
+        k0, k1, ju0, ju1, iu0, iu1 = horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop)
+        nl = k1 - k0 + 1
+        if nl > samp_cnt.shape[0]:
+            return STATUS_LAYERS, k
+        c1 = _cycles()
+        c2 = c1
+        if nl > 0:
+            use_cols = column_intervals(p0, p1, R, lower, s, nx, ny, ju0, ju1, iu0, iu1, colx, coly)
+            hwork = nl * (ju1 - ju0 + iu1 - iu0 + 2)
+            if par_ok and hwork > parallel_work:
+                st1 = _horizontal_layers_parallel(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx,
+                                                  ny, k0, nl, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, k, forces,
+                                                  samp_ang, samp_eng, samp_cnt, layer_removed, use_cols, colx,
+                                                  coly)
+                c2 = _cycles()
+            else:
+                m_full = -1
+                for kk in range(nl):
+                    if not forces:
+                        samp_cnt[kk] = 0
+                    elif radius_at(lower[2] + (k0 + kk + 0.5) * s - p1[2], R, rc, L) == R:
+                        if m_full < 0:
+                            m_full = circle_samples(p1, R, lower, s, ju0, ju1, iu0, iu1, samp_ang.shape[1],
+                                                    pair_ray, pair_w, sorted_ang, perm)
+                        sample_layer_full(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k0 + kk, kk, p1, m_full,
+                                          pair_ray, pair_w, sorted_ang, perm, samp_ang, samp_eng, samp_cnt)
+                    else:
+                        sample_layer(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, k0 + kk, kk, ju0, ju1, iu0,
+                                     iu1, p1, R, rc, L, samp_ang, samp_eng, samp_cnt)
+                c2 = _cycles()
+                st1 = 0
+                for kk in range(nl):
+                    st1 |= cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k0 + kk,
+                                     kk, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, k, layer_removed, use_cols, colx,
+                                     coly)
+            if st1 != 0:
+                return STATUS_OVERFLOW, k
+        c3 = _cycles()
+        ticks[0] += (c1 - c0) + (c3 - c2)
+        ticks[1] += c2 - c1
+        ticks[4] += c1 - c0
+        # ---- forces
+        if forces:
+            dt = t[k] - t[k - 1]
+            # chip thickness from the servo-driven motion (command + tracking error); the quasi-static
+            # deflection moves the engagement (samples at the deflected p1), not the feed per tooth
+            for a in range(3):
+                vel[a] = (xyz[k, a] + err[k, a] - xyz[k - 1, a] - err[k - 1, a]) / dt
+            klow = -1
+            if nl > 0 and vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2] != 0.0:
+                klow = sort_layers(samp_ang, samp_eng, samp_cnt, nl)
+            c4 = _cycles()
+            ticks[1] += c4 - c3
+            step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, nl, klow, lower[2], s, p1, vel, dt, t[k],
+                               R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, acc, inst, out)
+            for a in range(3):
+                force[k, a] = out[a]
+            peak[k] = out[3]
+            c5 = _cycles()
+            ticks[2] += c5 - c4
+            # ---- robot: deflection for the next step, a relaxed fixed-point update of d = C F(d)
+            if use_compliance:
+                for a in range(3):
+                    target = C[k, a, 0] * out[0] + C[k, a, 1] * out[1] + C[k, a, 2] * out[2]
+                    defl[a] += relaxation * (target - defl[a])
+                    deflection[k, a] = defl[a]
+            ticks[3] += _cycles() - c5
+        for a in range(3):
+            p0[a] = p1[a]
+    state[0:3] = p0
+    state[3:6] = defl
+    state[6] = removed
+    return STATUS_OK, k_to
+
+
 def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Material, spindle: Spindle, *,
                        compliance=None, tracking_error=None, switch=None, forces: bool = True,
-                       advance=None) -> MachiningResult:
+                       advance=None, relaxation: float = RELAXATION,
+                       parallel_work: int = PARALLEL_WORK) -> MachiningResult:
     """Run the coupled loop over a commanded cutter path (modifies ``workpiece``).
 
     Parameters
@@ -97,69 +263,79 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     forces : bool
         Compute engagement and forces (needed for deflection).
     advance : callable(n), optional
-        Progress callback.
+        Progress callback, called about 200 times (the loop runs compiled in chunks of steps).
+    relaxation : float
+        Factor in (0, 1] of the deflection update ``d += relaxation * (C F - d)`` (see
+        :data:`RELAXATION`).
+    parallel_work : int
+        Ray visits per step above which a step's removal runs in parallel (see :data:`PARALLEL_WORK`).
+
+    Raises
+    ------
+    RuntimeError
+        A ray's interval capacity is exceeded (rebuild the workpiece with a larger capacity).
     """
-    t = np.asarray(t, float)
-    xyz = np.asarray(xyz_cmd, float)
+    if not (0.0 < relaxation <= 1.0):
+        raise ValueError(f"relaxation must be in (0, 1], got {relaxation}")
+    t = np.ascontiguousarray(t, dtype=float)
+    xyz = np.ascontiguousarray(xyz_cmd, dtype=float)
     n = len(t)
     st = StepTable.zeros(n)
     st.t[:] = t
     st.line[:] = np.asarray(line)
     if switch is not None:
         st.switch[:] = np.asarray(switch)
-    err = np.zeros((n, 3)) if tracking_error is None else np.asarray(tracking_error, float)
+    err = np.zeros((n, 3)) if tracking_error is None else np.ascontiguousarray(tracking_error, dtype=float)
     st.tracking_error[:] = err
     if n < 2:
         return MachiningResult(st, 0.0, 0.0)
-    dt_all = np.diff(t)
-    max_move = float(np.max(np.linalg.norm(np.diff(xyz, axis=0), axis=1))) + 1e-3
+    max_move = float(np.max(np.linalg.norm(np.diff(xyz + err, axis=0), axis=1))) + 1e-3
     buf = RemovalBuffers(workpiece, cutter.radius, max_move)
     R, rc, L = cutter.radius, cutter.corner_radius, cutter.length
     N, tanb = cutter.flutes, math.tan(cutter.helix)
-    nsub = substeps(float(np.median(dt_all)), spindle.omega, N, per_tooth=4)
+    nsub = substeps(float(np.median(np.diff(t))), spindle.omega, N, per_tooth=4)
     fx, fy, fz = workpiece.families
     nx, ny, nz = workpiece.shape
-    lower, s = workpiece.lower, workpiece.spacing
-    kc, ke = material.kc, material.ke
-    out = np.zeros(4)
-    defl = np.zeros(3)
-    p0 = xyz[0] + err[0]
-    removed_z = 0.0
-    t_rem = t_force = t_robot = 0.0
-    C = None if compliance is None else np.asarray(compliance, float)
-    wall0 = time.perf_counter()
+    use_c = compliance is not None and forces
+    C = np.ascontiguousarray(np.broadcast_to(np.asarray(compliance, float), (n, 3, 3))) if use_c \
+        else np.zeros((1, 3, 3))
+    state = np.zeros(7)
+    state[:3] = xyz[0] + err[0]
+    ticks = np.zeros(5, np.int64)
     chunk = max(1, n // 200)
-    for k in range(1, n):
-        p1 = xyz[k] + defl + err[k]
-        c0 = time.perf_counter()
-        vz, s2, ztop = remove_vertical(fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count, lower, s, nx, ny,
-                                       p0, p1, R, rc, L, k)
-        k0, nl, s1 = remove_horizontal(fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count,
-                                       fy.lo, fy.hi, fy.lo_step, fy.hi_step, fy.count,
-                                       lower, s, nx, ny, nz, p0, p1, R, rc, L, k, forces,
-                                       buf.samp_ang, buf.samp_eng, buf.samp_cnt, buf.layer_removed, ztop)
-        if s1 or s2:
+    wall0 = time.perf_counter()
+    cpu0 = time.process_time()
+    tick0 = _tick_now()
+    for k_from in range(1, n, chunk):
+        k_to = min(n, k_from + chunk)
+        status, k = coupled_steps(k_from, k_to, fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count,
+                                  fy.lo, fy.hi, fy.lo_step, fy.hi_step, fy.count,
+                                  fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count,
+                                  workpiece.lower, workpiece.spacing, nx, ny, nz, xyz, err, t, C, use_c,
+                                  R, rc, L, N, tanb, spindle.omega, spindle.phase, material.kc, material.ke, nsub,
+                                  bool(forces), float(relaxation), int(parallel_work) if numba.get_num_threads() > 1 else 0, buf.samp_ang, buf.samp_eng, buf.samp_cnt,
+                                  buf.layer_removed, buf.colx, buf.coly,
+                                  buf.pair_ray, buf.pair_w, buf.sorted_ang, buf.perm, state, st.force, st.peak_force, st.deflection, ticks)
+        if status == STATUS_OVERFLOW:
             raise RuntimeError(f"dexel ray capacity exceeded at step {k}; use a larger capacity")
-        removed_z += vz
-        c1 = time.perf_counter()
-        t_rem += c1 - c0
-        if forces:
-            step_forces(buf.samp_ang, buf.samp_eng, buf.samp_cnt, k0, nl, lower[2], s, p0, p1, dt_all[k - 1],
-                        t[k], R, rc, L, N, tanb, spindle.omega, spindle.phase, kc, ke, nsub, out)
-            st.force[k] = out[:3]
-            st.peak_force[k] = out[3]
-            c2 = time.perf_counter()
-            t_force += c2 - c1
-            if C is not None:
-                defl = C[k] @ out[:3]
-                st.deflection[k] = defl
-                t_robot += time.perf_counter() - c2
-        p0 = p1
-        if advance is not None and k % chunk == 0:
-            advance(chunk)
+        if status == STATUS_LAYERS:
+            raise RuntimeError(f"step {k} spans more z-layers than the engagement buffers hold")
+        if advance is not None:
+            advance(k_to - k_from)
     wall = time.perf_counter() - wall0
-    return MachiningResult(st, removed_z, wall, {"removal": t_rem, "engagement+forces": t_force,
-                                                  "robot": t_robot})
+    cpu = time.process_time() - cpu0
+    total_ticks = max(1, _tick_now() - tick0)
+    # ticks -> seconds with the loop's own wall time (the counter's rate is not known up-front)
+    sec = wall / total_ticks
+    timings = {"removal": ticks[0] * sec, "engagement": ticks[1] * sec, "forces": ticks[2] * sec,
+               "robot": ticks[3] * sec, "removal, z-rays": ticks[4] * sec}
+    timings = {k: float(v) for k, v in timings.items()}
+    return MachiningResult(st, float(state[6]), wall, timings, cpu)
+
+
+@njit(cache=True)
+def _tick_now():
+    return _cycles()
 
 
 def workpiece_compliance(robot, q, placement_rotation, stiffness_scale: float = 1.0) -> np.ndarray:
