@@ -131,10 +131,10 @@ def write_report(ex, out_dir: str | Path, measured_source: str = "") -> Path:
     md += ["", f"**Cause: `{ex.cause}`**"]
     if ex.calibration is not None:
         c = ex.calibration
-        md.append(f"; calibrated `{c.before.param}`: {c.before.value:.6g} -> {c.after.value:.6g} {c.before.unit} "
+        md[-1] += (f"; calibrated `{c.before.param}`: {c.before.value:.6g} -> {c.after.value:.6g} {c.before.unit} "
                   f"({len(c.history)} re-simulations).")
     else:
-        md.append(": no candidate explains the discrepancy better than the noise; the robot file is unchanged.")
+        md[-1] += (": no candidate explains the discrepancy better than the noise; the robot file is unchanged.")
     md += ["", f"RMS measured - simulated: **{ex.rms_before * UM:.2f} um before**, **{ex.rms_after * UM:.2f} um after** "
                f"calibration (re-simulated, not predicted); gain = 1 - after/before = **{ex.gain * 100:.1f} %**.", ""]
     md += ["## Measured vs simulated deviations", ""]
