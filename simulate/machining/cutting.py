@@ -179,14 +179,16 @@ def step_forces(samp_ang, samp_eng, samp_cnt, k0, n_layers, lower_z, s, p0, p1, 
         return
     vel = np.array([vx, vy, vz])
     step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z, s, p1, vel, dt, t_end,
-                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, np.zeros(3), np.zeros((n_sub, 3)), out)
+                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, np.zeros(3), np.zeros((n_sub, 3)),
+                       np.zeros((n_sub * N, 2)), out)
 
 
 @njit(cache=True)
 def step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z, s, p1, vel, dt, t_end,
-                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, acc, inst, out):
+                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, acc, inst, trig, out):
     """The force part of :func:`step_forces` on already sorted samples (``klow``: first layer
-    with samples), with scratch ``acc`` (3,) and ``inst`` (>= n_sub, 3): no allocation.
+    with samples), with scratch ``acc`` (3,), ``inst`` (>= n_sub, 3) and ``trig`` (>= n_sub * N, 2):
+    no allocation.
 
     ``p1`` [m] places the disks (tool tip at the end of the step), ``vel`` [m/s] is the tool
     velocity that sets the chip thickness ``h = T_tooth (vel . n)``.
@@ -207,6 +209,12 @@ def step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z
     theta = math.atan2(vy, vx)
     acc[:] = 0.0
     inst[:n_sub] = 0.0
+    for m in range(n_sub):
+        t = t_end - dt + (m + 0.5) * dt / n_sub
+        for j in range(N):
+            base = phase - omega * t + 2.0 * math.pi * j / N
+            trig[m * N + j, 0] = math.cos(base)
+            trig[m * N + j, 1] = math.sin(base)
     for kk in range(klow, n_layers):
         cnt = samp_cnt[kk]
         if cnt == 0:
@@ -246,6 +254,13 @@ def step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z
             alpha = math.acos(min(1.0, max(-1.0, -Cc / S)))
         ang = samp_ang[kk]
         eng = samp_eng[kk]
+        engaged = False
+        for i in range(cnt):
+            if eng[i] != 0:
+                engaged = True
+                break
+        if not engaged:   # a disk out of the material contributes nothing
+            continue
         for i in range(cnt):
             if eng[i] == 0:
                 continue
@@ -260,12 +275,18 @@ def step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z
             _cell_force(l, rr, theta, alpha, A, B, Cc, b, sk, ck, t_tooth, kc, ke, acc)
         # instantaneous force at n_sub instants, for the peak
         lag = zp * tan_helix / R
+        cl = math.cos(lag)
+        sl = math.sin(lag)
         for m in range(n_sub):
             t = t_end - dt + (m + 0.5) * dt / n_sub
             for j in range(N):
-                psi = phase - omega * t + 2.0 * math.pi * j / N + lag
-                ux = math.cos(psi)
-                uy = math.sin(psi)
+                base = phase - omega * t + 2.0 * math.pi * j / N
+                psi = base + lag
+                # cos/sin of the tooth angle by angle addition: the base angles are shared by all disks
+                cb = trig[m * N + j, 0]
+                sb = trig[m * N + j, 1]
+                ux = cb * cl - sb * sl
+                uy = sb * cl + cb * sl
                 vn = A * ux + B * uy + Cc
                 if vn <= 0.0:
                     continue

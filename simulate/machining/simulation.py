@@ -142,6 +142,7 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
     acc = np.empty(3)
     vel = np.empty(3)
     inst = np.empty((max(n_sub, 1), 3))
+    trig = np.empty((max(n_sub, 1) * N, 2))
     out = np.zeros(4)
     removed = state[6]
     par_ok = parallel_work > 0
@@ -218,7 +219,7 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
             c4 = _cycles()
             ticks[1] += c4 - c3
             step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, nl, klow, lower[2], s, p1, vel, dt, t[k],
-                               R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, acc, inst, out)
+                               R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, acc, inst, trig, out)
             for a in range(3):
                 force[k, a] = out[a]
             peak[k] = out[3]

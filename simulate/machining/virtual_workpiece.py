@@ -3,8 +3,9 @@
 
 Every dexel end stores the index of the step that created it; :func:`end_attributes` gathers the
 step values (time, program line, force, deflection, tracking error, switching bits) per end.
-Export: a coloured point surface (the dexel ends are exact surface points; PLY with vertex
-colours, GLB as a point cloud) and PNG renderings with a colour bar.
+Export: a closed triangle surface whose vertices sit on the exact dexel ends
+(:mod:`simulate.machining.surface_mesh`), as GLB and PLY with vertex colours of a chosen variable,
+and PNG renderings with a colour bar.
 """
 from __future__ import annotations
 
@@ -133,33 +134,60 @@ def machined_points(vw: VirtualWorkpiece, variable: str = "deflection"):
 
 
 def _colours(values):
+    """RGBA (uint8) viridis colours of ``values`` scaled to their finite range; NaN -> light grey."""
     import matplotlib
 
-    v = np.nan_to_num(values)
-    lo, hi = (float(v.min()), float(v.max())) if len(v) else (0.0, 1.0)
-    norm = (v - lo) / (hi - lo) if hi > lo else np.zeros_like(v)
-    return (matplotlib.colormaps["viridis"](norm) * 255).astype(np.uint8), lo, hi
+    v = np.asarray(values, float)
+    ok = np.isfinite(v)
+    lo, hi = (float(v[ok].min()), float(v[ok].max())) if ok.any() else (0.0, 1.0)
+    norm = np.where(ok, (np.nan_to_num(v) - lo) / (hi - lo), 0.0) if hi > lo else np.zeros_like(v)
+    cols = (matplotlib.colormaps["viridis"](norm) * 255).astype(np.uint8)
+    cols[~ok] = (200, 200, 200, 255)
+    return cols, lo, hi
 
 
-def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", max_points: int = 2_000_000):
-    """Write ``surface_<variable>.ply`` and ``.glb`` (coloured surface points of the machined
-    dexel ends, every point an exact surface sample). Returns the written paths."""
-    import trimesh
+def step_values(vw: VirtualWorkpiece, step: np.ndarray, variable: str = "deflection") -> np.ndarray:
+    """Scalar of ``variable`` (vector variables: magnitude) for step indices; NaN where step < 0."""
+    if variable not in VARIABLES:
+        raise InputError(f"unknown variable '{variable}' (one of {', '.join(VARIABLES)})", field="variable")
+    col = getattr(vw.steps, "t" if variable == "time" else variable)
+    col = np.linalg.norm(col, axis=1) if col.ndim == 2 else col.astype(float)
+    out = np.full(len(step), np.nan)
+    ok = step >= 0
+    out[ok] = col[step[ok]]
+    return out
 
-    pts, vals = machined_points(vw, variable)
-    if len(pts) > max_points:
-        sel = np.random.default_rng(0).choice(len(pts), max_points, replace=False)
-        pts, vals = pts[sel], vals[sel]
+
+def coloured_mesh(vw: VirtualWorkpiece, variable: str = "deflection", stride: int | None = None):
+    """The closed surface (:func:`simulate.machining.surface_mesh.surface_mesh`) as a trimesh with
+    vertex colours of ``variable`` (stock surface grey); returns ``(mesh, values per vertex)``."""
+    from .surface_mesh import surface_mesh
+
+    sm = surface_mesh(vw.workpiece, stride=stride)
+    vals = step_values(vw, sm.vertex_step, variable)
     cols, _, _ = _colours(vals)
-    cloud = trimesh.PointCloud(pts, colors=cols)
+    return sm.trimesh(cols), vals
+
+
+def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", max_points: int = 2_000_000,
+                  stride: int | None = None):
+    """Write ``surface_<variable>.ply`` and ``.glb``: the closed triangle surface of the part with
+    vertex colours of ``variable`` (viridis over its range, stock surface grey). Written to temp
+    files and renamed. ``max_points`` is kept for compatibility (the mesh size is set by
+    ``stride``, see :func:`simulate.machining.surface_mesh.choose_stride`). Returns the paths."""
+    mesh, _ = coloured_mesh(vw, variable, stride)
     out_dir = Path(out_dir)
     paths = []
     for ext in ("ply", "glb"):
         p = out_dir / f"surface_{variable}.{ext}"
-        tmp = p.with_suffix(p.suffix + ".tmp")
-        data = cloud.export(file_type=ext)
-        tmp.write_bytes(data if isinstance(data, bytes) else data.encode())
-        os.replace(tmp, p)
+        tmp = p.with_name(p.name + ".tmp")
+        try:
+            data = mesh.export(file_type=ext)
+            tmp.write_bytes(data if isinstance(data, bytes) else data.encode())
+            os.replace(tmp, p)
+        finally:
+            if tmp.exists():
+                tmp.unlink()
         paths.append(p)
     return paths
 

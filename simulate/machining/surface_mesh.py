@@ -1,0 +1,254 @@
+"""A closed triangle surface of the tri-dexel workpiece (paper section 3.3, "virtual workpiece").
+
+Surface nets on the lattice of the dexel rays themselves: the lattice nodes are the ray centres
+(every ``stride``-th ray of each family), so every lattice edge along x lies on an x-ray, along y
+on a y-ray, along z on a z-ray. A node is inside the material when its z-ray holds material
+there; where the occupancy changes along an edge, the crossing is the *exact dexel end* of that
+edge's ray inside the edge (the continuous coordinate, not the grid), falling back to the edge's
+midpoint only where the three ray families disagree below the lattice resolution. Each lattice
+cell with crossings gets one vertex at the mean of its crossings, and each crossed edge gives one
+quad (two triangles) joining the four cells around it, oriented outward.
+
+Why this and not marching cubes: no case table is needed (``skimage`` is not installed), the
+surface is closed by construction (an empty layer of nodes pads the grid), and a plane wall
+normal to x, y or z has all its crossings at the wall's exact dexel coordinate, so its vertices
+sit exactly on the machined wall, at micrometre resolution, whatever the lattice pitch. Sharp
+edges and corners are bevelled by up to one cell (vertex = mean of the crossings), which changes
+the volume by O(cell^2 x edge length): about 0.1-1 % for parts of tens of cells per side.
+
+Each vertex carries the step index of the most recent dexel end among its crossings (-1: stock
+surface), so any step variable (deflection, force, ...) can colour the mesh.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .dexel import TriDexel
+
+#: Lattice nodes allowed before the stride is increased (memory: ~5 bytes per node).
+MAX_NODES = 40_000_000
+
+
+@dataclass
+class SurfaceMesh:
+    """A closed triangle surface of the workpiece.
+
+    Attributes
+    ----------
+    vertices : ndarray (V, 3)
+        Vertex positions [m], workpiece frame.
+    faces : ndarray (F, 3) int64
+        Counter-clockwise seen from outside (outward normals).
+    vertex_step : ndarray (V,) int32
+        Simulation step of the newest dexel end behind each vertex, -1 for stock surface.
+    stride : int
+        Rays per lattice cell (1: every ray, lattice pitch = dexel spacing).
+    pitch : float
+        Lattice pitch [m] = stride * spacing.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    vertex_step: np.ndarray
+    stride: int
+    pitch: float
+
+    def trimesh(self, colors=None):
+        """As a ``trimesh.Trimesh`` (no vertex merging or repair; optional RGBA colours (V, 4))."""
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices, self.faces, vertex_colors=colors, process=False)
+
+
+def choose_stride(shape, max_nodes: int = MAX_NODES) -> int:
+    """Smallest stride whose lattice has at most ``max_nodes`` nodes."""
+    nx, ny, nz = shape
+    st = 1
+    while (nx // st + 3) * (ny // st + 3) * (nz // st + 3) > max_nodes:
+        st += 1
+    return st
+
+
+def surface_mesh(workpiece: TriDexel, stride: int | None = None, max_nodes: int = MAX_NODES) -> SurfaceMesh:
+    """Closed surface of the material (see module docstring).
+
+    Parameters
+    ----------
+    workpiece : TriDexel
+    stride : int, optional
+        Use every ``stride``-th ray (lattice pitch ``stride * spacing``); default: the smallest
+        stride keeping the lattice under ``max_nodes`` nodes.
+    """
+    if stride is None:
+        stride = choose_stride(workpiece.shape, max_nodes)
+    stride = int(stride)
+    if stride < 1:
+        raise ValueError("stride must be >= 1")
+    nx, ny, nz = workpiece.shape
+    # lattice node n (1..m) sits on ray index (n - 1) * stride; nodes 0 and m + 1 are empty padding
+    mx, my, mz = (len(range(0, n, stride)) for n in (nx, ny, nz))
+    fx, fy, fz = workpiece.families
+    occ = np.zeros((mx + 2, my + 2, mz + 2), np.uint8)
+    _occupancy(fz.lo, fz.hi, fz.count, workpiece.lower, workpiece.spacing, nx, stride, mx, my, mz, occ)
+    cell_vertex = np.full((mx + 1, my + 1, mz + 1), -1, np.int32)
+    nv, nf = _count(occ, cell_vertex)
+    verts = np.zeros((nv, 3))
+    nsum = np.zeros(nv, np.int32)
+    vstep = np.full(nv, -1, np.int32)
+    faces = np.zeros((2 * nf, 3), np.int64)
+    _build(occ, cell_vertex, fx.lo, fx.hi, fx.hi_step, fx.lo_step, fx.count,
+           fy.lo, fy.hi, fy.hi_step, fy.lo_step, fy.count, fz.lo, fz.hi, fz.hi_step, fz.lo_step, fz.count,
+           workpiece.lower, workpiece.spacing, nx, ny, stride, verts, nsum, vstep, faces)
+    verts /= np.maximum(nsum, 1)[:, None]
+    return SurfaceMesh(verts, faces, vstep, stride, stride * workpiece.spacing)
+
+
+@njit(cache=True)
+def _node_coord(lower_a, s, stride, n):
+    """Coordinate [m] of lattice node n (n = 0 and the last are padding one pitch outside)."""
+    return lower_a + ((n - 1) * stride + 0.5) * s
+
+
+@njit(cache=True)
+def _occupancy(zlo, zhi, zcnt, lower, s, nx, stride, mx, my, mz, occ):
+    for I in range(1, mx + 1):
+        i = (I - 1) * stride
+        for J in range(1, my + 1):
+            j = (J - 1) * stride
+            r = j * nx + i
+            n = zcnt[r]
+            if n == 0:
+                continue
+            q = 0
+            for K in range(1, mz + 1):
+                z = _node_coord(lower[2], s, stride, K)
+                while q < n and zhi[r, q] < z:
+                    q += 1
+                if q < n and zlo[r, q] <= z:
+                    occ[I, J, K] = 1
+
+
+@njit(cache=True)
+def _count(occ, cell_vertex):
+    """Number the cells that get a vertex; count crossed edges (one quad each)."""
+    X, Y, Z = occ.shape
+    nf = 0
+    for I in range(X):
+        for J in range(Y):
+            for K in range(Z):
+                o = occ[I, J, K]
+                if I + 1 < X and occ[I + 1, J, K] != o:
+                    nf += 1
+                if J + 1 < Y and occ[I, J + 1, K] != o:
+                    nf += 1
+                if K + 1 < Z and occ[I, J, K + 1] != o:
+                    nf += 1
+    nv = 0
+    for I in range(X - 1):
+        for J in range(Y - 1):
+            for K in range(Z - 1):
+                o = occ[I, J, K]
+                mixed = False
+                for a in range(2):
+                    for b in range(2):
+                        for c in range(2):
+                            if occ[I + a, J + b, K + c] != o:
+                                mixed = True
+                if mixed:
+                    cell_vertex[I, J, K] = nv
+                    nv += 1
+    return nv, nf
+
+
+@njit(cache=True)
+def _crossing(lo, hi, hi_step, lo_step, cnt, r, a, b, exiting):
+    """Dexel end of ray r in [a, b]: the last exit (``exiting``) or the first entry; returns
+    (position, step), NaN if the ray has none there."""
+    n = cnt[r]
+    pos = np.nan
+    st = -1
+    for q in range(n):
+        if exiting:
+            if a <= hi[r, q] <= b:
+                pos = hi[r, q]
+                st = hi_step[r, q]
+        else:
+            if a <= lo[r, q] <= b:
+                return lo[r, q], lo_step[r, q]
+    return pos, st
+
+
+@njit(cache=True)
+def _add(verts, nsum, vstep, cell_vertex, I, J, K, x, y, z, st):
+    v = cell_vertex[I, J, K]
+    verts[v, 0] += x
+    verts[v, 1] += y
+    verts[v, 2] += z
+    nsum[v] += 1
+    if st > vstep[v]:
+        vstep[v] = st
+
+
+@njit(cache=True)
+def _build(occ, cell_vertex, xlo, xhi, xhs, xls, xcnt, ylo, yhi, yhs, yls, ycnt, zlo, zhi, zhs, zls, zcnt,
+           lower, s, nx, ny, stride, verts, nsum, vstep, faces):
+    X, Y, Z = occ.shape
+    f = 0
+    for I in range(X):
+        for J in range(Y):
+            for K in range(Z):
+                o = occ[I, J, K]
+                x0 = _node_coord(lower[0], s, stride, I)
+                y0 = _node_coord(lower[1], s, stride, J)
+                z0 = _node_coord(lower[2], s, stride, K)
+                for axis in range(3):
+                    I1 = I + (1 if axis == 0 else 0)
+                    J1 = J + (1 if axis == 1 else 0)
+                    K1 = K + (1 if axis == 2 else 0)
+                    if I1 >= X or J1 >= Y or K1 >= Z or occ[I1, J1, K1] == o:
+                        continue
+                    exiting = o == 1   # material at the lower node: the edge crosses an exit end
+                    x, y, z = x0, y0, z0
+                    st = -1
+                    pos = np.nan
+                    if axis == 0:
+                        a, b = x0, _node_coord(lower[0], s, stride, I1)
+                        if 1 <= J < Y - 1 and 1 <= K < Z - 1:
+                            r = ((K - 1) * stride) * ny + (J - 1) * stride
+                            pos, st = _crossing(xlo, xhi, xhs, xls, xcnt, r, a, b, exiting)
+                        x = pos if pos == pos else 0.5 * (a + b)
+                    elif axis == 1:
+                        a, b = y0, _node_coord(lower[1], s, stride, J1)
+                        if 1 <= I < X - 1 and 1 <= K < Z - 1:
+                            r = ((K - 1) * stride) * nx + (I - 1) * stride
+                            pos, st = _crossing(ylo, yhi, yhs, yls, ycnt, r, a, b, exiting)
+                        y = pos if pos == pos else 0.5 * (a + b)
+                    else:
+                        a, b = z0, _node_coord(lower[2], s, stride, K1)
+                        if 1 <= I < X - 1 and 1 <= J < Y - 1:
+                            r = ((J - 1) * stride) * nx + (I - 1) * stride
+                            pos, st = _crossing(zlo, zhi, zhs, zls, zcnt, r, a, b, exiting)
+                        z = pos if pos == pos else 0.5 * (a + b)
+                    # the four cells around the edge, counter-clockwise seen from +axis
+                    if axis == 0:
+                        c = ((I, J - 1, K - 1), (I, J, K - 1), (I, J, K), (I, J - 1, K))
+                    elif axis == 1:
+                        c = ((I - 1, J, K - 1), (I - 1, J, K), (I, J, K), (I, J, K - 1))
+                    else:
+                        c = ((I - 1, J - 1, K), (I, J - 1, K), (I, J, K), (I - 1, J, K))
+                    v = np.empty(4, np.int64)
+                    for q in range(4):
+                        ci, cj, ck = c[q]
+                        _add(verts, nsum, vstep, cell_vertex, ci, cj, ck, x, y, z, st)
+                        v[q] = cell_vertex[ci, cj, ck]
+                    if exiting:   # outward normal along +axis
+                        faces[f, 0], faces[f, 1], faces[f, 2] = v[0], v[1], v[2]
+                        faces[f + 1, 0], faces[f + 1, 1], faces[f + 1, 2] = v[0], v[2], v[3]
+                    else:
+                        faces[f, 0], faces[f, 1], faces[f, 2] = v[0], v[2], v[1]
+                        faces[f + 1, 0], faces[f + 1, 1], faces[f + 1, 2] = v[0], v[3], v[2]
+                    f += 2
