@@ -69,7 +69,9 @@ def test_submit_poll_rank_report_glb_and_restart(make_server):
     poses = ["near", "far_rotated"]
     with srv.client() as c:
         r = c.post("/simulations", json={"program": "iso160", "pose_set": "iso160", "select": poses,
-                                         "options": {"spacing_mm": 1.0}})
+                                         "options": {"spacing_mm": 1.0},
+                                         # the robot file's friction: independent of the session's registry
+                                         "friction": [{"axis": a, "model": "robot"} for a in range(1, 7)]})
         assert r.status_code == 202
         job = r.json()["id"]
         st, seen = poll(c, job, timeout=3600)

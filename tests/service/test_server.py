@@ -13,9 +13,13 @@ from service.jobs import RESTART_REASON
 
 DATA = Path(__file__).resolve().parents[2] / "data"
 
+#: The robot file's own friction on every axis: the jobs do not depend on what the session's MLflow
+#: registry holds (another test registers a champion for axis 1).
+ROBOT_FRICTION = [{"axis": a, "model": "robot"} for a in range(1, 7)]
 #: Placed 9 m from the robot: the job's inverse kinematics fails and names the program line.
-UNREACHABLE = {"program": "iso160", "poses": [{"name": "far", "xyz": [9.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}]}
-TWO_POSES = {"program": "iso160", "pose_set": "iso160", "options": {"spacing_mm": 2.0}}
+UNREACHABLE = {"program": "iso160", "poses": [{"name": "far", "xyz": [9.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}],
+               "friction": ROBOT_FRICTION}
+TWO_POSES = {"program": "iso160", "pose_set": "iso160", "options": {"spacing_mm": 2.0}, "friction": ROBOT_FRICTION}
 
 
 def wait_for(client: httpx.Client, job: str, states: tuple[str, ...], timeout: float = 120.0) -> dict:
@@ -91,7 +95,7 @@ def test_short_job_results_and_bounded_load_without_errors(shared_server):
 
     with shared_server.client() as c:
         r = c.post("/simulations", json={"gcode": short_program(), "stock": "iso160", "pose_set": "iso160",
-                                         "options": {"spacing_mm": 2.0}})
+                                         "options": {"spacing_mm": 2.0}, "friction": ROBOT_FRICTION})
         assert r.status_code == 202, r.text
         job = r.json()["id"]
         st = wait_for(c, job, ("succeeded", "failed"), timeout=600)
