@@ -22,8 +22,10 @@ from typing import Callable, Iterator, Sequence
 
 import torch
 
-#: Floating-point type of all learned friction models: the bristle scan and the stiff
-#: exponentials want float64, and records are short enough that it costs little.
+#: Floating-point type of the physics-based learned models: the bristle scan and the stiff
+#: exponentials want float64, and records are short enough that it costs little. (The
+#: black-box LSTM runs in float32, see :mod:`identify.models.lstm`; :func:`train` follows the
+#: network's type.)
 DTYPE = torch.float64
 
 
@@ -72,8 +74,8 @@ LossFn = Callable[[torch.nn.Module, tuple], torch.Tensor]
 
 
 def train(net: torch.nn.Module, loss_fn: LossFn, batches: Sequence[tuple], *, epochs: int, lr: float,
-          seed: int = 0, lr_final: float = 0.05, on_epoch: Callable[[int, float], None] | None = None
-          ) -> TrainingHistory:
+          seed: int = 0, lr_final: float = 0.05, grad_clip: float | None = None,
+          on_epoch: Callable[[int, float], None] | None = None) -> TrainingHistory:
     """Train ``net`` with Adam on ``batches`` for ``epochs`` passes, via a Lightning Trainer.
 
     Parameters
@@ -90,6 +92,10 @@ def train(net: torch.nn.Module, loss_fn: LossFn, batches: Sequence[tuple], *, ep
         Initial learning rate of Adam [-], decayed by a cosine schedule to ``lr*lr_final``.
     seed : int
         Torch seed.
+    lr_final : float
+        Final learning rate as a share of ``lr`` [-].
+    grad_clip : float, optional
+        Clip the gradient norm to this value [-] (recurrent nets); no clipping when None.
     on_epoch : callable, optional
         Called with (epoch, mean loss) after each epoch.
     """
@@ -130,9 +136,12 @@ def train(net: torch.nn.Module, loss_fn: LossFn, batches: Sequence[tuple], *, ep
 
     history = TrainingHistory()
     loader = torch.utils.data.DataLoader(_Batches(), batch_size=None, shuffle=False, num_workers=0)
+    # the network's own floating-point type decides the precision ("64-true" would cast a float32 net)
+    precision = "64-true" if any(p.dtype == torch.float64 for p in net.parameters()) else "32-true"
     trainer = pl.Trainer(max_epochs=epochs, accelerator="cpu", devices=1, logger=False, enable_progress_bar=False,
                          enable_checkpointing=False, enable_model_summary=False, deterministic=True,
-                         num_sanity_val_steps=0, precision="64-true")
+                         num_sanity_val_steps=0, precision=precision, gradient_clip_val=grad_clip,
+                         gradient_clip_algorithm="norm")
     with deterministic(seed):
         t0 = time.perf_counter()
         trainer.fit(_Step(), train_dataloaders=loader)

@@ -6,7 +6,7 @@ import torch
 from identify.errors import NotFittedError
 from identify.models import MODELS, load_model, make_model
 from identify.models.greybox import GreyBoxLuGre, GreyBoxLuGreNet, StaticLevelNet
-from identify.models.lstm import LSTMFriction, windows
+from identify.models.lstm import LSTMFriction, WindowLayout
 from identify.models.residual import ResidualLuGre
 
 NOISE = 0.02  # Nm, torque noise of the synthetic plant (PlantConfig default)
@@ -35,6 +35,18 @@ def test_greybox_wins_on_non_stribeck_curve(six_fits):
     assert min(rmse, key=rmse.get) == "greybox", rmse
     assert rmse["greybox"] <= 1.2 * NOISE, rmse
     assert rmse["residual"] < rmse["lugre"], rmse
+
+
+def test_lstm_competent_black_box(six_fits):
+    """The black-box baseline beats the static models clearly (paper 2.2.1: an LSTM came near
+    LuGre on axis 1) and co-identifies a plausible inertia (plant: J = 0.5 kg m^2)."""
+    rmse = {k: v[1] for k, v in six_fits.items()}
+    assert rmse["lstm"] <= 0.3, rmse
+    assert rmse["lstm"] < 0.25 * min(rmse["coulomb-viscous"], rmse["stribeck"]), rmse
+    est = six_fits["lstm"][0]
+    assert abs(est.params_["J"] - 0.5) < 0.15, est.params_
+    assert next(est.net_.lstm.parameters()).dtype == torch.float32
+    assert len(est.history_.loss) == est.epochs and est.history_.loss[-1] < 0.1 * est.history_.loss[0]
 
 
 def test_greybox_parameters_physical(six_fits):
@@ -109,15 +121,20 @@ def test_level_net_normalisation_in_buffers():
     assert float(names["v_max"]) == 2.0 and float(names["tau_scale"]) == 3.0
 
 
-def test_lstm_windows_cover_record():
-    for n, w, h in [(1000, 400, 100), (1001, 400, 100), (350, 400, 100), (5000, 300, 50)]:
-        starts = windows(n, w, h)
-        covered = np.zeros(n, bool)
-        length = min(w + h, n)
-        for i, s in enumerate(starts):
-            first = 0 if i == 0 else min(h, length - 1)
-            covered[s + first:min(s + length, n)] = True
-        assert covered.all()
+def test_lstm_windows_score_every_sample_once():
+    for n, w, h in [(1000, 400, 100), (1001, 400, 100), (350, 400, 100), (5000, 300, 50), (7, 3, 0), (1, 5, 5)]:
+        lay = WindowLayout.of(n, w, h)
+        assert lay.index.shape == lay.scored.shape == (-(-n // w), w + h)
+        counts = np.bincount(lay.index[lay.scored], minlength=n)
+        assert (counts == 1).all()
+        assert lay.index.min() == 0 and lay.index.max() == n - 1
+        # each window's history is the samples right before it (clamped at the record start: rest)
+        for i in range(lay.index.shape[0]):
+            expect = np.clip(np.arange(i * w - h, i * w + w), 0, n - 1)
+            np.testing.assert_array_equal(lay.index[i], expect)
+        # scatter inverts gather on the scored positions
+        x = np.arange(n, dtype=float)
+        np.testing.assert_array_equal(lay.scatter(lay.gather(x).numpy()), x)
 
 
 @pytest.mark.slow
