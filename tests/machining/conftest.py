@@ -54,3 +54,35 @@ def helpers():
     h.line = line
     h.arc = arc
     return h
+
+
+SMALL_PROGRAM = """%
+(small slot and contour for the machining CLI tests)
+G21 G90 G17 G94
+T1 M6
+S12000 M3
+G0 X-8 Y10 Z5
+G0 X-8 Y10 Z-1
+G1 X28 Y10 Z-1 F3000
+G1 X28 Y-4.5 Z-1
+G1 X-8 Y-4.5 Z-1
+G0 X-8 Y-4.5 Z5
+M5
+M30
+%
+"""
+
+
+@pytest.fixture
+def small_job(tmp_path):
+    """A small program (a 1 mm deep slot across a 20 x 20 mm block, then a side cut), its box
+    stock and a reachable pose: paths (program, pose file) in ``tmp_path``."""
+    import json
+
+    prog = tmp_path / "small.nc"
+    prog.write_text(SMALL_PROGRAM)
+    (tmp_path / "small.stock.json").write_text(json.dumps(
+        {"units": "mm", "box": {"min": [0, 0, -6], "max": [20, 20, 0]}, "tool": {"type": "flat", "diameter": 0.01}}))
+    pose = tmp_path / "poses.json"
+    pose.write_text(json.dumps({"poses": [{"name": "near", "xyz": [1.45, 0.0, -0.1], "rpy": [0.0, 0.0, 0.0]}]}))
+    return prog, pose
