@@ -46,11 +46,12 @@ def test_schema_errors_are_422(client):
     assert r.status_code == 422
 
 
-def test_unreachable_pose_is_422_naming_the_pose(client):
+def test_select_needs_a_pose_set_and_inline_gcode_a_stock(client):
     body = {"program": "iso160", "poses": [{"name": "far", "xyz": [9.0, 0, 0], "rpy": [0, 0, 0]}]}
-    # reachability is checked by the job (IK over the whole path); the request itself is valid
     r = client.post("/simulations", headers=HEADERS, json={**body, "select": ["x"]})
-    assert r.status_code == 422  # 'select' without pose_set
+    assert r.status_code == 422  # 'select' picks poses of a pose_set
+    r = client.post("/simulations", headers=HEADERS, json={"gcode": "G21 G90\nG0 X0 Y0 Z5\n", "pose_set": "iso160"})
+    assert r.status_code == 422 and r.json()["detail"]["field"] == "stock"
 
 
 def test_unknown_names_and_model_references_are_404(client):

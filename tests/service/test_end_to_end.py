@@ -1,7 +1,8 @@
 """End to end on loopback: submit the 160 test piece with two poses, poll, fetch ranking, report (JSON
 and CSV) and the virtual workpieces (GLB); the results stay readable after a restart.
 
-Slow: the coupled machining simulation of two poses takes minutes on 2 shared cores.
+About 15 s with the machining kernels compiled and cached (numba); the first run after a kernel
+change compiles them in the worker process and takes longer.
 """
 from __future__ import annotations
 
@@ -63,7 +64,6 @@ def check_results(c, job: str, poses: list[str]) -> dict:
     return report
 
 
-@pytest.mark.slow
 def test_submit_poll_rank_report_glb_and_restart(make_server):
     srv = make_server(GREYBENCH_WORKERS="1")
     poses = ["near", "far_rotated"]

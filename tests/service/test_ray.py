@@ -20,7 +20,6 @@ def short_program() -> str:
     return "\n".join(head + lines[start:]) + "\n"
 
 
-@pytest.mark.slow
 def test_ray_tasks_give_the_same_results_as_local(tmp_path):
     ray = pytest.importorskip("ray")
     poses = json.loads((DATA / "poses" / "iso160.json").read_text())["poses"]

@@ -89,7 +89,6 @@ def test_bounded_load_on_status_and_ranking_has_no_errors(shared_server):
     assert res["requests"] >= 100 and all(row["requests"] > 0 for row in res["endpoints"])
 
 
-@pytest.mark.slow  # about a minute on 2 shared cores: each worker process compiles the machining kernels
 def test_short_job_results_and_bounded_load_without_errors(shared_server):
     from service.loadtest import load
 
