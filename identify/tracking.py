@@ -60,9 +60,14 @@ def artifact_root(uri: str) -> str | None:
 
 
 def _mlflow():
-    """mlflow, pointed at the store, with its chatter kept off stdout."""
+    """mlflow, pointed at the store, with its chatter kept off stdout and stderr.
+
+    Artifact downloads (``predict --model runs:/...``, ``compare``) would draw progress bars
+    on stderr: they are off unless the user sets ``MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR``.
+    """
     import logging
 
+    os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
     import mlflow
 
     logging.getLogger("mlflow").setLevel(logging.ERROR)
@@ -106,10 +111,12 @@ except Exception:  # pragma: no cover - mlflow is a dependency
 class FrictionPyfunc(_PythonModel):
     """MLflow pyfunc wrapper: a DataFrame of axis-record columns in, total torque [Nm] out."""
 
-    def load_context(self, context):
+    def load_context(self, context) -> None:
         self.model = load_model(context.artifacts[PYFUNC_ARTIFACT])
 
-    def predict(self, context, model_input, params=None):
+    # The type hint tells mlflow the input is a DataFrame (mlflow >= 2.20 asks for one and warns
+    # otherwise); DataFrame hints carry no schema, so any axis-record columns are accepted.
+    def predict(self, context, model_input: pd.DataFrame, params: dict | None = None) -> pd.Series:
         frame = model_input if isinstance(model_input, pd.DataFrame) else pd.DataFrame(model_input)
         if "tau" not in frame.columns:  # prediction needs no measurement; the record format does
             frame = frame.assign(tau=0.0)
