@@ -83,7 +83,10 @@ def _free_port() -> int:
 
 def run_bench(clients: int = 50, duration: float = 20.0, spacing_mm: float = 2.0, job_timeout: float = 1800.0) -> dict:
     """Start a server on loopback (temporary data folder), run one simulation of the 160 test piece
-    (two poses), then the load test on its status and ranking; stops the server."""
+    (two poses), then the load test on its status and ranking; stops the server.
+
+    An error is a transport failure or an unexpected status: 200 for the status, and for the ranking
+    200 when the job succeeded, 409 when it failed (the job's state and message are reported)."""
     import httpx
 
     key = "bench-key-" + os.urandom(6).hex()
@@ -119,7 +122,10 @@ def run_bench(clients: int = 50, duration: float = 20.0, spacing_mm: float = 2.0
                     break
                 time.sleep(1.0)
             job_seconds = time.time() - t0
-            res = load(base, headers, [f"/simulations/{job}", f"/simulations/{job}/ranking"], clients, duration)
+            paths = [f"/simulations/{job}", f"/simulations/{job}/ranking"]
+            # a failed job's ranking is a 409 every time: then that is the expected answer
+            expect = {paths[1]: 200 if st["state"] == "succeeded" else 409}
+            res = load(base, headers, paths, clients, duration, expect)
             res["job"] = {"state": st["state"], "seconds": job_seconds,
                           "message": st["message"]}
             return res
