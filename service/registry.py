@@ -69,9 +69,22 @@ def registered_name(robot: str, axis: int) -> str:
     return f"{robot}-axis{axis}-friction"
 
 
+def store_uri(tracking_uri: str | None = None) -> str:
+    """The MLflow store: the given URI, else the project's default (:func:`identify.tracking.tracking_uri`:
+    ``MLFLOW_TRACKING_URI`` or ``sqlite:///<cwd>/mlruns.db``), so the service sees what ``greybench fit``
+    registered."""
+    if tracking_uri:
+        return tracking_uri
+    try:
+        from identify.tracking import tracking_uri as default_uri
+    except ModuleNotFoundError:  # tracking not installed: MLflow's own default
+        return os.environ.get("MLFLOW_TRACKING_URI") or ""
+    return default_uri()
+
+
 def _client(tracking_uri: str | None):
     from mlflow import MlflowClient
-    return MlflowClient(tracking_uri=tracking_uri or os.environ.get("MLFLOW_TRACKING_URI") or None)
+    return MlflowClient(tracking_uri=store_uri(tracking_uri) or None, registry_uri=store_uri(tracking_uri) or None)
 
 
 def _is_missing(exc: Exception) -> bool:
@@ -154,9 +167,10 @@ def fetch(model: ResolvedModel, into: str | Path, tracking_uri: str | None = Non
     into.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{into.name}.", dir=into.parent))
     try:
-        if tracking_uri:
-            mlflow.set_tracking_uri(tracking_uri)
-        mlflow.set_registry_uri(tracking_uri or os.environ.get("MLFLOW_TRACKING_URI") or mlflow.get_tracking_uri())
+        uri = store_uri(tracking_uri)
+        if uri:
+            mlflow.set_tracking_uri(uri)
+            mlflow.set_registry_uri(uri)
         local = Path(mlflow.artifacts.download_artifacts(artifact_uri=model.uri, dst_path=str(tmp)))
         found = sorted(local.rglob(PARAMS_FILE), key=lambda p: len(p.parts))
         if not found:
