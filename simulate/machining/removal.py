@@ -528,7 +528,8 @@ def column_intervals(p0, p1, R, lower, s, nx, ny, ju0, ju1, iu0, iu1, colx, coly
 def cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k, kk, ju0, ju1, iu0, iu1,
               p0, p1, R, rc, L, step, layer_removed, use_cols, colx, coly):
     """Subtract the swept cutter from the x- and y-rays of z-layer ``k``; ``layer_removed[kk]`` gets
-    the volume seen by the x-rays [m^3]. Returns 1 if a ray overflowed its capacity, else 0.
+    the volume seen by the x-rays [m^3]. Returns flags: 1 a ray overflowed its capacity (nothing
+    changed on it), 2 an x-ray, 4 a y-ray is now at its capacity (the next split would overflow).
 
     A ray whose material lies entirely outside the swept box along its axis is rejected before
     the swept interval is computed (it could not lose anything). With ``use_cols`` (a horizontal
@@ -559,9 +560,11 @@ def cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, 
         if a < b:
             got = subtract_interval(xlo, xhi, xls, xhs, xcnt, ridx, a, b, step)
             if got < 0.0:
-                overflow = 1
+                overflow |= 1
             else:
                 rem += got
+                if xcnt[ridx] == xlo.shape[1]:
+                    overflow |= 2
     for i in range(max(iu0, 0), min(iu1, nx - 1) + 1):
         ridx = k * nx + i
         n = ycnt[ridx]
@@ -576,7 +579,9 @@ def cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, 
         if a < b:
             got = subtract_interval(ylo, yhi, yls, yhs, ycnt, ridx, a, b, step)
             if got < 0.0:
-                overflow = 1
+                overflow |= 1
+            elif ycnt[ridx] == ylo.shape[1]:
+                overflow |= 4
     layer_removed[kk] = rem * s * s
     return overflow
 
@@ -587,7 +592,7 @@ def horizontal_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, 
                      layer_removed, use_cols, colx, coly):
     """Engagement samples (if ``sample``) then removal on the x- and y-rays of z-layer ``k`` (row
     ``kk`` of the buffers). Each sample reads only its own ray, so sampling the whole layer first
-    equals sampling each ray just before cutting it. Returns 1 if a ray overflowed, else 0."""
+    equals sampling each ray just before cutting it. Returns the flags of :func:`cut_layer`."""
     if sample:
         sample_layer(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, k, kk, ju0, ju1, iu0, iu1, p1, R, rc, L,
                      samp_ang, samp_eng, samp_cnt)
@@ -617,6 +622,48 @@ def horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop):
     return k0, k1, min(ju0, j0), max(ju1, j1), min(iu0, i0), max(iu1, i1)
 
 
+@njit(cache=True)
+def layer_has_material(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k, ju0, ju1, iu0, iu1, p0, p1, R):
+    """True if an x- or y-ray of z-layer ``k`` holds material inside the step's swept box."""
+    xa = min(p0[0], p1[0]) - R
+    xb = max(p0[0], p1[0]) + R
+    ya = min(p0[1], p1[1]) - R
+    yb = max(p0[1], p1[1]) + R
+    for j in range(max(ju0, 0), min(ju1, ny - 1) + 1):
+        r = k * ny + j
+        for q in range(xcnt[r]):
+            if xlo[r, q] < xb and xhi[r, q] > xa:
+                return True
+    for i in range(max(iu0, 0), min(iu1, nx - 1) + 1):
+        r = k * nx + i
+        for q in range(ycnt[r]):
+            if ylo[r, q] < yb and yhi[r, q] > ya:
+                return True
+    return False
+
+
+@njit(cache=True)
+def layer_range(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, nz, p0, p1, R, L, ztop):
+    """Layers of a step: ``(k0, n_layers, ju0, ju1, iu0, iu1)`` (see :func:`horizontal_range`).
+
+    From the lowest tip position up to the top of the cutter, but ending at the first layer above
+    ``ztop + spacing`` (``ztop``: highest z-ray material in the footprint) whose x- and y-rays hold
+    no material in the swept box. The z-rays alone are not a safe bound: a sliver thinner than the
+    spacing between two z-ray columns (a finishing allowance on a coarse grid) is seen only by
+    the x- and y-rays. Exact for 2.5-D material (one interval from the bottom per column, as left
+    by a vertical cutter from a stock of prisms), where nothing lies above an empty layer.
+    """
+    k0, k1, ju0, ju1, iu0, iu1 = horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, 1e300)
+    k1z = horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop)[1]
+    k = k0
+    while k <= k1:
+        if k > k1z and not layer_has_material(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k, ju0, ju1, iu0, iu1,
+                                              p0, p1, R):
+            break
+        k += 1
+    return k0, k - k0, ju0, ju1, iu0, iu1
+
+
 @njit(parallel=True, cache=True)
 def _horizontal_layers_parallel(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k0, nl,
                                 ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample, samp_ang, samp_eng,
@@ -626,7 +673,10 @@ def _horizontal_layers_parallel(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
         overflow[kk] = horizontal_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny,
                                         k0 + kk, kk, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample,
                                         samp_ang, samp_eng, samp_cnt, layer_removed, use_cols, colx, coly)
-    return 1 if overflow.sum() > 0 else 0
+    flags = 0
+    for kk in range(nl):
+        flags |= overflow[kk]
+    return flags
 
 
 @njit(parallel=True, cache=True)
@@ -638,11 +688,11 @@ def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower,
     Engagement samples of layer ``k0 + kk`` go to row ``kk`` of ``samp_ang`` (angle [rad] about the
     cutter axis at ``p1``, from +x counter-clockwise) and ``samp_eng`` (1 if material was there
     before the cut). ``ztop`` [m]: highest material in the cutter's footprint (from the z-rays);
-    layers above it hold no material and are skipped. Returns ``(k0, n_layers, status)``; status 1:
+    empty layers above it are skipped (:func:`layer_range`). Returns ``(k0, n_layers, status)``; status 1:
     a ray overflowed its capacity, 2: more layers than the buffers hold.
     """
-    k0, k1, ju0, ju1, iu0, iu1 = horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop)
-    nl = k1 - k0 + 1
+    k0, nl, ju0, ju1, iu0, iu1 = layer_range(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, nz, p0, p1, R, L,
+                                             ztop)
     if nl <= 0:
         return k0, 0, 0
     if nl > samp_cnt.shape[0]:
@@ -655,7 +705,7 @@ def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower,
         overflow[kk] = horizontal_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny,
                                         k0 + kk, kk, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample,
                                         samp_ang, samp_eng, samp_cnt, layer_removed, use_cols, colx, coly)
-    return k0, nl, 1 if overflow.sum() > 0 else 0
+    return k0, nl, 1 if (overflow & 1).sum() > 0 else 0
 
 
 @njit(cache=True)
@@ -663,7 +713,8 @@ def vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j, i0, i1, p0, p1, R, r
     """Remove the swept cutter from the z-rays of row ``j``, columns ``i0..i1``.
 
     Writes ``out[0]`` = removed length [m] summed over the row, ``out[1]`` = highest material top
-    [m] before the cut (-1e300 if none), ``out[2]`` = 1 if a ray overflowed. Rays whose top is at
+    [m] before the cut (-1e300 if none), ``out[2]`` = flags: 1 a ray overflowed, 8 a ray is now at
+    its capacity. Rays whose top is at
     or below the lowest tip position are rejected before the swept interval is computed (the
     swept solid lies above ``min(p0_z, p1_z)`` for every cutter shape).
     """
@@ -692,9 +743,11 @@ def vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j, i0, i1, p0, p1, R, r
         if a < b:
             got = subtract_interval(zlo, zhi, zls, zhs, zcnt, ridx, a, b, step)
             if got < 0.0:
-                overflow = 1.0
+                overflow = 1.0 if overflow < 8.0 else 9.0
             else:
                 acc += got
+                if zcnt[ridx] == zlo.shape[1] and (overflow == 0.0 or overflow == 1.0):
+                    overflow += 8.0
     out[0] = acc
     out[1] = top
     out[2] = overflow
@@ -704,8 +757,8 @@ def vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j, i0, i1, p0, p1, R, r
 def remove_vertical_serial(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, step, row_out):
     """Serial :func:`remove_vertical` with a scratch ``row_out`` (3,): no allocation per step.
 
-    Returns (removed volume [m^3] seen by z-rays, status, highest material top [m] in the cutter's
-    footprint before the cut, -1e300 if none)."""
+    Returns (removed volume [m^3] seen by z-rays, flags (1 overflow, 8 a z-ray now at its
+    capacity), highest material top [m] in the cutter's footprint before the cut, -1e300 if none)."""
     j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
     i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
     if j1 < j0 or i1 < i0:
@@ -718,8 +771,7 @@ def remove_vertical_serial(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R
         rem += row_out[0]
         if row_out[1] > top:
             top = row_out[1]
-        if row_out[2] > 0.0:
-            status = 1
+        status |= int(row_out[2])
     return rem * s * s, status, top
 
 
@@ -737,7 +789,10 @@ def remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L
     rows = np.zeros((nj, 3))
     for jj in prange(nj):
         vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j0 + jj, i0, i1, p0, p1, R, rc, L, step, rows[jj])
-    return rows[:, 0].sum() * s * s, 1 if rows[:, 2].max() > 0 else 0, rows[:, 1].max()
+    flags = 0
+    for jj in range(nj):
+        flags |= int(rows[jj, 2])
+    return rows[:, 0].sum() * s * s, flags, rows[:, 1].max()
 
 
 class RemovalBuffers:
@@ -781,6 +836,6 @@ def remove_step(workpiece, cutter, p0, p1, step: int, buffers: RemovalBuffers | 
                                    workpiece.lower, workpiece.spacing, nx, ny, nz, p0, p1, R, rc, L, step,
                                    sample, buffers.samp_ang, buffers.samp_eng, buffers.samp_cnt,
                                    buffers.layer_removed, ztop)
-    if st or st2:
+    if st or (st2 & 1):
         raise RuntimeError("dexel ray capacity exceeded; rebuild the workpiece with a larger capacity")
     return k0, nl, buffers

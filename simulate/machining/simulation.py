@@ -28,7 +28,7 @@ from numba.extending import intrinsic
 from .cutting import Material, Spindle, step_forces_sorted, substeps
 from .engagement import sort_layers
 from .removal import (RemovalBuffers, _horizontal_layers_parallel, circle_samples, column_intervals, cut_layer,
-                      horizontal_range, radius_at, remove_vertical, sample_layer_full,
+                      layer_range, radius_at, remove_vertical, sample_layer_full,
                       remove_vertical_serial, sample_layer)
 from .tools import Cutter
 
@@ -100,30 +100,35 @@ def _cycles(typingctx):
 #: region costs tens of microseconds to launch and far more on a loaded machine, so they stay serial.
 PARALLEL_WORK = 200_000
 
-#: Relaxation of the step-to-step deflection update ``d_k = d_(k-1) + w (C_k F_k - d_(k-1))``.
-#: The deflection is quasi-static, ``d = C F(d)``, solved by one fixed-point step per 2 ms step.
-#: With w = 1 (plain explicit coupling) that iteration diverges once the loop gain ``C dF/dd`` (robot
-#: compliance times the process's force-per-engagement stiffness) exceeds 1, which happens for this
-#: class of robot (C ~ 5e-6 m/N, about 1e5 N/m per mm of radial engagement in finishing): the force
-#: then alternates between zero and a runaway value every step. w = 0.5 keeps the same equilibrium
-#: and converges for gains up to 3; its lag of a few 2 ms steps is far below the arm's structural
-#: time constants (natural frequencies of 10-30 Hz), which could not follow faster changes anyway.
-RELAXATION = 0.5
+#: Time constant [s] of the deflection's response to the cutting force,
+#: ``d_k = d_(k-1) + (1 - exp(-dt / tau)) (C_k F_k - d_(k-1))``: a first-order lag towards the
+#: quasi-static deflection ``C F``. Why not ``d_k = C_k F_k`` (tau = 0): the arm cannot move its tool
+#: by the full deflection within one 2 ms step, and the explicit update then diverges once the loop
+#: gain ``C dF/dd`` (robot compliance x the process's force per unit engagement) exceeds 1, which it
+#: does for this class of robot (C ~ 5e-6 m/N): the force alternates between zero and a runaway
+#: value every step, the tool jumping off the wall and back. tau = 1 / (2 pi 15 Hz), the order of
+#: the first structural mode of a heavy serial robot (10-30 Hz; *assumed*, no modal data in the
+#: robot file), keeps the same equilibrium and converges for loop gains up to about 10.
+DEFLECTION_TIME_CONSTANT = 1.0 / (2.0 * math.pi * 15.0)
 
-#: Status codes of :func:`coupled_steps`.
-STATUS_OK, STATUS_OVERFLOW, STATUS_LAYERS = 0, 1, 2
+#: Intervals added to a ray family's capacity when one of its rays fills up.
+CAPACITY_STEP = 4
+
+#: Status codes of :func:`coupled_steps`: done, ray capacity exceeded, more layers than the
+#: buffers, a family's ray reached its capacity (step completed; grow before the next step).
+STATUS_OK, STATUS_OVERFLOW, STATUS_LAYERS, STATUS_FULL = 0, 1, 2, 3
 
 
 @njit(cache=True)
 def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, zlo, zhi, zls, zhs, zcnt,
                   lower, s, nx, ny, nz, xyz, err, t, C, use_compliance, R, rc, L, N, tan_helix, omega, phase,
-                  kc, ke, n_sub, forces, relaxation, parallel_work, samp_ang, samp_eng, samp_cnt, layer_removed, colx, coly,
+                  kc, ke, n_sub, forces, time_constant, parallel_work, samp_ang, samp_eng, samp_cnt, layer_removed, colx, coly,
                   pair_ray, pair_w, sorted_ang, perm, state, force, peak, deflection, ticks):
     """Steps ``k_from .. k_to - 1`` of the coupled loop (paper Figure 4) in one compiled call.
 
     Per step k: tool tip ``p1 = xyz[k] + deflection(k-1) + err[k]``; removal of the cutter swept
     from the previous actual tip on the z-rays (giving the material top in the footprint) and on
-    the x/y-rays of the layers up to that top; engagement samples at ``p1``; revolution-mean and
+    the x/y-rays of the layers holding material (:func:`simulate.machining.removal.layer_range`); engagement samples at ``p1``; revolution-mean and
     peak force; deflection ``C[k] F`` for the next step. Serial over steps (each depends on the
     previous deflection); a step's removal runs in parallel only when it visits more than
     ``parallel_work`` rays (0: never; the caller passes 0 when numba has one thread). Nothing is
@@ -132,8 +137,10 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
     ``state`` (7,) carries ``[p0 (3), deflection (3), removed z-ray volume [m^3]]`` between calls;
     ``ticks`` (5,) accumulates time-stamp-counter ticks of removal, engagement, forces, robot, and
     the z-ray part of the removal.
-    Returns ``(status, step)``: status 0, or 1 (ray capacity exceeded) / 2 (more layers than the
-    buffers) at ``step``.
+    Returns ``(status, step, mask)``: status 0 (``step = k_to``); 1 (ray capacity exceeded) / 2
+    (more layers than the buffers) at ``step``; 3: after completing ``step - 1`` a ray of the
+    families in ``mask`` (x 1, y 2, z 4) is at its capacity, to be grown before going on at
+    ``step``.
     """
     p0 = state[0:3].copy()
     defl = state[3:6].copy()
@@ -161,14 +168,15 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
         else:
             vz, st2, ztop = remove_vertical_serial(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, k,
                                                    row)
-        if st2 != 0:
-            return STATUS_OVERFLOW, k
+        if st2 & 1:
+            return STATUS_OVERFLOW, k, 0
+        full = (st2 & 8) >> 1   # z-family bit 4 of the mask: x 1, y 2, z 4
         removed += vz
         # ---- x/y-rays: engagement samples, then removal
-        k0, k1, ju0, ju1, iu0, iu1 = horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop)
-        nl = k1 - k0 + 1
+        k0, nl, ju0, ju1, iu0, iu1 = layer_range(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, nz, p0, p1, R, L,
+                                                 ztop)
         if nl > samp_cnt.shape[0]:
-            return STATUS_LAYERS, k
+            return STATUS_LAYERS, k, 0
         c1 = _cycles()
         c2 = c1
         if nl > 0:
@@ -200,8 +208,9 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
                     st1 |= cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k0 + kk,
                                      kk, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, k, layer_removed, use_cols, colx,
                                      coly)
-            if st1 != 0:
-                return STATUS_OVERFLOW, k
+            if st1 & 1:
+                return STATUS_OVERFLOW, k, 0
+            full |= (st1 & 6) >> 1
         c3 = _cycles()
         ticks[0] += (c1 - c0) + (c3 - c2)
         ticks[1] += c2 - c1
@@ -225,24 +234,32 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
             peak[k] = out[3]
             c5 = _cycles()
             ticks[2] += c5 - c4
-            # ---- robot: deflection for the next step, a relaxed fixed-point update of d = C F(d)
+            # ---- robot: deflection for the next step, first-order lag towards C F
             if use_compliance:
+                alpha = 1.0 - math.exp(-dt / time_constant) if time_constant > 0.0 else 1.0
                 for a in range(3):
                     target = C[k, a, 0] * out[0] + C[k, a, 1] * out[1] + C[k, a, 2] * out[2]
-                    defl[a] += relaxation * (target - defl[a])
+                    defl[a] += alpha * (target - defl[a])
                     deflection[k, a] = defl[a]
             ticks[3] += _cycles() - c5
         for a in range(3):
             p0[a] = p1[a]
+        if full != 0:
+            # a ray is at its capacity: the caller grows that family before the next step (a
+            # step splits an interval at most once per ray, so it can never overflow)
+            state[0:3] = p0
+            state[3:6] = defl
+            state[6] = removed
+            return STATUS_FULL, k + 1, full
     state[0:3] = p0
     state[3:6] = defl
     state[6] = removed
-    return STATUS_OK, k_to
+    return STATUS_OK, k_to, 0
 
 
 def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Material, spindle: Spindle, *,
                        compliance=None, tracking_error=None, switch=None, forces: bool = True,
-                       advance=None, relaxation: float = RELAXATION,
+                       advance=None, time_constant: float = DEFLECTION_TIME_CONSTANT,
                        parallel_work: int = PARALLEL_WORK) -> MachiningResult:
     """Run the coupled loop over a commanded cutter path (modifies ``workpiece``).
 
@@ -265,9 +282,8 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         Compute engagement and forces (needed for deflection).
     advance : callable(n), optional
         Progress callback, called about 200 times (the loop runs compiled in chunks of steps).
-    relaxation : float
-        Factor in (0, 1] of the deflection update ``d += relaxation * (C F - d)`` (see
-        :data:`RELAXATION`).
+    time_constant : float
+        s, lag of the deflection behind ``C F`` (see :data:`DEFLECTION_TIME_CONSTANT`); 0: none.
     parallel_work : int
         Ray visits per step above which a step's removal runs in parallel (see :data:`PARALLEL_WORK`).
 
@@ -276,8 +292,8 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     RuntimeError
         A ray's interval capacity is exceeded (rebuild the workpiece with a larger capacity).
     """
-    if not (0.0 < relaxation <= 1.0):
-        raise ValueError(f"relaxation must be in (0, 1], got {relaxation}")
+    if not (time_constant >= 0.0 and math.isfinite(time_constant)):
+        raise ValueError(f"time_constant must be a finite number >= 0 s, got {time_constant}")
     t = np.ascontiguousarray(t, dtype=float)
     xyz = np.ascontiguousarray(xyz_cmd, dtype=float)
     n = len(t)
@@ -303,26 +319,39 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     state = np.zeros(7)
     state[:3] = xyz[0] + err[0]
     ticks = np.zeros(5, np.int64)
+    par_work = int(parallel_work) if numba.get_num_threads() > 1 else 0
     chunk = max(1, n // 200)
     wall0 = time.perf_counter()
     cpu0 = time.process_time()
     tick0 = _tick_now()
-    for k_from in range(1, n, chunk):
+    for fam in workpiece.families:   # keep one free slot per ray (see coupled_steps)
+        if fam.count.size and int(fam.count.max()) >= fam.capacity:
+            fam.grow(fam.capacity + CAPACITY_STEP)
+    k_from = 1
+    while k_from < n:
         k_to = min(n, k_from + chunk)
-        status, k = coupled_steps(k_from, k_to, fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count,
-                                  fy.lo, fy.hi, fy.lo_step, fy.hi_step, fy.count,
-                                  fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count,
-                                  workpiece.lower, workpiece.spacing, nx, ny, nz, xyz, err, t, C, use_c,
-                                  R, rc, L, N, tanb, spindle.omega, spindle.phase, material.kc, material.ke, nsub,
-                                  bool(forces), float(relaxation), int(parallel_work) if numba.get_num_threads() > 1 else 0, buf.samp_ang, buf.samp_eng, buf.samp_cnt,
-                                  buf.layer_removed, buf.colx, buf.coly,
-                                  buf.pair_ray, buf.pair_w, buf.sorted_ang, buf.perm, state, st.force, st.peak_force, st.deflection, ticks)
+        fx, fy, fz = workpiece.families   # arrays are replaced when a family grows
+        status, k, mask = coupled_steps(k_from, k_to, fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count,
+                                        fy.lo, fy.hi, fy.lo_step, fy.hi_step, fy.count,
+                                        fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count,
+                                        workpiece.lower, workpiece.spacing, nx, ny, nz, xyz, err, t, C, use_c,
+                                        R, rc, L, N, tanb, spindle.omega, spindle.phase, material.kc, material.ke,
+                                        nsub, bool(forces), float(time_constant), par_work, buf.samp_ang,
+                                        buf.samp_eng, buf.samp_cnt, buf.layer_removed, buf.colx, buf.coly,
+                                        buf.pair_ray, buf.pair_w, buf.sorted_ang, buf.perm, state, st.force,
+                                        st.peak_force, st.deflection, ticks)
         if status == STATUS_OVERFLOW:
             raise RuntimeError(f"dexel ray capacity exceeded at step {k}; use a larger capacity")
         if status == STATUS_LAYERS:
             raise RuntimeError(f"step {k} spans more z-layers than the engagement buffers hold")
-        if advance is not None:
-            advance(k_to - k_from)
+        if status == STATUS_FULL:
+            for axis in range(3):
+                if mask & (1 << axis):
+                    fam = workpiece.families[axis]
+                    fam.grow(fam.capacity + CAPACITY_STEP)
+        if advance is not None and k > k_from:
+            advance(k - k_from)
+        k_from = k
     wall = time.perf_counter() - wall0
     cpu = time.process_time() - cpu0
     total_ticks = max(1, _tick_now() - tick0)
