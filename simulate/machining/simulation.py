@@ -5,12 +5,22 @@ k-1 plus the servo tracking error of step k (workpiece frame); the swept volume 
 actual position is removed, the engagement gives the cutting force, and the force through the
 robot's Cartesian compliance gives the deflection used at step k+1.
 
+The whole loop runs in one compiled call per chunk of steps (:func:`coupled_steps`): serial over
+steps, no Python and no allocation per step, only the rays of the step's swept box visited, rays
+without material there rejected before any geometry, swept intervals and engagement sample
+angles of horizontal moves computed once per step instead of once per layer. A step's removal
+runs in parallel over layers only when it is large (:data:`PARALLEL_WORK`).
+
 Sound approximations, stated: the compliance is taken at the *commanded* joints (deflections
-change the pose by micrometres, so ``C(q)`` is unchanged to first order) and computed for all
-steps in one vectorised call; only the translational 3x3 block is used (2.5-D, the tool axis
-rotation by the process wrench is neglected); the tracking error is the servo simulation's
-``p(q_act) - p(q_cmd)`` along the commanded joint trajectory, computed up-front (the process force
-is not fed back into the servo).
+change the pose by fractions of a millimetre, so ``C(q)`` is unchanged to first order) and
+computed for all steps in one vectorised call; only the translational 3x3 block is used (2.5-D,
+the tool axis rotation by the process wrench is neglected). The deflection follows ``C F`` with
+the lag of the arm's first structural mode (:data:`DEFLECTION_TIME_CONSTANT`), and the chip
+thickness comes from the servo-driven motion (command + tracking error): the quasi-static
+deflection moves where the cutter engages, not the feed per tooth. The tracking error is the
+servo simulation's ``p(q_act) - p(q_cmd)`` along the commanded joint trajectory, computed up-front
+(the process force is not fed back into the servo; see
+:func:`greybench.commands.machining.tracking_error`).
 """
 from __future__ import annotations
 
