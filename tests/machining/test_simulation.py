@@ -55,3 +55,25 @@ def test_save_load_probe(tmp_path):
     hit = vw2.probe([[0.025, 0.03, 0.008]], [[0, -1, 0]])
     assert np.isfinite(hit).all()
     assert abs(hit[0, 1] - np.median(y)) < 20e-6
+
+
+def test_parallel_steps_match_serial():
+    """Steps run in parallel over layers/rows (forced by parallel_work=1) give the serial result."""
+    out = []
+    for work in (200_000, 1):
+        wp = TriDexel.box([0, 0, 0], [0.03, 0.02, 0.01], 0.5e-3)
+        n = 40
+        x = np.linspace(-0.006, 0.036, n)
+        xyz = np.column_stack([x, np.full(n, 0.0101), np.linspace(0.009, 0.006, n)])
+        C = np.broadcast_to(np.eye(3) * 2e-7, (n, 3, 3))
+        res = simulate_machining(wp, make_cutter("bull", 8e-3), np.arange(n) * 0.002, np.arange(n), xyz,
+                                 load_material("Al7075"), Spindle.from_rpm(12000), compliance=C, parallel_work=work)
+        out.append((wp, res))
+    (w0, r0), (w1, r1) = out
+    for f0, f1 in zip(w0.families, w1.families):
+        np.testing.assert_array_equal(f0.count, f1.count)
+        np.testing.assert_array_equal(f0.lo, f1.lo)
+        np.testing.assert_array_equal(f0.hi_step, f1.hi_step)
+    np.testing.assert_allclose(r1.steps.force, r0.steps.force, rtol=1e-12, atol=1e-9)
+    assert r1.removed_volume == pytest.approx(r0.removed_volume, rel=1e-12)
+    assert np.abs(r0.steps.force).max() > 10
