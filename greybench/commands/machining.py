@@ -92,13 +92,14 @@ def run(program, robot, pose, name, out_dir, ideal, spacing, no_deflection, no_f
 
 
 def write_outputs(wp, res, out_dir: Path, variable: str = "deflection") -> list[Path]:
-    """Write ``virtual_workpiece.npz``, ``surface_<variable>.ply/.glb`` and ``render_<variable>.png``
+    """Write ``virtual_workpiece.npz``, ``surface_<variable>.ply/.glb``, ``render_<variable>.png`` (top
+    view of the machined surface points) and ``render3d_<variable>.png`` (oblique view of the mesh)
     into ``out_dir``: all are written into a temporary folder next to it first and moved in only
     when every one succeeded, so a failure leaves nothing half-written."""
     import shutil
     import tempfile
 
-    from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes, render_png
+    from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes, render_mesh_png, render_png
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -108,6 +109,7 @@ def write_outputs(wp, res, out_dir: Path, variable: str = "deflection") -> list[
         vw.save(tmp / "virtual_workpiece.npz")
         export_meshes(vw, tmp, variable)
         render_png(vw, tmp / f"render_{variable}.png", variable)
+        render_mesh_png(vw, tmp / f"render3d_{variable}.png", variable)
         paths = []
         for f in sorted(tmp.iterdir()):
             dest = out_dir / f.name

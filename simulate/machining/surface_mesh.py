@@ -21,7 +21,6 @@ surface), so any step variable (deflection, force, ...) can colour the mesh.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

@@ -218,3 +218,68 @@ def render_png(vw: VirtualWorkpiece, path, variable: str = "deflection", max_poi
     plt.close(fig)
     os.replace(tmp, p)
     return p
+
+
+def render_mesh_png(vw: VirtualWorkpiece, path, variable: str = "deflection", max_nodes: int = 300_000,
+                    azimuth_deg: float = -60.0, elevation_deg: float = 35.0) -> Path:
+    """Oblique view of the closed surface coloured by ``variable`` (stock surface grey), with a
+    colour bar (matplotlib, Agg).
+
+    A coarse lattice (:func:`simulate.machining.surface_mesh.choose_stride` under ``max_nodes``)
+    keeps it to some 10^5 triangles; faces turned away from the viewer are dropped and the rest
+    drawn far to near (painter's algorithm) with Lambert shading from the view direction.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+    from matplotlib.colors import Normalize
+
+    from .surface_mesh import choose_stride, surface_mesh
+
+    sm = surface_mesh(vw.workpiece, stride=choose_stride(vw.workpiece.shape, max_nodes))
+    vals = step_values(vw, sm.vertex_step, variable)
+    az, el = np.radians(azimuth_deg), np.radians(elevation_deg)
+    view = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])  # towards the viewer
+    right = np.array([-np.sin(az), np.cos(az), 0.0])
+    up = np.cross(view, right)
+    tri = sm.vertices[sm.faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    facing = n @ view > 0
+    tri, n = tri[facing], n[facing]
+    fv = vals[sm.faces[facing]]
+    cnt = np.isfinite(fv).sum(axis=1)
+    fval = np.where(cnt > 0, np.nansum(fv, axis=1) / np.maximum(cnt, 1), np.nan)   # NaN: stock surface
+    order = np.argsort(tri.mean(axis=1) @ view)   # far first
+    tri, n, fval = tri[order], n[order], fval[order]
+    xy = np.stack([tri @ right, tri @ up], axis=-1) * 1e3
+    unit = {"deflection": (1e6, "um"), "tracking_error": (1e6, "um"), "force": (1, "N"), "peak_force": (1, "N"),
+            "time": (1, "s"), "line": (1, "-"), "switch": (1, "bits")}[variable]
+    v = fval * unit[0]
+    ok = np.isfinite(v)
+    lo, hi = (float(v[ok].min()), float(v[ok].max())) if ok.any() else (0.0, 1.0)
+    norm = Normalize(lo, hi if hi > lo else lo + 1.0)
+    cmap = matplotlib.colormaps["viridis"]
+    rgba = np.where(ok[:, None], cmap(norm(np.nan_to_num(v))), (0.78, 0.78, 0.78, 1.0))
+    shade = 0.35 + 0.65 * np.clip(n @ view, 0.0, 1.0)
+    rgba[:, :3] *= shade[:, None]
+    fig, ax = plt.subplots(figsize=(9, 7), dpi=110)
+    ax.add_collection(PolyCollection(xy, facecolors=rgba, edgecolors="none"))
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    sc = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
+    fig.colorbar(sc, ax=ax, shrink=0.7, label=f"{variable.replace('_', ' ')} [{unit[1]}] (grey: stock surface)")
+    ax.set_title(f"virtual workpiece: {variable.replace('_', ' ')} (lattice {sm.pitch * 1e3:.2g} mm)")
+    p = Path(path)
+    tmp = p.with_name(p.stem + ".tmp.png")
+    try:
+        fig.savefig(tmp)
+        os.replace(tmp, p)
+    finally:
+        plt.close(fig)
+        if tmp.exists():
+            tmp.unlink()
+    return p

@@ -33,14 +33,15 @@ def test_machine_writes_workpiece_meshes_png_and_json(small_job, tmp_path):
     assert 60 < info["peak_force"] < 300
     assert 0 < info["peak_deflection"] < 2e-3
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["render_deflection.png", "surface_deflection.glb", "surface_deflection.ply",
-                     "virtual_workpiece.npz"]
+    assert names == ["render3d_deflection.png", "render_deflection.png", "surface_deflection.glb",
+                     "surface_deflection.ply", "virtual_workpiece.npz"]
     vw = VirtualWorkpiece.load(out / "virtual_workpiece.npz")
     assert len(vw.steps.t) == info["steps"]
     m = trimesh.load(out / "surface_deflection.glb", force="mesh")
     assert len(m.faces) > 0
     np.testing.assert_allclose(m.bounds, [[0, 0, -0.006], [0.02, 0.02, 0.0]], atol=1e-6)
-    assert (out / "render_deflection.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for png in ("render_deflection.png", "render3d_deflection.png"):
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_ideal_has_no_deflection(small_job, tmp_path):
