@@ -130,8 +130,19 @@ def client(settings):
         yield c
 
 
+@pytest.fixture(scope="session", autouse=True)
+def service_tracking_store(tmp_path_factory):
+    """The service tests get an MLflow store of their own: other areas' tests register models
+    under the same names (max100-axis1-friction) in the session store."""
+    mp = pytest.MonkeyPatch()
+    root = tmp_path_factory.mktemp("service-mlflow")
+    mp.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{root}/mlruns.db")
+    yield os.environ["MLFLOW_TRACKING_URI"]
+    mp.undo()
+
+
 @pytest.fixture(scope="session")
-def registered_model(tmp_path_factory):
+def registered_model(tmp_path_factory, service_tracking_store):
     """A Coulomb-viscous model fitted on a synthetic record, registered as max100-axis1-friction@champion
     (version 1) in the session's MLflow store; returns (fitted model, a test record, run id)."""
     import mlflow
@@ -150,6 +161,7 @@ def registered_model(tmp_path_factory):
     folder = tmp_path_factory.mktemp("model") / "cv"
     model.save(folder)
     mlflow.set_tracking_uri(os.environ["MLFLOW_TRACKING_URI"])
+    mlflow.set_registry_uri(os.environ["MLFLOW_TRACKING_URI"])  # other tests may have set a global one
     with mlflow.start_run() as run:
         mlflow.log_metrics({"test_rmse": 0.0123, "test_r2": 0.99})
         mlflow.log_artifacts(str(folder), artifact_path="model")
