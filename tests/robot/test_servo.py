@@ -9,6 +9,10 @@ from simulate.robot.servo import CYCLE, simulate_servo
 HOME = np.array([0.0, 0.5, 0.2, 0.0, 0.5, 0.0])
 
 
+def _no_feedforward(robot):
+    return robot.servo.with_changes(ff_vel=np.zeros(6), ff_tau=np.zeros(6))
+
+
 def _ideal(robot):
     return robot.servo.with_changes(ff_vel=np.ones(6), ff_tau=np.ones(6))
 
@@ -28,7 +32,8 @@ def test_constant_velocity_following_error_is_v_over_kv(robot, friction):
     t = np.arange(0.0, 3.0, CYCLE)
     v = np.array([0.2, -0.15, 0.1, 0.5, -0.4, 0.8])
     q = HOME + t[:, None] * v
-    res = simulate_servo(robot, t, q, friction=friction, backlash=False)
+    no_ff = robot.servo.with_changes(ff_vel=np.zeros(6), ff_tau=np.zeros(6))
+    res = simulate_servo(robot, t, q, friction=friction, backlash=False, gains=no_ff)
     expected = v / robot.servo.kv
     assert np.allclose(res.error[-1], expected, rtol=1e-6, atol=1e-10)
     assert np.allclose(res.qd_act[-1], v, rtol=1e-6)
@@ -42,7 +47,7 @@ def test_following_error_scales_with_kv(robot):
     t = np.arange(0.0, 3.0, CYCLE)
     v = 0.3
     q = HOME + t[:, None] * v
-    gains = robot.servo.with_changes(kv=robot.servo.kv * 0.5)
+    gains = robot.servo.with_changes(kv=robot.servo.kv * 0.5, ff_vel=np.zeros(6), ff_tau=np.zeros(6))
     res = simulate_servo(robot, t, q, friction=True, backlash=False, gains=gains)
     assert np.allclose(res.error[-1], v / gains.kv, rtol=1e-6)
 
@@ -51,7 +56,7 @@ def test_backlash_adds_half_play_and_shows_at_reversal(robot):
     t = np.arange(0.0, 3.0, CYCLE)
     v = 0.2
     q = HOME + t[:, None] * v
-    res = simulate_servo(robot, t, q, friction=False, backlash=True)
+    res = simulate_servo(robot, t, q, friction=False, backlash=True, gains=_no_feedforward(robot))
     assert np.allclose(res.error[-1], v / robot.servo.kv + robot.backlash / 2, rtol=1e-6)
     # ideal feed-forward: only the play is left, of sign opposite after a reversal
     q = HOME + 0.3 * np.sin(2 * np.pi * 0.5 * t)[:, None] * np.ones(6)
@@ -66,7 +71,7 @@ def test_backlash_adds_half_play_and_shows_at_reversal(robot):
 def test_friction_causes_reversal_error_and_feedforward_helps(robot):
     t = np.arange(0.0, 4.0, CYCLE)
     q = HOME + 0.2 * np.sin(2 * np.pi * 0.5 * t)[:, None] * np.ones(6)
-    plain = simulate_servo(robot, t, q, friction=True, backlash=False)
+    plain = simulate_servo(robot, t, q, friction=True, backlash=False, gains=_no_feedforward(robot))
     ideal = simulate_servo(robot, t, q, friction=True, backlash=False, gains=_ideal(robot))
     nofr = simulate_servo(robot, t, q, friction=False, backlash=False, gains=_ideal(robot))
     assert np.max(np.abs(nofr.error)) < 1e-12
