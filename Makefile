@@ -24,7 +24,7 @@ test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m ""
 
 bench: $(STAMP)
-	$(BIN)/greybench bench all
+	for b in friction diagnose robot toolpath machining ranking explain service; do $(BIN)/greybench bench $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) demo-output mlruns.db mlartifacts
+	rm -rf $(VENV) demo-output mlruns.db mlflow.db mlartifacts greybench-service
