@@ -8,7 +8,9 @@ Per pose (one worker process each, at most ``workers`` at a time):
 2. servo tracking error ``p(q_act) - p(q_cmd)`` from the cascaded servo with LuGre friction and gear
    backlash (:func:`simulate.robot.servo.simulate_servo`), turned into the workpiece frame;
 3. the coupled removal / force / deflection loop (:func:`simulate.machining.simulation.simulate_machining`)
-   with the translational compliance ``J K^-1 J^T`` in the workpiece frame;
+   with the translational compliance ``J K^-1 J^T`` in the workpiece frame and the cutter of the robot
+   file's ``[tool]`` (:func:`simulate.evaluation.cutter.robot_cutter`: the tool belongs to the robot
+   file, where ``explain`` calibrates its radius; the stock file only describes the blank);
 4. the virtual CMM (:mod:`simulate.evaluation.cmm`) and the ten rows (:mod:`simulate.evaluation.features`).
 
 Score (lower is better): ``sum over rows of |deviation| / tolerance``; ties broken by more rows in
@@ -74,11 +76,6 @@ class RankSettings:
         z-layers at 2 mm pitch still cut every 6 mm feature at mid-height).
     probe_spacing : float
         Virtual CMM point distance along a feature, m.
-    tool_diameter : float
-        Flat end mill diameter, m (default from the program's stock description, else 10 mm).
-    flutes : int
-    helix_deg : float
-        deg.
     material : str
         Name in ``data/materials.toml``.
     spindle_rpm : float or None
@@ -91,16 +88,13 @@ class RankSettings:
 
     spacing: float = 2e-3
     probe_spacing: float = 2e-3
-    tool_diameter: float = 10e-3
-    flutes: int = 4
-    helix_deg: float = 30.0
     material: str = "Al7075"
     spindle_rpm: float | None = None
     stiffness_scale: float = 1.0
     size: int = 320
 
     def validate(self) -> None:
-        for name in ("spacing", "probe_spacing", "tool_diameter", "stiffness_scale"):
+        for name in ("spacing", "probe_spacing", "stiffness_scale"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"must be > 0, got {v!r}", field=name.replace("_", "-"))
@@ -254,7 +248,7 @@ def _run_job(job: _Job) -> PoseResult:
     from simulate.machining.cutting import Spindle, load_material
     from simulate.machining.dexel import TriDexel
     from simulate.machining.simulation import simulate_machining, workpiece_compliance
-    from simulate.machining.tools import make_cutter
+    from simulate.evaluation.cutter import robot_cutter
     from simulate.machining.virtual_workpiece import VirtualWorkpiece
     from simulate.robot.model import load_robot
     from simulate.robot.servo import simulate_servo
@@ -289,14 +283,14 @@ def _run_job(job: _Job) -> PoseResult:
     else:
         raise InputError("no stock description next to the program (expected <program>.stock.json)",
                          source=job.program)
-    cutter = make_cutter("flat", s.tool_diameter, flutes=s.flutes, helix_deg=s.helix_deg)
+    cutter = robot_cutter(robot)
     res = simulate_machining(wp, cutter, jt.t, jt.line, jt.xyz, load_material(s.material),
                              Spindle.from_rpm(job.spindle_rpm), compliance=C, tracking_error=err,
                              switch=jt.switch, forces=comp.deflection)
     timings["machining"] = time.perf_counter() - c0
     c0 = time.perf_counter()
     piece = iso_test_piece(s.size)
-    scan = probe(wp, piece, spacing=s.probe_spacing, tool_diameter=s.tool_diameter)
+    scan = probe(wp, piece, spacing=s.probe_spacing, tool_diameter=float(robot.tool.diameter))
     table = evaluate_scan(scan, piece)
     timings["cmm+fits"] = time.perf_counter() - c0
     wfile = None
@@ -356,13 +350,6 @@ def rank_poses(program: str | Path, robot: str | Path, placements: list[Placemen
     program = Path(program)
     prog = read_program(program)
     stock = program.with_name(program.stem + ".stock.json")
-    if stock.exists():
-        try:
-            d = json.loads(stock.read_text()).get("tool", {}).get("diameter")
-        except (json.JSONDecodeError, AttributeError):
-            d = None
-        if isinstance(d, (int, float)) and d > 0 and settings.tool_diameter == RankSettings.tool_diameter:
-            settings = replace(settings, tool_diameter=float(d))
     rpm = settings.spindle_rpm or _program_spindle(prog)
     if not rpm > 0:
         raise InputError("the program never switches the spindle on (no S word with M3/M4); give --spindle",

@@ -10,8 +10,7 @@ Choices stated:
 
 - The cutter is the robot file's ``[tool]`` (type, diameter, corner radius, flutes, helix, flute
   length): the tool radius is a calibratable parameter of the robot file, so the simulation must take
-  it from there (``greybench machine`` and ``rank-poses`` take the diameter from the stock file; with
-  the shipped files both say 10 mm).
+  it from there, as ``rank-poses`` does (:func:`simulate.evaluation.cutter.robot_cutter`).
 - The stock below 2 mm under the lowest programmed cutting height is left out of the dexel grid (no
   tool reaches it; the same choice as the pose ranking).
 - ``extra_offset`` (N, 3) [m, workpiece frame] is added to the tool path like a tracking error: the
@@ -184,12 +183,11 @@ def stock_workpiece(setup: PartSetup):
 
 
 def cutter_of(robot: Robot):
-    """The robot file's tool as a machining cutter (module docstring)."""
-    from simulate.machining.tools import make_cutter
+    """The robot file's tool as a machining cutter (module docstring;
+    :func:`simulate.evaluation.cutter.robot_cutter`)."""
+    from simulate.evaluation.cutter import robot_cutter
 
-    t = robot.tool
-    return make_cutter(t.type, float(t.diameter), corner_radius=float(t.corner_radius) if t.type != "flat" else None,
-                       flutes=int(t.flutes), helix_deg=math.degrees(float(t.helix)), length=float(t.length))
+    return robot_cutter(robot)
 
 
 def servo_error(robot: Robot, setup: PartSetup) -> np.ndarray:

@@ -1,7 +1,11 @@
-"""Ranking end to end on the 160 test piece (slow: full machining simulations)."""
+"""Ranking end to end on the 160 test piece (slow: full machining simulations); the cutter comes from the
+robot file's ``[tool]`` (fast: ideal robot on the square and circle contours only)."""
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
+from pathlib import Path
 
 import pytest
 
@@ -10,6 +14,28 @@ from simulate.toolpath.placement import load_poses
 
 PROGRAM = "data/programs/iso160.nc"
 ROBOT = "data/robots/max100.toml"
+SMALL = Path("tests/explain/data")  # square and circle finishing contours of the 160 piece
+
+
+def test_cutter_comes_from_the_robot_tool(tmp_path):
+    """A robot file whose tool is 0.2 mm larger (and 2-fluted) cuts the square and circle 0.2 mm smaller, although
+    the stock file still says D10: the cutter is the robot's ``[tool]``, not the stock's."""
+    from simulate.robot.model import load_robot, save_robot
+
+    assert json.loads((SMALL / "small160.stock.json").read_text())["tool"]["diameter"] == 0.01
+    rob = load_robot(ROBOT)
+    big = save_robot(rob.with_changes(tool=dataclasses.replace(rob.tool, diameter=rob.tool.diameter + 0.2e-3,
+                                                               flutes=2)), tmp_path / "big_tool.toml")
+    pl = load_poses(SMALL / "small160.poses.json")[:1]
+    ideal = Components(deflection=False, servo=False)
+    dev = {}
+    for f in (ROBOT, big):
+        r = rank_poses(SMALL / "small160.nc", f, pl, settings=RankSettings(spacing=2e-3, size=160), components=ideal,
+                       workers=1)
+        dev[f] = r.results[pl[0].name].table
+    for row in ("circle diameter", "square side length (2x)"):
+        assert abs(dev[ROBOT][row].deviation) < 1e-6, row
+        assert dev[big][row].deviation == pytest.approx(-0.2e-3, abs=1e-6), row
 
 
 @pytest.mark.slow
