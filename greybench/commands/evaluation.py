@@ -80,7 +80,8 @@ def rank_poses_cmd(
                                                     "[m, rad]."),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="Output folder: report.md, images/, per pose "
                                                                "scan.csv [m] and workpiece.npz."),
-    spacing: float = typer.Option(2.0, "--spacing", help="Dexel spacing [mm]."),
+    spacing: float = typer.Option(0.5, "--spacing", help="Dexel spacing [mm] (coarser grids make the cutting force, "
+                                                            "hence the deflection, jumpy)."),
     probe_spacing: float = typer.Option(2.0, "--probe-spacing", help="Virtual CMM point distance [mm]."),
     stiffness_scale: float = typer.Option(1.0, "--stiffness-scale", help="Joint stiffness multiplier [-]."),
     shares: bool = typer.Option(False, "--shares/--no-shares", help="Re-run each pose with deflection, friction "
@@ -174,7 +175,8 @@ def bench_ranking(
                                  "--program", help="G-code program."),
     poses: Path = typer.Option(Path(__file__).resolve().parents[2] / "data" / "poses" / "iso320.json", "--poses",
                                help="Pose file (JSON) [m, rad]."),
-    spacing: float = typer.Option(2.0, "--spacing", help="Dexel spacing [mm]."),
+    spacing: float = typer.Option(0.5, "--spacing", help="Dexel spacing [mm] (coarser grids make the cutting force, "
+                                                            "hence the deflection, jumpy)."),
 ) -> None:
     """Rank the poses with 1 and with 2 worker processes: wall times [s] and the speed-up, one run each."""
     from simulate.toolpath.placement import load_poses

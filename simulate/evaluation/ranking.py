@@ -72,8 +72,13 @@ class RankSettings:
     Attributes
     ----------
     spacing : float
-        Dexel spacing, m (default 2 mm: wall and face positions stay continuous at any spacing, and the
-        z-layers at 2 mm pitch still cut every 6 mm feature at mid-height).
+        Dexel spacing, m (default 0.5 mm). Wall and face positions stay continuous at any spacing, but
+        the cutting force integrates over the dexels in the tool, so coarse grids make the force, and
+        with it the deflection, jump as whole dexels enter and leave the cutter. Measured on iso320 with
+        max100 (4 poses, deviations vs 0.25 mm): at 2 mm the slope straightness is 0.085 mm instead of
+        0.006 mm and the square sides are 0.1 mm off; at 0.5 mm every row is within 0.02 mm of the
+        0.25 mm value, the best pose is the same at 2, 1, 0.5 and 0.25 mm, and the ranking takes
+        about 20 s (0.25 mm: 55 s) on 2 cores.
     probe_spacing : float
         Virtual CMM point distance along a feature, m.
     material : str
@@ -86,7 +91,7 @@ class RankSettings:
         Test piece size, mm (160 or 320): which nominal geometry is measured.
     """
 
-    spacing: float = 2e-3
+    spacing: float = 0.5e-3
     probe_spacing: float = 2e-3
     material: str = "Al7075"
     spindle_rpm: float | None = None
