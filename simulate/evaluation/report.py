@@ -46,6 +46,16 @@ def nominal_residuals(name: str, pts: np.ndarray, piece: TestPiece) -> np.ndarra
     return p[:, 2] - z
 
 
+def _gain_driver(ranking: Ranking, best: str, other: str, row: str) -> str:
+    """``"; mostly <component>: +a vs +b mm"``: the component whose contribution to ``row`` differs most
+    between the best and the other pose (empty without component re-runs)."""
+    cb, co = ranking.contributions(best), ranking.contributions(other)
+    if not cb or not co:
+        return ""
+    c = max(cb, key=lambda k: abs(co[k][row] - cb[k][row]))
+    return f"; mostly {c}: {cb[c][row] / MM:+.4f} vs {co[c][row] / MM:+.4f} mm"
+
+
 def _plt():
     import matplotlib
 
@@ -205,9 +215,18 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
     for e in ranking.entries[1:]:
         ot = ranking.results[e.pose].table
         gains = sorted(((ot[r.name].ratio - r.ratio, r.name) for r in bt.rows), reverse=True)[:3]
-        txt = ", ".join(f"{n} ({g:+.2f})" for g, n in gains)
+        txt = ", ".join(f"{n} ({g:+.2f}{_gain_driver(ranking, best, e.pose, n)})" for g, n in gains)
         md.append(f"- {best} vs {e.pose}: score {bt.score:.2f} vs {e.score:.2f}; largest gains in "
                   f"|deviation|/tolerance: {txt}.")
+    if ranking.variants:
+        sb = ranking.shares(best).get("score", {})
+        md.append(f"- Component shares of {best}'s score: "
+                  + ", ".join(f"{c} {100 * sb.get(c, 0.0):.0f}%" for c in COMPONENTS)
+                  + "; a gain is attributed to the component whose contribution differs most between the two "
+                    "poses (contribution = deviation with all components minus deviation without it).")
+    else:
+        md.append("- Component shares: re-run with `--shares` to attribute each gain to deflection, friction or "
+                  "switching.")
     if ranking.variants:
         md += ["", "## Component shares (re-runs with one component switched off)", ""]
         md.append("Contribution = deviation(all) - deviation(without it), mm; share of the score = "

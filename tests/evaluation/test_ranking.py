@@ -1,5 +1,5 @@
-"""Ranking end to end on the 160 test piece (slow: full machining simulations); the cutter comes from the
-robot file's ``[tool]`` (fast: ideal robot on the square and circle contours only)."""
+"""Ranking end to end (full machining simulations, a few seconds each with the compiled coupled loop): ideal robot,
+stiff vs soft robot, the report for the four poses of iso320; the cutter comes from the robot file's ``[tool]``."""
 from __future__ import annotations
 
 import dataclasses
@@ -38,7 +38,6 @@ def test_cutter_comes_from_the_robot_tool(tmp_path):
         assert dev[big][row].deviation == pytest.approx(-0.2e-3, abs=1e-6), row
 
 
-@pytest.mark.slow
 def test_ideal_robot_gives_near_zero_deviations(piece160):
     pl = load_poses("data/poses/iso160.json")[:1]
     r = rank_poses(PROGRAM, ROBOT, pl, settings=RankSettings(spacing=2e-3, size=160),
@@ -55,7 +54,6 @@ def test_ideal_robot_gives_near_zero_deviations(piece160):
             assert abs(row.deviation) < 1e-6, row.name
 
 
-@pytest.mark.slow
 def test_stiffer_robot_scores_better():
     pl = load_poses("data/poses/iso160.json")[:1]
     soft = rank_poses(PROGRAM, ROBOT, pl, settings=RankSettings(spacing=2e-3, size=160, stiffness_scale=0.2))
@@ -64,7 +62,6 @@ def test_stiffer_robot_scores_better():
     assert stiff.results[name].score < soft.results[name].score
 
 
-@pytest.mark.slow
 def test_report_for_the_four_poses(tmp_path):
     from simulate.evaluation.report import write_report
 
