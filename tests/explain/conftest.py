@@ -1,6 +1,5 @@
-"""Fixtures of the explain tests: the small 160 program (square + circle contours), a stiff copy of max100
-as the nominal robot file (the shipped max100's compliance makes the step-to-step coupled loop diverge at
-this pose; see the report), and "measured" scans simulated with a hidden change."""
+"""Fixtures of the explain tests: the small 160 program (square + circle contours), the shipped
+``data/robots/max100.toml`` as the nominal robot file, and "measured" scans simulated with a hidden change."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,7 +9,7 @@ import numpy as np
 import pytest
 
 from simulate.explain.causes import scale_friction
-from simulate.robot.model import load_robot, save_robot
+from simulate.robot.model import load_robot
 
 DATA = Path(__file__).parent / "data"
 REPO = Path(__file__).resolve().parents[2]
@@ -21,10 +20,8 @@ NOISE = 0.5e-6  # m, CMM probing noise (1 sigma) added to the hidden-effect scan
 
 
 @pytest.fixture(scope="session")
-def robot_file(tmp_path_factory) -> Path:
-    rob = load_robot(REPO / "data" / "robots" / "max100.toml")
-    rob = rob.with_changes(stiffness=rob.stiffness * 10.0)
-    return save_robot(rob, tmp_path_factory.mktemp("robot") / "stiff100.toml")
+def robot_file() -> Path:
+    return REPO / "data" / "robots" / "max100.toml"
 
 
 @pytest.fixture(scope="session")

@@ -9,10 +9,14 @@ import pytest
 from simulate.explain.pipeline import explain_part
 
 
-# (kind, axis, hidden value): stiffness factor, backlash added [rad], friction factor, tool radius change [m]
+# (kind, axis, hidden value): stiffness factor, backlash added [rad], friction factor, tool radius change [m].
+# With the shipped max100 (velocity and torque feed-forward on, PI velocity loop) friction changes show only as
+# small reversal marks: on this part and pose, axis-3 friction x2 moves the probed surfaces by 1.3 um RMS
+# (15 um max), axis-2 friction x2 by 0.27 um RMS (1.8 um max), below the 0.5 um probing noise; x4 on axis 2
+# gives about 1 um RMS. So the axis-2 friction case hides a factor 4 (and see test_friction_below_noise).
 FAST = [("stiffness", 2, 0.5), ("backlash", 1, 3e-4), ("tool_radius", 0, 20e-6)]
 SLOW = [("stiffness", 1, 0.5), ("stiffness", 3, 0.5), ("stiffness", 5, 0.5), ("backlash", 2, 3e-4),
-        ("backlash", 3, 3e-4), ("friction", 2, 2.0), ("friction", 3, 2.0), ("friction", 3, 3.0),
+        ("backlash", 3, 3e-4), ("friction", 2, 4.0), ("friction", 3, 2.0), ("friction", 3, 3.0),
         ("tool_radius", 0, -15e-6), ("stiffness", 2, 0.4)]
 
 
@@ -52,6 +56,17 @@ def test_hidden_effect_named_and_recovered(helpers, robot, setup, nominal, kind,
 @pytest.mark.parametrize("kind,axis,value", SLOW)
 def test_hidden_effect_named_and_recovered_slow(helpers, robot, setup, nominal, kind, axis, value):
     _check(helpers, robot, setup, nominal, kind, axis, value, seed=2)
+
+
+@pytest.mark.slow
+def test_friction_below_noise_names_no_wrong_cause(helpers, robot, setup, nominal):
+    """Axis-2 friction x2 changes the part by less than the probing noise (0.27 um RMS vs 0.5 um): explain may
+    say ``none`` (nothing beats the noise) or name it, but must not name another cause or make the fit worse."""
+    meas = helpers.measured_scan(helpers.hidden_robot(robot, "friction", 2, 2.0), setup, seed=2)
+    ex = explain_part(meas, robot, setup, nominal=nominal, max_sims=2)
+    assert ex.cause in ("none", "friction:2"), ex.cause
+    assert ex.rms_after <= ex.rms_before
+    assert ex.rms_before < 0.7e-6  # the discrepancy is (nearly) the probing noise
 
 
 def test_unchanged_robot_gives_none(helpers, robot, setup, nominal):
