@@ -74,7 +74,7 @@ LossFn = Callable[[torch.nn.Module, tuple], torch.Tensor]
 
 
 def train(net: torch.nn.Module, loss_fn: LossFn, batches: Sequence[tuple], *, epochs: int, lr: float,
-          seed: int = 0, lr_final: float = 0.05, grad_clip: float | None = None,
+          seed: int = 0, lr_final: float = 0.05, grad_clip: float | None = None, weight_decay: float = 0.0,
           on_epoch: Callable[[int, float], None] | None = None) -> TrainingHistory:
     """Train ``net`` with Adam on ``batches`` for ``epochs`` passes, via a Lightning Trainer.
 
@@ -96,6 +96,8 @@ def train(net: torch.nn.Module, loss_fn: LossFn, batches: Sequence[tuple], *, ep
         Final learning rate as a share of ``lr`` [-].
     grad_clip : float, optional
         Clip the gradient norm to this value [-] (recurrent nets); no clipping when None.
+    weight_decay : float
+        Decoupled weight decay of AdamW on the weight matrices [-] (0: plain Adam).
     on_epoch : callable, optional
         Called with (epoch, mean loss) after each epoch.
     """
@@ -122,7 +124,14 @@ def train(net: torch.nn.Module, loss_fn: LossFn, batches: Sequence[tuple], *, ep
                 on_epoch(len(history.loss), mean)
 
         def configure_optimizers(self):
-            opt = torch.optim.Adam(self.net.parameters(), lr=lr)
+            if weight_decay > 0:
+                # decay weight matrices only: biases and physical scalars (J, c, s0, ...) keep their values
+                params = list(self.net.parameters())
+                groups = [{"params": [p for p in params if p.ndim >= 2], "weight_decay": weight_decay},
+                          {"params": [p for p in params if p.ndim < 2], "weight_decay": 0.0}]
+                opt = torch.optim.AdamW(groups, lr=lr)
+            else:
+                opt = torch.optim.Adam(self.net.parameters(), lr=lr)
             total = max(1, epochs * len(batches))
             sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=total, eta_min=lr * lr_final)
             return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": "step"}}
@@ -142,6 +151,7 @@ def train(net: torch.nn.Module, loss_fn: LossFn, batches: Sequence[tuple], *, ep
                          enable_checkpointing=False, enable_model_summary=False, deterministic=True,
                          num_sanity_val_steps=0, precision=precision, gradient_clip_val=grad_clip,
                          gradient_clip_algorithm="norm")
+    net.train()  # a net fitted before was left in eval mode
     with deterministic(seed):
         t0 = time.perf_counter()
         trainer.fit(_Step(), train_dataloaders=loader)

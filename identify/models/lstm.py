@@ -180,6 +180,8 @@ class LSTMFriction(FrictionModel):
         Initial learning rate (cosine decay to 2% of it).
     grad_clip : float
         Gradient-norm clip [-] (LSTMs occasionally produce gradient spikes).
+    weight_decay : float
+        AdamW weight decay [-].
     play_widths : sequence of float
         Play-operator half-widths [rad] of the features.
     seed : int
@@ -190,7 +192,7 @@ class LSTMFriction(FrictionModel):
     units = {"J": "kg m^2", "c": "Nm"}
 
     def __init__(self, hidden: int = 16, head: int = 32, window: int = 150, warmup: int = 150, epochs: int = 300,
-                 batches: int = 4, lr: float = 0.01, grad_clip: float = 1.0,
+                 batches: int = 4, lr: float = 0.01, grad_clip: float = 1.0, weight_decay: float = 0.0,
                  play_widths: tuple[float, ...] | list[float] = DEFAULT_PLAY_WIDTHS, seed: int = 0):
         self.hidden = hidden
         self.head = head
@@ -200,6 +202,7 @@ class LSTMFriction(FrictionModel):
         self.batches = batches
         self.lr = lr
         self.grad_clip = grad_clip
+        self.weight_decay = weight_decay
         self.play_widths = [float(w) for w in play_widths]
         self.seed = seed
 
@@ -240,7 +243,8 @@ class LSTMFriction(FrictionModel):
             return torch.mean(err[batch[3]] ** 2)
 
         self.history_: TrainingHistory = train(net, loss_fn, batches, epochs=self.epochs, lr=self.lr,
-                                               seed=self.seed, lr_final=0.02, grad_clip=self.grad_clip)
+                                               seed=self.seed, lr_final=0.02, grad_clip=self.grad_clip,
+                                               weight_decay=self.weight_decay)
         self.net_ = net
         self.params_ = net.rigid_parameters()
 

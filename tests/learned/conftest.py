@@ -3,6 +3,7 @@ curve is not of the exponential Stribeck form, and a throwaway MLflow store per 
 from dataclasses import replace
 
 import pytest
+import torch
 
 from identify.axis_limits import AxisLimits
 from identify.plant import PlantConfig, synthesize
@@ -20,6 +21,19 @@ def _pair(curve: str, duration: float):
     train = synthesize(tr.t, tr.q, tr.qd, tr.qdd, config=cfg, seed=1).frame
     test = synthesize(te.t, te.q, te.qd, te.qdd, config=cfg, seed=2).frame
     return train, test
+
+
+def one_torch_thread() -> None:
+    """Back to one torch thread (tests/conftest.py). The first numba ``parallel=True`` launch
+    (the LuGre GA kernel) initialises numba's OpenMP layer with all cores, which also raises
+    torch's intra-op thread count (they share OpenMP): on a shared 2-core machine the LSTM
+    then runs about ten times slower."""
+    torch.set_num_threads(1)
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    one_torch_thread()
 
 
 @pytest.fixture(scope="session")

@@ -23,6 +23,7 @@ def six_fits(hump_records):
     train, test = hump_records
     fits = {}
     for name in ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox"):
+        torch.set_num_threads(1)  # see conftest.one_torch_thread: the LuGre GA raises it
         est = make_model(name).fit(train)
         fits[name] = (est, est.score(test).rmse)
     return fits
@@ -148,6 +149,7 @@ def test_acceptance_60s_records(curve, record_pair):
     train, test = validate_frame(train_f, "train"), validate_frame(test_f, "test")
     rmse = {}
     for name in ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox"):
+        torch.set_num_threads(1)
         rmse[name] = make_model(name).fit(train).score(test).rmse
     assert min(rmse, key=rmse.get) == "greybox", rmse
     assert rmse["greybox"] <= 1.2 * NOISE, rmse
