@@ -178,7 +178,8 @@ def bench_ranking(
     spacing: float = typer.Option(0.5, "--spacing", help="Dexel spacing [mm] (coarser grids make the cutting force, "
                                                             "hence the deflection, jumpy)."),
 ) -> None:
-    """Rank the poses with 1 and with 2 worker processes: wall times [s] and the speed-up, one run each."""
+    """Rank the poses with 2 and 1 worker processes, and with 2 plus the component re-runs (``--shares``, what
+    ``make demo`` runs): wall times [s] and ratios, one run each."""
     from simulate.toolpath.placement import load_poses
 
     placements = load_poses(poses)
@@ -186,17 +187,21 @@ def bench_ranking(
     settings = RankSettings(spacing=spacing * MM)
     t = Table(title=f"bench ranking: {len(placements)} poses of {program.name}, dexel {spacing:g} mm "
                     "(target <= 120 s on 2 cores)")
-    for c in ("workers", "wall [s]", "per pose [s]", "ratio to 1 worker", "best pose"):
+    for c in ("workers", "component re-runs", "simulations", "wall [s]", "per simulation [s]", "ratio to 1 worker",
+              "best pose"):
         t.add_column(c, justify="right")
     rows = []
-    for w in (2, 1):
+    for w, sh in ((2, False), (1, False), (2, True)):
         c0 = time.perf_counter()
-        r = rank_poses(program, robot_path, placements, settings=settings, workers=w)
-        rows.append((w, time.perf_counter() - c0, r.best))
-    base = next(x[1] for x in rows if x[0] == 1)
-    for w, s, best in rows:
-        t.add_row(str(w), f"{s:.1f}", f"{s / len(placements):.1f}", f"{base / s:.2f}", best)
+        r = rank_poses(program, robot_path, placements, settings=settings, workers=w, shares=sh)
+        n_sim = len(placements) * (1 + (len(COMPONENTS) if sh else 0))
+        rows.append((w, sh, n_sim, time.perf_counter() - c0, r.best))
+    base = next(x[3] / x[2] for x in rows if x[0] == 1)
+    for w, sh, n_sim, s, best in rows:
+        t.add_row(str(w), "yes" if sh else "no", str(n_sim), f"{s:.1f}", f"{s / n_sim:.1f}",
+                  f"{base / (s / n_sim):.2f}", best)
     out.print(t)
+    out.print("ratio to 1 worker: simulations per second relative to the 1-worker run.")
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
