@@ -47,12 +47,18 @@ def nominal_residuals(name: str, pts: np.ndarray, piece: TestPiece) -> np.ndarra
 
 
 def _gain_driver(ranking: Ranking, best: str, other: str, row: str) -> str:
-    """``"; mostly <component>: +a vs +b mm"``: the component whose contribution to ``row`` differs most
-    between the best and the other pose (empty without component re-runs)."""
+    """``"; mostly <component>: +a vs +b mm"``: the component whose contribution to ``row`` pushes the other
+    pose's deviation furthest away from zero compared with the best pose (contributions signed along the other
+    pose's deviation); ``"; no single component"`` when none does (the components interact); empty without
+    component re-runs."""
     cb, co = ranking.contributions(best), ranking.contributions(other)
     if not cb or not co:
         return ""
-    c = max(cb, key=lambda k: abs(co[k][row] - cb[k][row]))
+    sgn = 1.0 if ranking.results[other].table[row].deviation >= 0 else -1.0
+    push = {k: sgn * (co[k][row] - cb[k][row]) for k in cb}
+    c = max(push, key=push.get)
+    if push[c] <= 0:
+        return "; no single component"
     return f"; mostly {c}: {cb[c][row] / MM:+.4f} vs {co[c][row] / MM:+.4f} mm"
 
 
@@ -222,8 +228,9 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
         sb = ranking.shares(best).get("score", {})
         md.append(f"- Component shares of {best}'s score: "
                   + ", ".join(f"{c} {100 * sb.get(c, 0.0):.0f}%" for c in COMPONENTS)
-                  + "; a gain is attributed to the component whose contribution differs most between the two "
-                    "poses (contribution = deviation with all components minus deviation without it).")
+                  + "; a gain is attributed to the component whose contribution pushes the other pose's deviation "
+                    "furthest from zero compared with the best pose (contribution = deviation with all components "
+                    "minus deviation without it).")
     else:
         md.append("- Component shares: re-run with `--shares` to attribute each gain to deflection, friction or "
                   "switching.")

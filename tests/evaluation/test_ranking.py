@@ -66,7 +66,8 @@ def test_report_for_the_four_poses(tmp_path):
     from simulate.evaluation.report import write_report
 
     pl = load_poses("data/poses/iso320.json")
-    r = rank_poses("data/programs/iso320.nc", ROBOT, pl, settings=RankSettings(spacing=2e-3), out_dir=tmp_path)
+    r = rank_poses("data/programs/iso320.nc", ROBOT, pl, settings=RankSettings(spacing=2e-3), out_dir=tmp_path,
+                   shares=True)
     assert [e.rank for e in r.entries] == [1, 2, 3, 4]
     path = write_report(r, tmp_path, program="data/programs/iso320.nc", trajectories=r.trajectories)
     text = path.read_text()
@@ -77,3 +78,10 @@ def test_report_for_the_four_poses(tmp_path):
         assert (tmp_path / "images" / f"{p.name}_switching.png").exists()
         assert f"### {p.name}" in text
     assert "greybench trace --workpiece" in text and "Why the best pose wins" in text
+    why = text[text.index("## Why the best pose wins"):text.index("## Component shares")]
+    assert why.count(" vs ") >= 3 and f"Component shares of {r.best}'s score" in why
+    # every one of the best pose's three largest gains per rival is attributed (or said to be an interaction)
+    assert why.count("; mostly ") + why.count("; no single component") == 3 * (len(pl) - 1)
+    for pose in (p.name for p in pl):  # every pose has a score share per component
+        sh = r.shares(pose)["score"]
+        assert set(sh) == {"deflection", "friction", "switching"}
