@@ -38,7 +38,7 @@ def ranking_json(r: Ranking) -> dict:
 def print_ranking(r: Ranking) -> None:
     poses = [p.name for p in r.placements]
     n = len(poses)
-    t = Table(title="Feature deviations [mm] (ISO 10791-7, paper Table 2); green best .. red worst per row, "
+    t = Table(title="Feature deviations \\[mm] (ISO 10791-7, paper Table 2); green best .. red worst per row, "
                     "bold: in tolerance")
     t.add_column("feature")
     t.add_column("nominal", justify="right")
@@ -159,7 +159,7 @@ def trace_cmd(
                              for ln in tr.lines]})
         return
     t = Table(title=f"{tr.n_ends} machined dexel ends within {radius:g} mm of ({point}) mm")
-    for c in ("line", "program", "t [s]", "ends", "max deflection [um]", "max force [N]", "switching"):
+    for c in ("line", "program", "t \\[s]", "ends", "max deflection \\[um]", "max force \\[N]", "switching"):
         t.add_column(c)
     for ln in tr.lines:
         t.add_row(str(ln.line), ln.text, f"{ln.t_first:.3f}..{ln.t_last:.3f}", str(ln.n_ends),
@@ -187,7 +187,7 @@ def bench_ranking(
     settings = RankSettings(spacing=spacing * MM)
     t = Table(title=f"bench ranking: {len(placements)} poses of {program.name}, dexel {spacing:g} mm "
                     "(target <= 120 s on 2 cores)")
-    for c in ("workers", "component re-runs", "simulations", "wall [s]", "per simulation [s]", "ratio to 1 worker",
+    for c in ("workers", "component re-runs", "simulations", "wall \\[s]", "per simulation \\[s]", "ratio to 1 worker",
               "best pose"):
         t.add_column(c, justify="right")
     rows = []

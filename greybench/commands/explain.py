@@ -67,12 +67,12 @@ def explain(
         emit_json(ex.as_json())
         return
     t = Table(title=f"explain: cause {ex.cause} (score = dBIC vs no discrepancy; named above 10)")
-    for c in ("cause", "score", "held-out gain [%]", "fitted change"):
+    for c in ("cause", "score", "held-out gain \\[%]", "fitted change"):
         t.add_column(c, justify="left" if c == "cause" else "right")
     for f in ex.choice.ranking[:8]:
         t.add_row(f.cause, f"{f.score:.1f}", f"{f.heldout_gain * 100:.1f}", ", ".join(f"{v:.3g}" for v in f.theta))
     out.print(t)
-    ft = Table(title="RMS measured - simulated [um]")
+    ft = Table(title="RMS measured - simulated \\[um]")
     for c in ("feature", "before", "after"):
         ft.add_column(c, justify="left" if c == "feature" else "right")
     for f, (b, a) in ex.rms_by_feature().items():
@@ -125,18 +125,18 @@ def bench_explain(
     t.add_column("figure")
     t.add_column("value", justify="right")
     t.add_row("steps", f"{n_steps}")
-    t.add_row("setup (IK, switching) [s]", f"{t_setup:.2f}")
-    t.add_row("one simulation [s]", f"{t_sim:.2f}")
+    t.add_row("setup (IK, switching) \\[s]", f"{t_setup:.2f}")
+    t.add_row("one simulation \\[s]", f"{t_sim:.2f}")
     t.add_row("steps/s of one simulation", f"{n_steps / t_sim:,.0f}")
     t.add_row("probe points compared", f"{len(cmp.residual)}")
-    t.add_row("nominal simulation + comparison [s]", f"{t_cmp:.2f}")
+    t.add_row("nominal simulation + comparison \\[s]", f"{t_cmp:.2f}")
     for k, v in ex.timings.items():
-        t.add_row(f"  explain: {k} [s]", f"{v:.2f}")
-    t.add_row("explain total (nominal given) [s]", f"{t_all:.2f}")
+        t.add_row(f"  explain: {k} \\[s]", f"{v:.2f}")
+    t.add_row("explain total (nominal given) \\[s]", f"{t_all:.2f}")
     t.add_row("calibration re-simulations", f"{len(ex.calibration.history) if ex.calibration else 0}")
-    t.add_row("explain / one simulation [-]", f"{t_all / t_sim:.1f}")
+    t.add_row("explain / one simulation \\[-]", f"{t_all / t_sim:.1f}")
     t.add_row("cause named", ex.cause)
-    t.add_row("rms before / after [um]", f"{ex.rms_before * 1e6:.2f} / {ex.rms_after * 1e6:.2f}")
+    t.add_row("rms before / after \\[um]", f"{ex.rms_before * 1e6:.2f} / {ex.rms_after * 1e6:.2f}")
     out.print(t)
 
 
