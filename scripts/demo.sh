@@ -15,7 +15,12 @@ $G synth --trajectory "$OUT/ut_test.parquet" --out "$OUT/test.parquet" --seed 2 
 $G compare --train "$OUT/train.parquet" --test "$OUT/test.parquet" --axis 1 --experiment demo-axis1
 $G fit --model lugre --train "$OUT/train.parquet" --test "$OUT/test.parquet" --out "$OUT/models/lugre" --no-track > /dev/null
 $G predict --model "$OUT/models/lugre" --data "$OUT/test.parquet" --out "$OUT/test-predicted.parquet"
-echo "Every fit above is an MLflow run; open them with:"
-$G ui --print-only
 
+echo "== 2. Machining simulation of the ISO 10791-7 test piece in four poses, ranked (Table 2 layout) =="
+$G rank-poses --program data/programs/iso320.nc --robot max100 --poses data/poses/iso320.json \
+    --out "$OUT/ranking" --shares
+echo "Report with deviation maps and component shares: $OUT/ranking/report.md"
+
+echo "== Friction fits above are MLflow runs; open them with: =="
+$G ui --print-only
 echo "Demo outputs in $OUT/"
