@@ -36,13 +36,17 @@ from identify.errors import InputError
 from identify.models.base import FrictionModel
 from identify.models.sequence_features import DEFAULT_PLAY_WIDTHS, FeatureScales, TANH_VELOCITY, sequence_features
 from identify.records import AxisRecord
-from identify.training import TrainingHistory, count_parameters, deterministic, train
+from identify.training import TrainingHistory, count_parameters, deterministic, torch_threads, train
 
 NETWORK_FILE = "network.pt"
 #: Version of ``network.pt``; older LSTM folders (inputs qd, qdd only) must be refitted.
 NETWORK_FORMAT = 2
 #: Floating-point type of the LSTM (see the module docstring).
 LSTM_DTYPE = torch.float32
+#: Torch threads for fitting and predicting: the per-step matrix products of a 16-unit LSTM
+#: are too small to share out (:func:`identify.training.torch_threads`); one thread also
+#: makes results independent of the caller's thread setting.
+LSTM_THREADS = 1
 
 
 class LSTMFrictionNet(nn.Module):
@@ -223,6 +227,10 @@ class LSTMFriction(FrictionModel):
 
     def _fit(self, record: AxisRecord) -> None:
         self._check_hyperparameters()
+        with torch_threads(LSTM_THREADS):
+            self._train(record)
+
+    def _train(self, record: AxisRecord) -> None:
         rigid = bool(self.rigid_)
         scales = FeatureScales.from_record(record.qd, record.qdd, self.play_widths)
         J0, c0 = _linear_start(record, scales.v_scale) if rigid else (0.0, 0.0)
@@ -250,7 +258,7 @@ class LSTMFriction(FrictionModel):
 
     def _friction(self, record: AxisRecord) -> np.ndarray:
         layout, x, qdd = self._inputs(record, self.net_.scales)
-        with torch.no_grad():
+        with torch.no_grad(), torch_threads(LSTM_THREADS):
             friction, _ = self.net_(x, qdd)
         return layout.scatter(friction.numpy()).astype(float)
 

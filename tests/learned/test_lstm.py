@@ -101,3 +101,18 @@ def test_known_rigid_body_torque(short_records):
     assert est.params_ == {} and not est.rigid_
     with pytest.raises(InputError, match="tau_rb"):
         est.predict(test)
+
+
+def test_fit_uses_one_thread_and_restores_the_callers(short_records):
+    """Same result whatever the caller's torch thread count; the count is restored after."""
+    train, test = short_records
+    ref = LSTMFriction(epochs=2).fit(train).predict(test)
+    torch.set_num_threads(2)
+    try:
+        est = LSTMFriction(epochs=2).fit(train)
+        assert torch.get_num_threads() == 2
+        pred = est.predict(test)
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(1)
+    np.testing.assert_array_equal(pred, ref)
