@@ -218,20 +218,9 @@ class Ranking:
 
 
 def _stock_solids(stock_file: Path, floor: float):
-    from simulate.machining.dexel import read_stock_solids
+    from simulate.machining.dexel import raise_floor, read_stock_solids
 
-    solids = read_stock_solids(stock_file)
-    out = []
-    for sd in solids:
-        if sd.lower[2] < floor:
-            hs = np.array(sd.halfspaces, float)
-            bottom = (np.abs(hs[:, 2] + 1) < 1e-12) & (np.abs(hs[:, 0]) < 1e-12) & (np.abs(hs[:, 1]) < 1e-12)
-            hs[bottom, 3] = -floor
-            lower = sd.lower.copy()
-            lower[2] = floor
-            sd = replace(sd, halfspaces=hs, lower=lower)
-        out.append(sd)
-    return out
+    return raise_floor(read_stock_solids(stock_file), floor)
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -165,19 +165,10 @@ class PartSimulation:
 
 def stock_workpiece(setup: PartSetup):
     """The stock as a tri-dexel model, trimmed 2 mm under the lowest cutting height (module docstring)."""
-    from simulate.machining.dexel import TriDexel, read_stock_solids
+    from simulate.machining.dexel import TriDexel, raise_floor, read_stock_solids
 
     floor = float(setup.interp.xyz[:, 2].min()) - 2e-3
-    solids = []
-    for sd in read_stock_solids(setup.stock):
-        if sd.lower[2] < floor:
-            hs = np.array(sd.halfspaces, float)
-            bottom = (np.abs(hs[:, 2] + 1) < 1e-12) & (np.abs(hs[:, 0]) < 1e-12) & (np.abs(hs[:, 1]) < 1e-12)
-            hs[bottom, 3] = -floor
-            lower = sd.lower.copy()
-            lower[2] = floor
-            sd = replace(sd, halfspaces=hs, lower=lower)
-        solids.append(sd)
+    solids = raise_floor(read_stock_solids(setup.stock), floor)
     # extra ray capacity: slightly different tool paths leave thin slivers that split rays many times
     return TriDexel.from_solids(solids, setup.spacing, capacity=(32, 32, 16))
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -435,6 +435,25 @@ def read_stock_solids(path) -> list[ConvexSolid]:
         if not np.all(upper > lower):
             raise InputError("solid has no volume", source=str(p), field=fieldname, row=row)
         out.append(ConvexSolid(np.array(hs, float), lower, upper, cyl))
+    return out
+
+
+def raise_floor(solids: list[ConvexSolid], floor: float) -> list[ConvexSolid]:
+    """The solids cut off below ``floor`` [m]: stock no tool reaches need not be modelled.
+
+    A solid reaching below ``floor`` gets its bottom half-space (normal -z) moved up to it; the
+    others are returned as they are.
+    """
+    out = []
+    for sd in solids:
+        if sd.lower[2] < floor:
+            hs = np.array(sd.halfspaces, float)
+            bottom = (np.abs(hs[:, 2] + 1) < 1e-12) & (np.abs(hs[:, 0]) < 1e-12) & (np.abs(hs[:, 1]) < 1e-12)
+            hs[bottom, 3] = -floor
+            lower = sd.lower.copy()
+            lower[2] = floor
+            sd = replace(sd, halfspaces=hs, lower=lower)
+        out.append(sd)
     return out
 
 
