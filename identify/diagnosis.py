@@ -65,7 +65,7 @@ from enum import Enum
 import numpy as np
 
 from identify.errors import InputError
-from identify.metrics import Metrics, evaluate
+from identify.metrics import Metrics
 from identify.models.base import FrictionModel
 from identify.records import AxisRecord
 

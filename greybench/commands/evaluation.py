@@ -1,7 +1,6 @@
 """Evaluation commands: ``rank-poses``, ``trace``; ``bench ranking`` (paper 3.8, 4, Table 2)."""
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Optional

@@ -1,8 +1,6 @@
 """Toolpath commands: ``testpiece``, ``interpolate``; ``bench toolpath`` (paper 3.1, 3.2, 3.7)."""
 from __future__ import annotations
 
-import os
-import tempfile
 import time
 from pathlib import Path
 from typing import Optional
@@ -14,30 +12,11 @@ from rich.table import Table
 
 from greybench.support import DATA_DIR, emit_json, guarded, out, resolve_robot
 from identify.errors import InputError
+from identify.records import write_table
 from simulate.toolpath.gcode import read_program
-from simulate.toolpath.interpolation import Interpolation, PathLimits, interpolate
+from simulate.toolpath.interpolation import PathLimits, interpolate
 from simulate.toolpath.placement import JointTrajectory, joint_trajectory, load_poses, select_pose
 from simulate.toolpath.testpiece import Technology, finishing_program, iso_test_piece, write_test_piece
-
-
-def _write_table(df: pd.DataFrame, path: Path) -> None:
-    """CSV or Parquet by extension, written to a temp file and renamed (nothing half-written)."""
-    suffix = path.suffix.lower()
-    if suffix not in (".csv", ".parquet"):
-        raise InputError("output must end in .csv or .parquet", source=str(path))
-    if not path.parent.exists():
-        raise InputError("output folder does not exist", source=str(path.parent))
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        if suffix == ".csv":
-            df.to_csv(tmp, index=False, float_format="%.12g")
-        else:
-            df.to_parquet(tmp, index=False)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def trajectory_frame(jt: JointTrajectory) -> pd.DataFrame:
@@ -107,7 +86,7 @@ def interpolate_cmd(
     rob = load_robot(resolve_robot(robot))
     ip = interpolate(prog, limits)
     jt = joint_trajectory(rob, ip, placement, source=str(program))
-    _write_table(trajectory_frame(jt), out_file)
+    write_table(trajectory_frame(jt), out_file)
     summary = {"out": str(out_file), "pose": placement.name, "samples": len(ip), "duration_s": ip.duration,
                "path_length_m": prog.length, "max_speed_m_s": float(ip.v.max()),
                "switching_steps": int((jt.switch > 0).sum()),

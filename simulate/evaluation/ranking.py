@@ -44,7 +44,7 @@ from identify.errors import InputError
 from simulate.evaluation.cmm import Scan, probe, write_scan
 from simulate.evaluation.features import FeatureTable, evaluate_scan
 from simulate.toolpath.placement import Placement
-from simulate.toolpath.testpiece import TestPiece, iso_test_piece
+from simulate.toolpath.testpiece import iso_test_piece
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 
 from identify.errors import InputError
 from identify.models.lugre import LuGreTable, velocity_grid
