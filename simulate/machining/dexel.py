@@ -458,9 +458,32 @@ def raise_floor(solids: list[ConvexSolid], floor: float) -> list[ConvexSolid]:
 
 
 @njit(cache=True)
+def _merge_into_ray(lo, hi, r, seg_lo, seg_hi, m):
+    """Write the union of the first ``m`` segments ``[seg_lo, seg_hi]`` into ray ``r``, sorted;
+    touching or overlapping segments merge. Returns the interval count, -1 past the capacity."""
+    if m == 0:
+        return 0
+    cap = lo.shape[1]
+    order = np.argsort(seg_lo[:m])
+    n = 0
+    for q in range(m):
+        a = seg_lo[order[q]]
+        b = seg_hi[order[q]]
+        if n > 0 and a <= hi[r, n - 1]:
+            if b > hi[r, n - 1]:
+                hi[r, n - 1] = b
+        else:
+            if n == cap:
+                return -1
+            lo[r, n] = a
+            hi[r, n] = b
+            n += 1
+    return n
+
+
+@njit(cache=True)
 def _merge_kernel(lo, hi, count, los, his):
     ns = los.shape[0]
-    cap = lo.shape[1]
     a_ = np.empty(ns)
     b_ = np.empty(ns)
     for r in range(lo.shape[0]):
@@ -470,24 +493,7 @@ def _merge_kernel(lo, hi, count, los, his):
                 a_[m] = los[q, r]
                 b_[m] = his[q, r]
                 m += 1
-        n = 0
-        if m > 0:
-            order = np.argsort(a_[:m])
-            for q in range(m):
-                a = a_[order[q]]
-                b = b_[order[q]]
-                if n > 0 and a <= hi[r, n - 1]:
-                    if b > hi[r, n - 1]:
-                        hi[r, n - 1] = b
-                else:
-                    if n == cap:
-                        count[r] = -1
-                        break
-                    lo[r, n] = a
-                    hi[r, n] = b
-                    n += 1
-        if count[r] >= 0:
-            count[r] = n
+        count[r] = _merge_into_ray(lo, hi, r, a_, b_, m)
 
 
 def _fill_family_boxes(wp: TriDexel, fam: RayFamily, boxes) -> None:
@@ -506,7 +512,6 @@ def _fill_family_boxes(wp: TriDexel, fam: RayFamily, boxes) -> None:
 @njit(cache=True)
 def _fill_kernel(lo, hi, count, c1, c2, amin, amax, b1min, b1max, b2min, b2max):
     nb = amin.shape[0]
-    cap = lo.shape[1]
     seg_lo = np.empty(nb)
     seg_hi = np.empty(nb)
     for r in range(lo.shape[0]):
@@ -516,25 +521,7 @@ def _fill_kernel(lo, hi, count, c1, c2, amin, amax, b1min, b1max, b2min, b2max):
                 seg_lo[m] = amin[b]
                 seg_hi[m] = amax[b]
                 m += 1
-        if m == 0:
-            count[r] = 0
-            continue
-        order = np.argsort(seg_lo[:m])
-        n = 0
-        for q in range(m):
-            a = seg_lo[order[q]]
-            b_ = seg_hi[order[q]]
-            if n > 0 and a <= hi[r, n - 1]:  # touching or overlapping boxes merge
-                if b_ > hi[r, n - 1]:
-                    hi[r, n - 1] = b_
-            else:
-                if n == cap:
-                    count[r] = -1
-                    return
-                lo[r, n] = a
-                hi[r, n] = b_
-                n += 1
-        count[r] = n
+        count[r] = _merge_into_ray(lo, hi, r, seg_lo, seg_hi, m)
 
 
 @njit(cache=True)
