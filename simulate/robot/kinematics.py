@@ -113,6 +113,18 @@ def _dh(robot: Robot) -> np.ndarray:
 
 # --------------------------------------------------------------------------- forward kinematics
 
+@njit(inline="always")
+def _dh_link(A, dh_row, qi):
+    """Fill the top 3 rows of A with the standard DH link transform
+    Rz(qi + theta_offset) Tz(d) Tx(a) Rx(alpha); ``dh_row`` = (a, alpha, d, theta_offset)."""
+    th = qi + dh_row[3]
+    ct, st = math.cos(th), math.sin(th)
+    ca, sa = math.cos(dh_row[1]), math.sin(dh_row[1])
+    A[0, 0] = ct; A[0, 1] = -st * ca; A[0, 2] = st * sa; A[0, 3] = dh_row[0] * ct
+    A[1, 0] = st; A[1, 1] = ct * ca; A[1, 2] = -ct * sa; A[1, 3] = dh_row[0] * st
+    A[2, 0] = 0.0; A[2, 1] = sa; A[2, 2] = ca; A[2, 3] = dh_row[2]
+
+
 @njit(cache=True)
 def _fk_kernel(dh, q, Ttool, out):
     n = q.shape[0]
@@ -125,12 +137,7 @@ def _fk_kernel(dh, q, Ttool, out):
             for c in range(4):
                 T[r, c] = 1.0 if r == c else 0.0
         for i in range(6):
-            th = q[k, i] + dh[i, 3]
-            ct, st = math.cos(th), math.sin(th)
-            ca, sa = math.cos(dh[i, 1]), math.sin(dh[i, 1])
-            A[0, 0] = ct; A[0, 1] = -st * ca; A[0, 2] = st * sa; A[0, 3] = dh[i, 0] * ct
-            A[1, 0] = st; A[1, 1] = ct * ca; A[1, 2] = -ct * sa; A[1, 3] = dh[i, 0] * st
-            A[2, 0] = 0.0; A[2, 1] = sa; A[2, 2] = ca; A[2, 3] = dh[i, 2]
+            _dh_link(A, dh[i], q[k, i])
             for r in range(3):
                 for c in range(4):
                     Tn[r, c] = T[r, 0] * A[0, c] + T[r, 1] * A[1, c] + T[r, 2] * A[2, c]
@@ -179,12 +186,7 @@ def _frames_kernel(dh, q, out):
             for c in range(4):
                 out[k, 0, r, c] = 1.0 if r == c else 0.0
         for i in range(6):
-            th = q[k, i] + dh[i, 3]
-            ct, st = math.cos(th), math.sin(th)
-            ca, sa = math.cos(dh[i, 1]), math.sin(dh[i, 1])
-            A[0, 0] = ct; A[0, 1] = -st * ca; A[0, 2] = st * sa; A[0, 3] = dh[i, 0] * ct
-            A[1, 0] = st; A[1, 1] = ct * ca; A[1, 2] = -ct * sa; A[1, 3] = dh[i, 0] * st
-            A[2, 0] = 0.0; A[2, 1] = sa; A[2, 2] = ca; A[2, 3] = dh[i, 2]
+            _dh_link(A, dh[i], q[k, i])
             for r in range(3):
                 for c in range(4):
                     out[k, i + 1, r, c] = (out[k, i, r, 0] * A[0, c] + out[k, i, r, 1] * A[1, c]
