@@ -75,6 +75,18 @@ def progress(description: str, total: float | None = None, enabled: bool = True)
         yield lambda n=1: bar.advance(task, n)
 
 
+def print_summary(title: str, info: dict) -> None:
+    """A two-column (item, value) table of a command's summary on stdout."""
+    from rich.table import Table
+
+    table = Table(title=title)
+    table.add_column("item")
+    table.add_column("value", justify="right")
+    for k, v in info.items():
+        table.add_row(str(k), f"{v:.6g}" if isinstance(v, float) else str(v))
+    out.print(table)
+
+
 def resolve_robot(name_or_path: str) -> Path:
     """A robot given by name (``max100`` -> ``data/robots/max100.toml``) or by path."""
     p = Path(name_or_path)

@@ -544,7 +544,7 @@ def bench_friction(
     lugre_stribeck(qd, dt, *args, z)  # compile
     t0 = time.perf_counter()
     for _ in range(repeats):
-        f_exact = lugre_stribeck(qd, dt, *args, z)
+        lugre_stribeck(qd, dt, *args, z)
     t_numba = (time.perf_counter() - t0) / repeats
 
     def rhs(t, zz):

@@ -12,7 +12,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from greybench.support import DATA_DIR, emit_json, guarded, out, progress, resolve_robot
+from greybench.support import DATA_DIR, emit_json, guarded, out, progress, print_summary, resolve_robot
 from identify.errors import InputError
 
 
@@ -286,14 +286,9 @@ def machine(
     if as_json:
         emit_json(info)
         return
-    table = Table(title=f"machining {program.name}")
-    table.add_column("item")
-    table.add_column("value", justify="right")
     units = {"simulated_time": "s", "wall_time": "s", "removed_volume": "m^3", "peak_force": "N",
              "peak_deflection": "m"}
-    for k, v in info.items():
-        table.add_row(f"{k} ({units[k]})" if k in units else k, f"{v:.6g}" if isinstance(v, float) else str(v))
-    out.print(table)
+    print_summary(f"machining {program.name}", {f"{k} ({units[k]})" if k in units else k: v for k, v in info.items()})
 
 
 def bench_machining(

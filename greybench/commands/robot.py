@@ -10,7 +10,7 @@ import pandas as pd
 import typer
 from rich.table import Table
 
-from greybench.support import emit_json, guarded, out, progress, resolve_robot
+from greybench.support import emit_json, guarded, out, progress, print_summary, resolve_robot
 from identify.errors import InputError
 from simulate.robot.kinematics import IKStatus, fk, ik_nearest, ik_path
 from simulate.robot.model import load_robot
@@ -59,12 +59,7 @@ def fk_cmd(
     if as_json:
         emit_json(info)
         return
-    table = Table(title=f"robot fk ({r.name})")
-    table.add_column("item")
-    table.add_column("value", justify="right")
-    for k, v in info.items():
-        table.add_row(k, str(v))
-    out.print(table)
+    print_summary(f"robot fk ({r.name})", info)
 
 
 def ik_cmd(

@@ -10,7 +10,7 @@ import pandas as pd
 import typer
 from rich.table import Table
 
-from greybench.support import DATA_DIR, emit_json, guarded, out, resolve_robot
+from greybench.support import DATA_DIR, emit_json, guarded, out, print_summary, resolve_robot
 from identify.errors import InputError
 from identify.records import write_table
 from simulate.toolpath.gcode import read_program
@@ -94,12 +94,7 @@ def interpolate_cmd(
     if as_json:
         emit_json(summary)
         return
-    table = Table(title=f"{program.name} on {rob.name}, pose {placement.name}")
-    table.add_column("item")
-    table.add_column("value", justify="right")
-    for k, v in summary.items():
-        table.add_row(k, f"{v:.6g}" if isinstance(v, float) else str(v))
-    out.print(table)
+    print_summary(f"{program.name} on {rob.name}, pose {placement.name}", summary)
 
 
 def bench_toolpath(
