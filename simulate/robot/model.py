@@ -21,6 +21,10 @@ stiffness          Nm/rad       joint (gear) stiffness; ``inf`` for a rigid join
 backlash           rad          total gear play, joint side
 [joint.servo]                   ``kv`` [1/s], ``kp_vel`` [Nm s/rad], ``ki_vel`` [Nm/rad],
                                 ``ff_vel`` [-], ``ff_tau`` [-] (see :mod:`simulate.robot.servo`)
+[joint.drive]                   optional (all joints or none), the two-mass drive model
+                                (:mod:`simulate.robot.drive`): ``damping`` [Nm s/rad] gear
+                                damping, ``rated_torque`` [Nm] of the reducer,
+                                ``friction_side`` ``"joint"`` or ``"motor"``
 [joint.friction]                inline LuGre ``fc, fs`` [Nm], ``vs`` [rad/s], ``delta`` [-],
                                 ``s0`` [Nm/rad], ``s1`` [Nm s/rad], ``nu`` [Nm s/rad]; or
                                 ``model = "<saved friction model dir or MLflow URI>"``
@@ -59,6 +63,8 @@ JOINT_SCALARS = {
     "mass": "kg", "gear_ratio": "-", "motor_inertia": "kg m^2", "stiffness": "Nm/rad", "backlash": "rad",
 }
 SERVO_KEYS = {"kv": "1/s", "kp_vel": "Nm s/rad", "ki_vel": "Nm/rad", "ff_vel": "-", "ff_tau": "-"}
+DRIVE_KEYS = {"damping": "Nm s/rad", "rated_torque": "Nm"}
+FRICTION_SIDES = ("joint", "motor")
 LUGRE_KEYS = {"fc": "Nm", "fs": "Nm", "vs": "rad/s", "delta": "-", "s0": "Nm/rad", "s1": "Nm s/rad", "nu": "Nm s/rad"}
 
 
@@ -192,6 +198,34 @@ class ServoGains:
 
 
 @dataclass(frozen=True, eq=False)
+class DriveSpec:
+    """Drive-model data per joint beyond the joint table (arrays of shape (6,), joint side).
+
+    Attributes
+    ----------
+    damping : ndarray
+        Gear damping [Nm s/rad] (in parallel with ``Robot.stiffness``).
+    rated_torque : ndarray
+        Rated output torque of the reducer [Nm] (friction levels are quoted as its share).
+    friction_side : ndarray of int
+        Where friction acts: 0 joint (gear output), 1 motor (see ``simulate.robot.drive.FrictionSide``).
+    """
+
+    damping: np.ndarray
+    rated_torque: np.ndarray
+    friction_side: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "damping", _frozen(self.damping, (N_JOINTS,)))
+        object.__setattr__(self, "rated_torque", _frozen(self.rated_torque, (N_JOINTS,)))
+        side = np.array(self.friction_side, dtype=np.int64)
+        if side.shape != (N_JOINTS,):
+            raise ValueError(f"expected shape {(N_JOINTS,)}, got {side.shape}")
+        side.setflags(write=False)
+        object.__setattr__(self, "friction_side", side)
+
+
+@dataclass(frozen=True, eq=False)
 class Robot:
     """A six-axis serial robot in standard DH form with drives, stiffness, servo and tool.
 
@@ -222,6 +256,8 @@ class Robot:
     servo : ServoGains
     friction : tuple of FrictionSpec
     tool : Tool
+    drive : DriveSpec or None
+        The ``[joint.drive]`` tables (None when the file has none).
     source : str
         File the robot was loaded from ("" if built in code).
     """
@@ -249,6 +285,7 @@ class Robot:
     joint_names: tuple = tuple(f"A{i + 1}" for i in range(N_JOINTS))
     description: str = ""
     source: str = ""
+    drive: DriveSpec | None = None
 
     def __post_init__(self):
         for key in (*JOINT_SCALARS, ):
@@ -361,6 +398,7 @@ def robot_from_dict(data: dict, source: str = "<robot>") -> Robot:
     vals: dict[str, list] = {k: [] for k in JOINT_SCALARS}
     com, inertia, names, frictions = [], [], [], []
     servo = {k: [] for k in SERVO_KEYS}
+    drive: dict[str, list] = {"damping": [], "rated_torque": [], "friction_side": []}
     for i, jt in enumerate(joints):
         where = f"joint[{i + 1}]"
         if not isinstance(jt, dict):
@@ -375,6 +413,20 @@ def robot_from_dict(data: dict, source: str = "<robot>") -> Robot:
             raise InputError("missing [joint.servo] table", source=source, field=f"{where}.servo")
         for key in SERVO_KEYS:
             servo[key].append(_number(sv, key, f"{where}.servo", source))
+        dv = jt.get("drive")
+        if dv is not None:
+            if not isinstance(dv, dict):
+                raise InputError("must be a table", source=source, field=f"{where}.drive")
+            for key in DRIVE_KEYS:
+                drive[key].append(_number(dv, key, f"{where}.drive", source))
+            side = dv.get("friction_side", "joint")
+            if side not in FRICTION_SIDES:
+                raise InputError(f"must be one of {', '.join(FRICTION_SIDES)}, got {side!r}", source=source,
+                                 field=f"{where}.drive.friction_side")
+            drive["friction_side"].append(FRICTION_SIDES.index(side))
+        elif drive["damping"]:
+            raise InputError("missing [joint.drive] table (give it for every joint or none)", source=source,
+                             field=f"{where}.drive")
         fr = jt.get("friction")
         if not isinstance(fr, dict):
             raise InputError("missing [joint.friction] table", source=source, field=f"{where}.friction")
@@ -409,8 +461,12 @@ def robot_from_dict(data: dict, source: str = "<robot>") -> Robot:
         com=_vector(tt, "com", 3, "tool", source, default=np.zeros(3)),
         inertia=_vector(tt, "inertia", 9, "tool", source, default=np.zeros((3, 3))),
     )
+    if drive["damping"] and len(drive["damping"]) != N_JOINTS:
+        raise InputError("missing [joint.drive] table (give it for every joint or none)", source=source,
+                         field="joint[1].drive")
+    drive_spec = DriveSpec(**{k: np.array(v) for k, v in drive.items()}) if drive["damping"] else None
     robot = Robot(
-        name=str(data.get("name", Path(source).stem)), description=str(data.get("description", "")),
+        name=str(data.get("name", Path(source).stem)), drive=drive_spec, description=str(data.get("description", "")),
         joint_names=tuple(names), com=np.array(com), inertia=np.array(inertia),
         servo=ServoGains(**{k: np.array(v) for k, v in servo.items()}), friction=tuple(frictions),
         tool=tool, source=source if source != "<robot>" else "", **{k: np.array(v) for k, v in vals.items()})
@@ -444,6 +500,17 @@ def _validate(r: Robot, source: str) -> None:
         for key in ("kv", "kp_vel"):
             if not getattr(r.servo, key)[i] > 0:
                 bad("must be > 0", i, f"servo.{key}")
+        if r.drive is not None:
+            for key in DRIVE_KEYS:
+                v = getattr(r.drive, key)[i]
+                if not (math.isfinite(v) and v >= 0):
+                    bad("must be finite and >= 0", i, f"drive.{key}")
+            if not r.drive.rated_torque[i] > 0:
+                bad("must be > 0", i, "drive.rated_torque")
+            if r.drive.friction_side[i] not in (0, 1):
+                bad("must be joint or motor", i, "drive.friction_side")
+            if not math.isfinite(r.stiffness[i]):
+                bad("must be finite for the drive model (a gear has a finite stiffness)", i, "stiffness")
         lg = r.friction[i].lugre
         if lg is not None:
             for key in ("fc", "fs", "vs", "s0", "s1", "nu", "delta"):
@@ -479,6 +546,9 @@ def _as_dict(r: Robot) -> dict:
         jt["com"] = [float(v) for v in r.com[i]]
         jt["inertia"] = [[float(v) for v in row] for row in r.inertia[i]]
         jt["servo"] = {k: float(getattr(r.servo, k)[i]) for k in SERVO_KEYS}
+        if r.drive is not None:
+            jt["drive"] = {k: float(getattr(r.drive, k)[i]) for k in DRIVE_KEYS}
+            jt["drive"]["friction_side"] = FRICTION_SIDES[int(r.drive.friction_side[i])]
         fr = r.friction[i]
         jt["friction"] = ({"model": fr.model} if fr.model is not None
                           else {k: float(getattr(fr.lugre, k)) for k in LUGRE_KEYS})
@@ -518,7 +588,9 @@ def robot_to_toml(robot: Robot) -> str:
         for k, v in jt.items():
             if not isinstance(v, dict):
                 lines.append(f"{k} = {_toml_value(v)}")
-        for sub in ("servo", "friction"):
+        for sub in ("servo", "drive", "friction"):
+            if sub not in jt:
+                continue
             lines.append(f"[joint.{sub}]")
             lines.extend(f"{k} = {_toml_value(v)}" for k, v in jt[sub].items())
         lines.append("")

@@ -1,0 +1,537 @@
+"""Two-mass drive model per joint: motor, elastic gear with backlash, link, friction, cascaded control.
+
+Per joint ``j`` (joint-side units throughout: motor angle and torque divided / multiplied by the
+gear ratio ``N``; equations and sources in ``docs/drive-model.md``)::
+
+    J_m' theta_dd = u - tau_fm - tau_s                   motor side, J_m' = N^2 J_m
+    J_l  q_dd     = tau_s - tau_load - tau_fl            link side, J_l = M_jj(q)
+    tau_s = elasto-backlash(delta = theta - q, delta_d)  gear torque
+
+* **Gear** (Modelica ``Rotational.Components.ElastoBacklash``): no torque while
+  ``|delta| <= b/2``; outside ``c (delta -+ b/2) + d delta_d``, and the damping may not pull
+  (the torque keeps the sign of the contact flank). ``b = 0`` gives a linear spring-damper.
+  The play is therefore crossed where the *transmitted torque* changes sign, not where the
+  velocity does: a joint held on one flank by gravity stays there through a velocity reversal.
+* **Load** ``tau_load``: gravity, inertial coupling of the other joints and the process force
+  through ``J^T``, supplied by the caller per cycle (linear within it);
+  :func:`load_torques` computes it with the Newton-Euler model of :mod:`simulate.robot.dynamics`.
+* **Friction** acts on the motor or the link side (``DriveParams.side``), one call of
+  :func:`friction_torque` per joint and substep (LuGre with the exact bristle update, held
+  velocity; the loop's friction dispatch can replace that one function).
+* **Control** as an NC drive, evaluated every substep: position P from the motor encoder,
+  velocity PI on the motor speed, velocity and torque feed-forward::
+
+      theta_r = r + [WINDUP] (tau_g - (d/c) d/dt tau_g) / c    motor setpoint (gear windup compensated)
+      v_cmd   = kv (theta_r - theta) + ff_vel * d/dt theta_r
+      u       = kp (v_cmd - omega) + ki int(v_cmd - omega) dt
+                + ff_tau ((J_m' + J_l) r_dd + tau_model) + [FF_FRICTION] g(r_d)
+
+  with ``tau_g = ff_tau (J_l r_dd + tau_model)`` the torque the NC's model expects through the
+  gear and ``tau_model`` the load the NC knows (gravity and inertia; not the process force).
+  The reference ``r`` is the cubic Hermite interpolant of the commanded link positions and
+  velocities at the cycle ends; the acceleration ``r_dd`` of the feed-forward is linear between
+  the commanded accelerations at the cycle ends (the Hermite's own jerk would triple the error of
+  difference velocities); the feed-forward torque is evaluated at substep midpoints.
+
+Integration (the gear is stiff: ``f_r = sqrt(c (1/J_m' + 1/J_l)) / 2 pi`` is 25-200 Hz): each
+cycle ``T`` is cut into ``n_sub`` substeps of ``h = T / n_sub``. The control torque is held over a
+substep (zero-order hold, as a digital current loop), friction is held at its start velocity
+with the exact bristle update, and the two masses are advanced by velocity Verlet
+(kick-drift-kick; second order, symplectic: no numerical damping of the gear mode, stable for
+``omega h < 2``). :func:`substeps_for` picks ``n_sub`` so that ``omega_max h <= 0.1`` where
+``omega_max`` bounds the gear mode, the bristle mode ``sqrt(s0 / J_side)``, the damping rates and
+the velocity-loop rate ``kp / J_m'``; the phase error of the gear mode is then below
+``(omega h)^2 / 24 = 0.04 %`` per period. At a 2 ms cycle the shipped robot needs about 30
+substeps (A6, the light flange, sets the rate).
+"""
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+from dataclasses import dataclass
+from enum import IntEnum, IntFlag
+
+import numpy as np
+from numba import njit
+
+from identify.errors import InputError
+
+N_AXES = 6
+CYCLE = 0.002   # s, interpolation cycle
+
+#: Bound on omega * h that :func:`substeps_for` enforces [-].
+OMEGA_H = 0.1
+
+
+class DriveFlags(IntFlag):
+    """Switches of the drive model (one int for the kernel)."""
+
+    NONE = 0
+    FRICTION = 1       #: friction torque on
+    BACKLASH = 2       #: gear play on (off: b = 0, a linear spring-damper)
+    FF_VEL = 4         #: velocity feed-forward (factor ``ff_vel`` per joint)
+    FF_TAU = 8         #: torque feed-forward (factor ``ff_tau`` per joint)
+    FF_FRICTION = 16   #: friction feed-forward g(r_d) from the NC's friction model (off in an NC by default)
+    WINDUP = 32        #: gear windup compensation of the motor setpoint by the model torque
+
+    @classmethod
+    def default(cls) -> "DriveFlags":
+        """Friction and backlash on; velocity, torque feed-forward and windup compensation on."""
+        return cls.FRICTION | cls.BACKLASH | cls.FF_VEL | cls.FF_TAU | cls.WINDUP
+
+
+class Contact(IntEnum):
+    """Gear flank state: which flank transmits (``delta = theta - q`` beyond +-b/2) or the gap."""
+
+    NEGATIVE = -1
+    GAP = 0
+    POSITIVE = 1
+
+
+class FrictionSide(IntEnum):
+    """Where the friction torque acts."""
+
+    JOINT = 0   #: on the link (gear output, joint bearings)
+    MOTOR = 1   #: on the motor (rotor bearings, gear input), before the gear's elasticity
+
+
+#: Per-joint parameters, arrays of shape (6,) [SI, joint side]:
+#: jm reflected motor inertia N^2 J_m [kg m^2]; c gear stiffness [Nm/rad]; d gear damping [Nm s/rad];
+#: b total play [rad]; kv [1/s], kp [Nm s/rad], ki [Nm/rad] loop gains; ffv, fft feed-forward factors [-];
+#: side FrictionSide (int64); LuGre fc, fs [Nm], vs [rad/s], delta [-], s0 [Nm/rad], s1, nu [Nm s/rad].
+DriveParams = namedtuple("DriveParams", "jm c d b kv kp ki ffv fft side fc fs vs delta s0 s1 nu")
+
+#: Per-joint state, arrays of shape (6,), updated in place by :func:`drive_step`:
+#: theta motor position [rad], omega motor velocity [rad/s] (both joint side), q, qd link position [rad]
+#: and velocity [rad/s], integ velocity-loop integrator [Nm], z LuGre bristle state [rad],
+#: u motor torque [Nm], tau_s gear torque [Nm], tau_f friction torque [Nm], contact Contact (int64).
+DriveState = namedtuple("DriveState", "theta omega q qd integ z u tau_s tau_f contact")
+
+#: One cycle's input, arrays of shape (6,), values at the cycle start (0) and end (1):
+#: r0, r1 commanded link positions [rad]; v0, v1 commanded velocities [rad/s]; a0, a1 commanded
+#: accelerations [rad/s^2] (linear within the cycle, for the feed-forward); load0, load1 actual
+#: load torque on the link [Nm]; model0, model1 load torque the NC's feed-forward knows [Nm];
+#: jl link inertia M_jj(q) [kg m^2].
+CycleInput = namedtuple("CycleInput", "r0 r1 v0 v1 a0 a1 load0 load1 model0 model1 jl")
+
+
+# --------------------------------------------------------------------------- per-step kernels
+
+@njit(cache=True)
+def static_friction(p, j, v):
+    """Steady-state (static) friction of joint j at velocity v [Nm]: ``sign(v) g(v) + nu v``."""
+    g = p.fc[j] + (p.fs[j] - p.fc[j]) * math.exp(-abs(v / p.vs[j]) ** p.delta[j])
+    sg = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
+    return sg * g + p.nu[j] * v
+
+
+@njit(cache=True)
+def friction_torque(p, j, v, z, h):
+    """Friction torque of joint j over a substep, velocity ``v`` [rad/s] held; returns (tau [Nm], z_new [rad]).
+
+    LuGre ``tau = s0 z + s1 z_d + nu v`` with the exact bristle update
+    ``z+ = zss + (z - zss) exp(-s0 |v| h / g(v))``, ``zss = sign(v) g(v) / s0`` (stable for any s0);
+    ``z_d`` is the mean over the substep. The single place friction enters the drive: the loop's
+    friction dispatch (any fitted model type) replaces this function.
+    """
+    g = p.fc[j] + (p.fs[j] - p.fc[j]) * math.exp(-abs(v / p.vs[j]) ** p.delta[j])
+    sg = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
+    zss = sg * g / p.s0[j]
+    zn = zss + (z - zss) * math.exp(-p.s0[j] * abs(v) * h / g)
+    return p.s0[j] * zn + p.s1[j] * (zn - z) / h + p.nu[j] * v, zn
+
+
+@njit(cache=True)
+def gear_torque(c, d, b2, delta, delta_d):
+    """Elasto-backlash gear torque [Nm] for deflection ``delta`` [rad], rate ``delta_d`` [rad/s], half play b2 [rad]."""
+    if b2 <= 0.0:
+        return c * delta + d * delta_d
+    if delta > b2:
+        t = c * (delta - b2) + d * delta_d
+        return t if t > 0.0 else 0.0
+    if delta < -b2:
+        t = c * (delta + b2) + d * delta_d
+        return t if t < 0.0 else 0.0
+    return 0.0
+
+
+@njit(cache=True)
+def _contact(delta, b2):
+    if delta > b2:
+        return 1
+    if delta < -b2:
+        return -1
+    return 0
+
+
+@njit(cache=True)
+def _hermite(s, T, p0, p1, v0, v1):
+    """Cubic Hermite reference at s in [0, 1]: position [rad], velocity [rad/s]."""
+    s2 = s * s
+    s3 = s2 * s
+    r = (2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * T * v0 + (-2 * s3 + 3 * s2) * p1 + (s3 - s2) * T * v1
+    rd = ((6 * s2 - 6 * s) * p0 + (3 * s2 - 4 * s + 1) * T * v0 + (-6 * s2 + 6 * s) * p1
+          + (3 * s2 - 2 * s) * T * v1) / T
+    return r, rd
+
+
+@njit(cache=True)
+def drive_init(p, st, r, v, load, model, jl, flags):
+    """Put ``st`` at rest-equilibrium (velocity ``v``) on the reference ``r`` [rad] under ``load`` [Nm].
+
+    The motor sits on its (windup-compensated) setpoint, the gear carries ``load`` on the flank
+    its sign selects (centred in the play at zero load), the integrator holds the torque the
+    feed-forward does not supply, friction bristles are relaxed (z = 0).
+    """
+    for j in range(N_AXES):
+        b2 = 0.5 * p.b[j] if flags & 2 else 0.0
+        fft = p.fft[j] if flags & 8 else 0.0
+        tg = fft * model[j]
+        sh = r[j] + (tg / p.c[j] if flags & 32 else 0.0)
+        sg = 1.0 if load[j] > 0 else (-1.0 if load[j] < 0 else 0.0)
+        dl = load[j] / p.c[j] + sg * b2
+        st.theta[j] = sh
+        st.q[j] = sh - dl
+        st.omega[j] = v[j]
+        st.qd[j] = v[j]
+        st.integ[j] = load[j] - fft * model[j]
+        st.z[j] = 0.0
+        st.u[j] = load[j]
+        st.tau_s[j] = load[j]
+        st.tau_f[j] = 0.0
+        st.contact[j] = _contact(dl, b2) if b2 > 0.0 else (1 if dl > 0 else (-1 if dl < 0 else 0))
+
+
+@njit(cache=True)
+def drive_step(p, st, cy, T, n_sub, flags):
+    """Advance the six drives by one cycle of ``T`` [s] in ``n_sub`` substeps; updates ``st`` in place.
+
+    Parameters
+    ----------
+    p : DriveParams
+    st : DriveState
+        State at the cycle start; holds the state at the cycle end on return (``u``, ``tau_s``,
+        ``tau_f`` are the last substep's values, ``contact`` the flank at the end).
+    cy : CycleInput
+        Reference, load and link inertia of this cycle.
+    T : float
+        Cycle time [s].
+    n_sub : int
+        Substeps (see :func:`substeps_for`).
+    flags : int
+        :class:`DriveFlags`.
+    """
+    h = T / n_sub
+    fr_on = flags & 1
+    for j in range(N_AXES):
+        b2 = 0.5 * p.b[j] if flags & 2 else 0.0
+        ffv = p.ffv[j] if flags & 4 else 0.0
+        fft = p.fft[j] if flags & 8 else 0.0
+        jm = p.jm[j]
+        jl = cy.jl[j]
+        c = p.c[j]
+        d = p.d[j]
+        side = p.side[j]
+        theta, omega, q, qd = st.theta[j], st.omega[j], st.q[j], st.qd[j]
+        integ, z = st.integ[j], st.z[j]
+        u = st.u[j]
+        ts = st.tau_s[j]
+        tf = 0.0
+        dmod = (cy.model1[j] - cy.model0[j]) / T
+        # feed-forward acceleration linear in the cycle: the cubic Hermite's own jerk would amplify
+        # the error of difference velocities (it is 3x the true jerk for central differences)
+        jerk = (cy.a1[j] - cy.a0[j]) / T
+        for i in range(n_sub):
+            sa = i / n_sub
+            sm = (i + 0.5) / n_sub
+            r, rd = _hermite(sa, T, cy.r0[j], cy.r1[j], cy.v0[j], cy.v1[j])
+            _, rdm = _hermite(sm, T, cy.r0[j], cy.r1[j], cy.v0[j], cy.v1[j])
+            rdd = cy.a0[j] + jerk * sa * T
+            rddm = cy.a0[j] + jerk * sm * T
+            mod_a = cy.model0[j] + dmod * sa * T
+            mod_m = cy.model0[j] + dmod * sm * T
+            # NC: motor setpoint (windup compensated), position P, velocity PI, feed-forward
+            th_r = r
+            th_rd = rd
+            if flags & 32:
+                # c delta + d delta_d = tau_g to first order in d/c: delta = (tau_g - (d/c) tau_g_d) / c
+                tg_d = fft * (jl * jerk + dmod)
+                th_r += (fft * (jl * rdd + mod_a) - d / c * tg_d) / c
+                th_rd += tg_d / c
+            vcmd = p.kv[j] * (th_r - theta) + ffv * th_rd
+            ev = vcmd - omega
+            integ += p.ki[j] * ev * h
+            uff = fft * ((jm + jl) * rddm + mod_m)
+            if flags & 16:
+                uff += static_friction(p, j, rdm)
+            u = p.kp[j] * ev + integ + uff
+            # friction, held over the substep at its start velocity
+            tfm = 0.0
+            tfl = 0.0
+            if fr_on:
+                tf, z = friction_torque(p, j, omega if side == 1 else qd, z, h)
+                if side == 1:
+                    tfm = tf
+                else:
+                    tfl = tf
+            load = cy.load0[j] + (cy.load1[j] - cy.load0[j]) * sm
+            # velocity Verlet: kick, drift, kick (gear torque at both ends of the substep)
+            ts = gear_torque(c, d, b2, theta - q, omega - qd)
+            omega += 0.5 * h * (u - tfm - ts) / jm
+            qd += 0.5 * h * (ts - load - tfl) / jl
+            theta += h * omega
+            q += h * qd
+            ts = gear_torque(c, d, b2, theta - q, omega - qd)
+            omega += 0.5 * h * (u - tfm - ts) / jm
+            qd += 0.5 * h * (ts - load - tfl) / jl
+        st.theta[j] = theta
+        st.omega[j] = omega
+        st.q[j] = q
+        st.qd[j] = qd
+        st.integ[j] = integ
+        st.z[j] = z
+        st.u[j] = u
+        st.tau_s[j] = ts
+        st.tau_f[j] = tf
+        dl = theta - q
+        st.contact[j] = _contact(dl, b2) if b2 > 0.0 else (1 if ts > 0 else (-1 if ts < 0 else 0))
+
+
+@njit(cache=True)
+def _run_kernel(p, st, ref, load, model, jl, t, n_sub, flags, out_q, out_th, out_ts, out_tf, out_u, out_c):
+    m = t.shape[0]
+    r, v, a = ref[0], ref[1], ref[2]
+    drive_init(p, st, r[0], v[0], load[0], model[0], jl[0], flags)
+    for k in range(m):
+        if k > 0:
+            cy = CycleInput(r[k - 1], r[k], v[k - 1], v[k], a[k - 1], a[k], load[k - 1], load[k], model[k - 1], model[k],
+                            0.5 * (jl[k - 1] + jl[k]))
+            drive_step(p, st, cy, t[k] - t[k - 1], n_sub, flags)
+        for j in range(N_AXES):
+            out_q[k, j] = st.q[j]
+            out_th[k, j] = st.theta[j]
+            out_ts[k, j] = st.tau_s[j]
+            out_tf[k, j] = st.tau_f[j]
+            out_u[k, j] = st.u[j]
+            out_c[k, j] = st.contact[j]
+
+
+# --------------------------------------------------------------------------- Python side
+
+def new_state() -> DriveState:
+    """A zeroed :class:`DriveState` (use :func:`drive_init` to put it at equilibrium)."""
+    z = [np.zeros(N_AXES) for _ in range(9)]
+    return DriveState(*z, np.zeros(N_AXES, dtype=np.int64))
+
+
+def substeps_for(p: DriveParams, jl, T: float = CYCLE, flags: int = int(DriveFlags.default())) -> int:
+    """Substeps per cycle ``T`` [s] so that ``omega_max h <= OMEGA_H`` (module docstring).
+
+    ``jl`` [kg m^2] (6,) or (M, 6): the smallest link inertia per joint along the motion is used.
+    """
+    jl_min = np.min(np.atleast_2d(np.asarray(jl, float)), axis=0)
+    w_gear = np.sqrt(p.c * (1.0 / p.jm + 1.0 / jl_min))
+    rate_d = p.d * (1.0 / p.jm + 1.0 / jl_min)
+    rate_ctl = p.kp / p.jm
+    cand = [w_gear, rate_d, rate_ctl]
+    if flags & DriveFlags.FRICTION:
+        j_side = np.where(p.side == FrictionSide.MOTOR, p.jm, jl_min)
+        cand += [np.sqrt(p.s0 / j_side), (p.s1 + p.nu) / j_side]
+    w = float(np.max(np.concatenate(cand)))
+    return max(1, int(math.ceil(w * T / OMEGA_H)))
+
+
+def drive_params(robot, *, gains=None, friction_scale: float = 1.0) -> DriveParams:
+    """The :class:`DriveParams` of a robot: rotor inertia, gear stiffness/damping/play, servo gains, friction.
+
+    Parameters
+    ----------
+    robot : simulate.robot.model.Robot
+        Needs its ``[joint.drive]`` tables (``robot.drive``) and inline LuGre friction.
+    gains : simulate.robot.model.ServoGains, optional
+        Replaces ``robot.servo``.
+    friction_scale : float
+        Multiplies the Coulomb and static levels ``fc, fs`` [-] (e.g. 2 for a doubled friction).
+
+    Raises
+    ------
+    InputError
+        No ``[joint.drive]`` table, or a friction model reference (the drive takes inline LuGre).
+    """
+    if robot.drive is None:
+        raise InputError("the drive model needs a [joint.drive] table per joint", source=robot.source or None,
+                         field="joint[1].drive")
+    lugre = []
+    for j, spec in enumerate(robot.friction):
+        if spec.lugre is None:
+            raise InputError("the drive model takes inline LuGre friction (fc, fs, vs, delta, s0, s1, nu); "
+                             "model references enter with the loop's friction dispatch",
+                             source=robot.source or None, field=f"joint[{j + 1}].friction.model")
+        lugre.append(spec.lugre)
+    gs = gains if gains is not None else robot.servo
+    col = lambda key: np.array([getattr(x, key) for x in lugre], float)  # noqa: E731
+    dr = robot.drive
+    return DriveParams(
+        jm=np.array(robot.rotor_inertia, float), c=np.array(robot.stiffness, float), d=np.array(dr.damping, float),
+        b=np.array(robot.backlash, float), kv=np.array(gs.kv, float), kp=np.array(gs.kp_vel, float),
+        ki=np.array(gs.ki_vel, float), ffv=np.array(gs.ff_vel, float), fft=np.array(gs.ff_tau, float),
+        side=np.array(dr.friction_side, dtype=np.int64),
+        fc=col("fc") * friction_scale, fs=col("fs") * friction_scale, vs=col("vs"), delta=col("delta"),
+        s0=col("s0"), s1=col("s1"), nu=col("nu"))
+
+
+def load_torques(robot, q, qd, qdd, *, wrench_tcp=None, payload=None):
+    """Load torque on each link and the link inertia, from the arm state (Newton-Euler).
+
+    ``tau_load_j = [M(q) qdd + C(q, qd) qd + g(q) - J^T w]_j - M_jj(q) qdd_j``: everything the link
+    side of gear j must carry except its own inertia, which the drive integrates (``J_l = M_jj``,
+    rotor excluded).
+
+    Parameters
+    ----------
+    robot : Robot
+    q, qd, qdd : array_like (N, 6)
+        Link positions [rad], velocities [rad/s], accelerations [rad/s^2].
+    wrench_tcp : array_like (N, 6) or (6,), optional
+        Process wrench on the tool at the TCP, base axes ``[F; M]`` [N, Nm].
+    payload : simulate.robot.dynamics.Payload, optional
+
+    Returns
+    -------
+    tau_load : ndarray (N, 6) [Nm]
+    jl : ndarray (N, 6) [kg m^2]
+    """
+    from simulate.robot.dynamics import mass_matrix, rnea
+
+    q = np.atleast_2d(np.asarray(q, float))
+    qdd = np.atleast_2d(np.asarray(qdd, float))
+    tau = np.atleast_2d(rnea(robot, q, qd, qdd, wrench_tcp=wrench_tcp, payload=payload, rotor=False))
+    M = mass_matrix(robot, q, payload=payload, rotor=False).reshape(-1, 6, 6)
+    jl = np.diagonal(M, axis1=1, axis2=2).copy()
+    return tau - jl * qdd, jl
+
+
+@dataclass(frozen=True, eq=False)
+class DriveResult:
+    """Simulated drives at the command times (arrays (M, 6) unless noted, joint side).
+
+    Attributes
+    ----------
+    t : ndarray (M,)
+        Time [s].
+    q_cmd : ndarray
+        Commanded link positions [rad].
+    q : ndarray
+        Link positions [rad] (what the kinematics sees).
+    theta : ndarray
+        Motor positions divided by the gear ratio [rad] (the encoder).
+    tau_gear : ndarray
+        Transmitted gear torque [Nm].
+    tau_friction : ndarray
+        Friction torque [Nm] (on the side ``friction_side`` says).
+    tau_motor : ndarray
+        Motor torque, joint side [Nm].
+    contact : ndarray of int8
+        :class:`Contact` per sample: +1/-1 flank, 0 in the play.
+    tau_load : ndarray
+        Load torque on the link that was applied [Nm].
+    substeps : int
+        Substeps per cycle used.
+    flags : DriveFlags
+    """
+
+    t: np.ndarray
+    q_cmd: np.ndarray
+    q: np.ndarray
+    theta: np.ndarray
+    tau_gear: np.ndarray
+    tau_friction: np.ndarray
+    tau_motor: np.ndarray
+    contact: np.ndarray
+    tau_load: np.ndarray
+    substeps: int
+    flags: DriveFlags
+
+    @property
+    def error(self) -> np.ndarray:
+        """Link following error ``q_cmd - q`` [rad]."""
+        return self.q_cmd - self.q
+
+
+def command_velocity(t, q) -> np.ndarray:
+    """Velocities of samples ``q`` at times ``t`` by second-order central differences [rad/s]."""
+    return np.gradient(q, t, axis=0, edge_order=2) if len(t) > 2 else np.gradient(q, t, axis=0)
+
+
+def simulate_drive(robot, t, q_cmd, *, tau_load=None, tau_model=None, link_inertia=None,
+                   flags: DriveFlags | None = None, friction: bool = True, backlash: bool = True,
+                   ff_friction: bool = False, params: DriveParams | None = None,
+                   substeps: int | None = None) -> DriveResult:
+    """Run the six drives along a commanded joint trajectory.
+
+    Parameters
+    ----------
+    robot : Robot
+    t : array_like (M,)
+        Command times [s], strictly increasing (normally the 2 ms cycle).
+    q_cmd : array_like (M, 6)
+        Commanded link positions [rad].
+    tau_load : array_like (M, 6), optional
+        Load torque on the links [Nm]; default :func:`load_torques` along the command (gravity and
+        inertial coupling; the command is the state where the arm is meant to be).
+    tau_model : array_like (M, 6), optional
+        Load the NC's torque feed-forward knows [Nm]; default ``tau_load`` (a process force would
+        be in ``tau_load`` only).
+    link_inertia : array_like (M, 6) or (6,), optional
+        ``J_l`` [kg m^2]; default ``M_jj`` along the command.
+    flags : DriveFlags, optional
+        Overrides ``friction``, ``backlash``, ``ff_friction`` (default :meth:`DriveFlags.default`).
+    friction, backlash, ff_friction : bool
+        Switch friction, gear play and friction feed-forward.
+    params : DriveParams, optional
+        Replaces :func:`drive_params` of the robot.
+    substeps : int, optional
+        Substeps per cycle; default :func:`substeps_for`.
+
+    Returns
+    -------
+    DriveResult
+    """
+    t = np.ascontiguousarray(np.asarray(t, float))
+    q = np.ascontiguousarray(np.asarray(q_cmd, float))
+    if t.ndim != 1 or q.shape != (t.shape[0], N_AXES):
+        raise ValueError(f"t (M,) and q_cmd (M, 6) expected, got {t.shape} and {q.shape}")
+    if t.shape[0] < 2 or not np.all(np.diff(t) > 0):
+        raise ValueError("t must be strictly increasing with at least 2 samples")
+    if flags is None:
+        flags = DriveFlags.default()
+        if not friction:
+            flags &= ~DriveFlags.FRICTION
+        if not backlash:
+            flags &= ~DriveFlags.BACKLASH
+        if ff_friction:
+            flags |= DriveFlags.FF_FRICTION
+    flags = DriveFlags(flags)
+    p = params if params is not None else drive_params(robot)
+    v = np.ascontiguousarray(command_velocity(t, q))
+    a = np.ascontiguousarray(command_velocity(t, v))
+    if tau_load is None or link_inertia is None:
+        tl, jl0 = load_torques(robot, q, v, a)
+    tl = np.ascontiguousarray(np.broadcast_to(np.asarray(tau_load if tau_load is not None else tl, float), q.shape))
+    tm = (tl if tau_model is None
+          else np.ascontiguousarray(np.broadcast_to(np.asarray(tau_model, float), q.shape)))
+    jl = np.ascontiguousarray(np.broadcast_to(np.asarray(link_inertia if link_inertia is not None else jl0, float),
+                                              q.shape))
+    if not np.all(jl > 0):
+        raise ValueError("link inertia must be > 0")
+    T = float(np.max(np.diff(t)))
+    n_sub = int(substeps) if substeps is not None else substeps_for(p, jl, T, int(flags))
+    if n_sub < 1:
+        raise ValueError("substeps must be >= 1")
+    m = t.shape[0]
+    out = [np.empty((m, N_AXES)) for _ in range(5)]
+    oc = np.empty((m, N_AXES), dtype=np.int8)
+    st = new_state()
+    _run_kernel(p, st, np.stack([q, v, a]), tl, tm, jl, t, n_sub, int(flags), *out, oc)
+    return DriveResult(t=t, q_cmd=q, q=out[0], theta=out[1], tau_gear=out[2], tau_friction=out[3], tau_motor=out[4],
+                       contact=oc, tau_load=tl, substeps=n_sub, flags=flags)
