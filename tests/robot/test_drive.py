@@ -231,3 +231,72 @@ def test_substeps_resolve_the_fastest_mode(params):
     n = substeps_for(params, JL, T)
     w = np.sqrt(params.c * (1 / params.jm + 1 / JL)).max()
     assert w * T / n <= 0.1 and n >= 1
+
+
+def test_elasto_backlash_law():
+    """Modelica ElastoBacklash: no torque in the play, c (delta -+ b/2) + d delta_d outside, and the
+    damping may not pull the flanks together (the torque keeps the flank's sign)."""
+    from simulate.robot.drive import gear_torque
+
+    c, d, b2 = 1e6, 1e3, 1e-4
+    assert gear_torque(c, d, b2, 0.5e-4, 10.0) == 0.0
+    assert gear_torque(c, d, b2, 3e-4, 0.01) == pytest.approx(c * 2e-4 + d * 0.01)
+    assert gear_torque(c, d, b2, -3e-4, -0.01) == pytest.approx(-(c * 2e-4 + d * 0.01))
+    assert gear_torque(c, d, b2, 1.1e-4, -1.0) == 0.0           # separating fast: 10 Nm spring, -1000 Nm damping
+    assert gear_torque(c, d, b2, -1.1e-4, 1.0) == 0.0
+    assert gear_torque(c, d, 0.0, 1e-6, -1.0) == pytest.approx(c * 1e-6 - d)   # no play: plain spring-damper
+
+
+@pytest.mark.parametrize("old,new,field", [
+    ("damping = 4800.0", "damping = -1.0", "joint[2].drive.damping"),
+    ("damping = 4800.0", "damping = \"soft\"", "joint[2].drive.damping"),
+    ("rated_torque = 3136.0", "rated_torque = 0.0", "joint[2].drive.rated_torque"),
+    ("rated_torque = 3136.0", "", "joint[2].drive.rated_torque"),
+])
+def test_drive_table_bad_values_name_the_key(robot_path, tmp_path, old, new, field):
+    from identify.errors import InputError
+    from simulate.robot.model import load_robot
+
+    bad = tmp_path / "bad.toml"
+    text = robot_path.read_text()
+    assert old in text
+    bad.write_text(text.replace(old, new, 1))
+    with pytest.raises(InputError) as ei:
+        load_robot(bad)
+    assert ei.value.field == field and str(bad) in str(ei.value)
+
+
+def test_drive_table_side_and_presence(robot_path, tmp_path):
+    from identify.errors import InputError
+    from simulate.robot.model import load_robot, save_robot
+
+    text = robot_path.read_text()
+    bad = tmp_path / "side.toml"
+    bad.write_text(text.replace('friction_side = "joint"', 'friction_side = "left"', 3))
+    with pytest.raises(InputError) as ei:
+        load_robot(bad)
+    assert ei.value.field == "joint[1].drive.friction_side"
+    # one joint without its table: named
+    start = text.index("[joint.drive]", text.index("# ---- joint 3 ----"))
+    stop = text.index("\n[joint.friction]", start) + 1
+    (tmp_path / "gap.toml").write_text(text[:start] + text[stop:])
+    with pytest.raises(InputError) as ei:
+        load_robot(tmp_path / "gap.toml")
+    assert ei.value.field == "joint[3].drive"
+    # none at all: loads, but the drive model refuses it naming the table
+    import re
+    none = re.sub(r"\[joint\.drive\].*\n(?:[a-z_]+ = .*\n)*", "", text)
+    (tmp_path / "none.toml").write_text(none)
+    r = load_robot(tmp_path / "none.toml")
+    assert r.drive is None
+    with pytest.raises(InputError) as ei:
+        drive_params(r)
+    assert ei.value.field == "joint[1].drive"
+    # round trip keeps the drive data, motor side included
+    r = load_robot(robot_path)
+    side = np.array(r.drive.friction_side); side[4] = int(FrictionSide.MOTOR)
+    from simulate.robot.model import DriveSpec
+    r2 = r.with_changes(drive=DriveSpec(damping=r.drive.damping, rated_torque=r.drive.rated_torque, friction_side=side))
+    back = load_robot(save_robot(r2, tmp_path / "r2.toml"))
+    assert back.equals(r2) and back.drive.friction_side[4] == FrictionSide.MOTOR
+    np.testing.assert_array_equal(back.drive.damping, r.drive.damping)
