@@ -1,0 +1,402 @@
+"""Virtual circular test (ISO 230-4, ballbar) of the robot: path, simulation, evaluation, polar plot.
+
+A circle of radius ``R`` in the plane xy, yz or zx of the workpiece frame, centred at the pose's
+workpiece origin unless given, is written as a G-code program (a 90 deg lead-in arc, the full
+circle, a 90 deg lead-out arc, all ``G3`` counter-clockwise about the plane normal or ``G2``),
+interpolated jerk-limited at the 2 ms cycle (:mod:`simulate.toolpath.interpolation`), turned
+into joint commands by the inverse kinematics, and run through the drives
+(:func:`simulate_circle`, the one place the simulation is called). Only the full circle is
+evaluated, so acceleration from and to rest is not in the trace.
+
+Evaluation of the tool positions (forward kinematics of the simulated link positions), in the
+circle's plane:
+
+- **radial deviation** per sample ``F_i = |p_i - c_LS| - R`` about the least-squares centre
+  ``c_LS`` (centring offsets removed as a ballbar evaluation does), outward positive;
+- **roundness** ``max F - min F``, the circular deviation G of ISO 230-4 (smallest radial gap of
+  two concentric circles about the least-squares centre that enclose the trace);
+- **radius error** ``R_LS - R`` (the trace's least-squares radius minus the nominal one);
+- **reversal spikes**: where a joint's commanded velocity changes sign along the circle (on a
+  robot these are the angles where glitches appear, not the Cartesian quadrants), the height is
+  the extreme of ``F - F(reversal)`` within the next ``SPIKE_WINDOW_DEG`` of the circle, signed
+  (a lost-motion step that persists counts with its full height).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+
+import numpy as np
+
+from identify.errors import InputError
+
+#: Circle plane -> (G code, in-plane axes (first, second), normal axis); angle 0 along the first axis.
+_PLANES = {"xy": (17, (0, 1), 2), "zx": (18, (2, 0), 1), "yz": (19, (1, 2), 0)}
+#: Arc length of the lead-in and lead-out arcs [deg].
+LEAD_DEG = 90.0
+#: Window after a joint reversal in which its spike is measured [deg of the circle].
+SPIKE_WINDOW_DEG = 15.0
+#: A joint reverses only where its commanded speed exceeds this share of its peak on both sides [-] ...
+REVERSAL_DEADBAND = 1e-3
+#: ... and this absolute speed [rad/s] (a joint the circle does not move only shows round-off of the IK).
+REVERSAL_MIN_SPEED = 1e-5
+
+
+class Plane(str, Enum):
+    """Plane of the circle in the workpiece frame (angle 0 along the first axis)."""
+
+    XY = "xy"
+    YZ = "yz"
+    ZX = "zx"
+
+
+@dataclass(frozen=True)
+class CircleSpec:
+    """The commanded circle.
+
+    Attributes
+    ----------
+    radius : float
+        m.
+    feed : float
+        Path speed, m/s.
+    plane : Plane
+    center : ndarray (3,)
+        Centre in the workpiece frame, m.
+    ccw : bool
+        Counter-clockwise about the plane normal (G3), else clockwise (G2).
+    """
+
+    radius: float
+    feed: float
+    plane: Plane = Plane.XY
+    center: tuple = (0.0, 0.0, 0.0)
+    ccw: bool = True
+
+    def __post_init__(self):
+        if not (math.isfinite(self.radius) and self.radius > 0):
+            raise InputError(f"radius must be finite and > 0, got {self.radius * 1e3:g} mm", field="radius-mm")
+        if not (math.isfinite(self.feed) and self.feed > 0):
+            raise InputError(f"feed must be finite and > 0, got {self.feed * 6e4:g} mm/min", field="feed-mm-min")
+        try:
+            object.__setattr__(self, "plane", Plane(self.plane))
+        except ValueError:
+            raise InputError(f"unknown plane '{self.plane}' (known: xy, yz, zx)", field="plane") from None
+        c = np.asarray(self.center, float)
+        if c.shape != (3,) or not np.all(np.isfinite(c)):
+            raise InputError("centre must be three finite numbers x,y,z", field="center-mm")
+        object.__setattr__(self, "center", tuple(float(v) for v in c))
+
+
+def circle_gcode(spec: CircleSpec) -> str:
+    """The circle as a G-code program (mm, G90): lead-in 90 deg, full circle, lead-out 90 deg."""
+    g_plane, (a1, a2), _ = _PLANES[spec.plane.value]
+    c = np.array(spec.center) * 1e3
+    R = spec.radius * 1e3
+    sgn = 1.0 if spec.ccw else -1.0
+    letters = "XYZ"
+    centre_words = "IJK"
+
+    def point(angle_deg):
+        p = c.copy()
+        p[a1] += R * math.cos(math.radians(angle_deg))
+        p[a2] += R * math.sin(math.radians(angle_deg))
+        return p
+
+    def words(p):
+        return " ".join(f"{letters[i]}{p[i]:.6f}" for i in range(3))
+
+    def arc(p_from, p_to):
+        off = c - p_from
+        return f"{'G3' if spec.ccw else 'G2'} {words(p_to)} {centre_words[a1]}{off[a1]:.6f} {centre_words[a2]}{off[a2]:.6f}"
+
+    p0, p1 = point(0.0), point(sgn * LEAD_DEG)
+    lines = [f"(virtual circular test: R {R:g} mm, F {spec.feed * 6e4:g} mm/min, plane {spec.plane.value})",
+             f"G21 G90 G94 G{g_plane}", f"G0 {words(p0)}", f"G1 {words(p0)} F{spec.feed * 6e4:.6f}",
+             arc(p0, p1), arc(p1, p1), arc(p1, point(2 * sgn * LEAD_DEG))]
+    return "\n".join(lines + ["M30"]) + "\n"
+
+
+def circle_program(spec: CircleSpec):
+    """The parsed program, starting at rest on the circle (the positioning move dropped)."""
+    from simulate.toolpath.gcode import Arc, parse_program
+
+    prog = parse_program(circle_gcode(spec), source="<circle>")
+    arcs = [s for s in prog.segments if isinstance(s, Arc)]
+    return dataclasses.replace(prog, segments=arcs, start=arcs[0].start.copy())
+
+
+@dataclass(frozen=True, eq=False)
+class CircleRun:
+    """Commanded and simulated motion along the circle program (all samples, 2 ms).
+
+    Attributes
+    ----------
+    t : ndarray (M,)
+        s.
+    segment : ndarray (M,) of int
+        0 lead-in, 1 the evaluated full circle, 2 lead-out.
+    xyz_cmd, xyz : ndarray (M, 3)
+        Commanded and simulated TCP in the workpiece frame, m.
+    q_cmd, q : ndarray (M, 6)
+        Commanded and simulated link positions, rad.
+    drive : simulate.robot.drive.DriveResult
+    spec : CircleSpec
+    """
+
+    t: np.ndarray
+    segment: np.ndarray
+    xyz_cmd: np.ndarray
+    xyz: np.ndarray
+    q_cmd: np.ndarray
+    q: np.ndarray
+    drive: object
+    spec: CircleSpec
+
+
+def simulate_circle(robot, placement, spec: CircleSpec, *, friction: bool = True, backlash: bool = True,
+                    friction_scale: float = 1.0, ff_friction: bool = False, limits=None) -> CircleRun:
+    """Simulate the circle: interpolation, inverse kinematics, drives, forward kinematics.
+
+    The single place the circle's simulation runs (no cutting: no process force). The drives get
+    the Newton-Euler load of the commanded motion (gravity and inertial coupling).
+
+    Raises
+    ------
+    InputError
+        The circle leaves the robot's reach or joint limits at this pose (``field="radius-mm"``).
+    """
+    from simulate.robot.drive import drive_params, simulate_drive
+    from simulate.robot.kinematics import fk
+    from simulate.toolpath.interpolation import interpolate
+    from simulate.toolpath.placement import joint_trajectory
+
+    if not (math.isfinite(friction_scale) and friction_scale >= 0):
+        raise InputError(f"must be finite and >= 0, got {friction_scale}", field="friction-scale")
+    prog = circle_program(spec)
+    ip = interpolate(prog, limits)
+    try:
+        jt = joint_trajectory(robot, ip, placement, source="<circle>")
+    except InputError as exc:
+        raise InputError(f"the circle (R {spec.radius * 1e3:g} mm, plane {spec.plane.value}) is not feasible at "
+                         f"pose '{placement.name}': {exc.message}", field="radius-mm") from None
+    params = drive_params(robot, friction_scale=friction_scale)
+    res = simulate_drive(robot, jt.t, jt.q, friction=friction, backlash=backlash, ff_friction=ff_friction,
+                         params=params)
+    T_wb = np.linalg.inv(placement.T)
+    p_base = fk(robot, res.q)[:, :3, 3]
+    xyz = p_base @ T_wb[:3, :3].T + T_wb[:3, 3]
+    return CircleRun(t=jt.t, segment=np.asarray(ip.segment), xyz_cmd=np.asarray(ip.xyz), xyz=xyz, q_cmd=jt.q,
+                     q=res.q, drive=res, spec=spec)
+
+
+# --------------------------------------------------------------------------- evaluation
+
+@dataclass(frozen=True)
+class ReversalSpike:
+    """A glitch where one joint reverses.
+
+    Attributes
+    ----------
+    angle_deg : float
+        Circle angle of the joint's velocity reversal [deg], 0 along the plane's first axis.
+    joint : int
+        The reversing joint, 1..6 (A1..A6).
+    height_um : float
+        Extreme of the radial deviation relative to its value at the reversal, within
+        ``SPIKE_WINDOW_DEG`` after it [µm], outward positive.
+    peak_angle_deg : float
+        Angle of that extreme [deg].
+    """
+
+    angle_deg: float
+    joint: int
+    height_um: float
+    peak_angle_deg: float
+
+    @property
+    def name(self) -> str:
+        return f"A{self.joint}"
+
+
+@dataclass(frozen=True, eq=False)
+class CircleResult:
+    """Evaluation of one circle trace.
+
+    Attributes
+    ----------
+    angle_deg : ndarray (N,)
+        Angle of each evaluated sample about the least-squares centre [deg], 0..360, in path order.
+    deviation_um : ndarray (N,)
+        Radial deviation ``|p - c_LS| - R`` [µm], outward positive.
+    q : ndarray (N, 6)
+        Simulated link positions [rad] of the samples.
+    roundness_um : float
+        Circular deviation G (ISO 230-4) [µm].
+    radius_error_um : float
+        Least-squares radius minus nominal [µm].
+    center_offset_um : ndarray (2,)
+        Least-squares centre minus nominal centre, in-plane axes [µm].
+    spikes : tuple of ReversalSpike
+    radius_m, feed_m_s : float
+        Nominal radius [m] and feed [m/s].
+    plane : str
+    """
+
+    angle_deg: np.ndarray
+    deviation_um: np.ndarray
+    q: np.ndarray
+    roundness_um: float
+    radius_error_um: float
+    center_offset_um: np.ndarray
+    spikes: tuple
+    radius_m: float
+    feed_m_s: float
+    plane: str
+
+    @property
+    def largest_spike_um(self) -> float:
+        """Largest |height| of the reversal spikes [µm] (0 when no joint reverses)."""
+        return max((abs(s.height_um) for s in self.spikes), default=0.0)
+
+    def summary(self) -> dict:
+        """Plain numbers for printing / JSON."""
+        return {"roundness_um": self.roundness_um, "radius_error_um": self.radius_error_um,
+                "center_offset_um": [float(v) for v in self.center_offset_um],
+                "largest_spike_um": self.largest_spike_um,
+                "reversal_spikes": [{"angle_deg": s.angle_deg, "joint": s.name, "height_um": s.height_um}
+                                    for s in self.spikes]}
+
+
+def joint_reversals(qd: np.ndarray, deadband: float = REVERSAL_DEADBAND,
+                    min_speed: float = REVERSAL_MIN_SPEED) -> list[tuple[int, int]]:
+    """``(sample, joint)`` where a joint velocity [rad/s] changes sign (joint 0-based).
+
+    Speeds below ``deadband`` times the joint's peak speed, or below ``min_speed`` [rad/s], count
+    as no sign; a reversal is the first sample of the new sign (a joint that does not move has none).
+    """
+    qd = np.asarray(qd, float)
+    out = []
+    for j in range(qd.shape[1]):
+        v = qd[:, j]
+        peak = np.abs(v).max() if len(v) else 0.0
+        if not peak > 0:
+            continue
+        s = np.where(np.abs(v) > max(deadband * peak, min_speed), np.sign(v), 0.0)
+        last = 0.0
+        for k in range(len(s)):
+            if s[k] == 0.0:
+                continue
+            if last != 0.0 and s[k] != last:
+                out.append((k, j))
+            last = s[k]
+    return sorted(out)
+
+
+def evaluate_circle(xyz, q, qd_cmd, spec: CircleSpec, *, window_deg: float = SPIKE_WINDOW_DEG) -> CircleResult:
+    """Evaluate one trace of the full circle.
+
+    Parameters
+    ----------
+    xyz : array_like (N, 3)
+        Tool positions in the workpiece frame [m], in path order.
+    q : array_like (N, 6)
+        Link positions [rad] (for the CSV).
+    qd_cmd : array_like (N, 6)
+        Commanded joint velocities [rad/s] (where they change sign, joints reverse).
+    spec : CircleSpec
+    window_deg : float
+        Spike window after a reversal [deg].
+    """
+    from simulate.evaluation.fits import fit_circle_ls
+
+    _, (a1, a2), _ = _PLANES[spec.plane.value]
+    p = np.asarray(xyz, float)[:, [a1, a2]]
+    fit = fit_circle_ls(p)
+    d = np.hypot(p[:, 0] - fit.center[0], p[:, 1] - fit.center[1])
+    dev = (d - spec.radius) * 1e6
+    ang = np.degrees(np.arctan2(p[:, 1] - fit.center[1], p[:, 0] - fit.center[0])) % 360.0
+    # travelled angle along the path (unwrapped, increasing) for the spike windows
+    trav = np.degrees(np.abs(np.unwrap(np.radians(ang)) - math.radians(ang[0])))
+    spikes = []
+    for k, j in joint_reversals(qd_cmd):
+        sel = np.nonzero((trav >= trav[k]) & (trav <= trav[k] + window_deg))[0]
+        rel = dev[sel] - dev[k]
+        m = int(np.argmax(np.abs(rel)))
+        spikes.append(ReversalSpike(angle_deg=float(ang[k]), joint=j + 1, height_um=float(rel[m]),
+                                    peak_angle_deg=float(ang[sel[m]])))
+    c_nom = np.array(spec.center)[[a1, a2]]
+    return CircleResult(angle_deg=ang, deviation_um=dev, q=np.asarray(q, float),
+                        roundness_um=float(dev.max() - dev.min()), radius_error_um=float((fit.radius - spec.radius) * 1e6),
+                        center_offset_um=(fit.center - c_nom) * 1e6, spikes=tuple(spikes), radius_m=spec.radius,
+                        feed_m_s=spec.feed, plane=spec.plane.value)
+
+
+def evaluate_run(run: CircleRun) -> CircleResult:
+    """Evaluate the full-circle part of a :class:`CircleRun`."""
+    from simulate.robot.drive import command_velocity
+
+    sel = run.segment == 1
+    qd = command_velocity(run.t, run.q_cmd)
+    return evaluate_circle(run.xyz[sel], run.q[sel], qd[sel], run.spec)
+
+
+# --------------------------------------------------------------------------- outputs
+
+def circle_table(result: CircleResult):
+    """The CSV table: angle [deg], radial deviation [µm], link positions q1..q6 [rad]."""
+    import pandas as pd
+
+    df = pd.DataFrame({"angle_deg": result.angle_deg, "radial_deviation_um": result.deviation_um})
+    for j in range(6):
+        df[f"q{j + 1}_rad"] = result.q[:, j]
+    return df
+
+
+def polar_plot(result: CircleResult, path: str | Path, title: str = "") -> str:
+    """A ballbar-style polar plot: radial deviation magnified about the nominal circle, spikes marked.
+
+    The radial axis is the deviation in µm (the nominal circle is the dashed 0 µm ring), so the
+    trace's shape is magnified by the ratio of the radius to the plotted deviation range.
+    """
+    from simulate.evaluation.report import _plt, _save
+
+    plt = _plt()
+    dev = result.deviation_um
+    lo, hi = float(min(dev.min(), 0.0)), float(max(dev.max(), 0.0))
+    span = max(hi - lo, 1e-3)
+    lo, hi = lo - 0.15 * span, hi + 0.15 * span
+    fig = plt.figure(figsize=(7.5, 7.5))
+    ax = fig.add_subplot(projection="polar")
+    ax.set_rorigin(lo - 1.2 * (hi - lo))
+    ax.set_ylim(lo, hi)
+    th = np.radians(result.angle_deg)
+    ax.plot(np.linspace(0, 2 * np.pi, 361), np.zeros(361), "--", color="0.5", lw=1, label="nominal (0 µm)")
+    ax.plot(th, dev, color="tab:blue", lw=1.2, label="radial deviation")
+    colours = plt.get_cmap("tab10")
+
+    def nearest(angle):
+        return int(np.argmin(np.abs((result.angle_deg - angle + 180.0) % 360.0 - 180.0)))
+
+    # joints reversing at the same sample share one spike: one mark, one label naming them all
+    groups: dict[tuple, list] = {}
+    for s in result.spikes:
+        groups.setdefault((round(s.angle_deg, 6), round(s.peak_angle_deg, 6)), []).append(s)
+    for (a_rev, a_peak), group in groups.items():
+        colour = colours(group[0].joint - 1)
+        k, kr = nearest(a_peak), nearest(a_rev)
+        ax.plot([th[kr]], [dev[kr]], marker="|", ms=14, mew=2, color=colour)
+        ax.plot([th[k]], [dev[k]], marker="o", ms=6, color=colour)
+        ax.annotate(f"{'+'.join(s.name for s in group)} {group[0].height_um:+.1f} µm", (th[k], dev[k]),
+                    textcoords="offset points", xytext=(6, 6), fontsize=9, color=colour)
+    ax.set_rlabel_position(22.5)
+    ax.set_ylabel("radial deviation [µm]", labelpad=28)
+    ax.set_title(title + (f"\n" if title else "") +
+                 f"R {result.radius_m * 1e3:g} mm, F {result.feed_m_s * 6e4:g} mm/min, plane {result.plane}: "
+                 f"roundness {result.roundness_um:.1f} µm, radius error {result.radius_error_um:+.1f} µm", fontsize=10)
+    ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.12), fontsize=8)
+    fig.text(0.98, 0.02, "o spike peak, | joint reversal; label: joint, height [µm]", ha="right", fontsize=8)
+    return _save(fig, Path(path))
