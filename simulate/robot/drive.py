@@ -356,11 +356,16 @@ def drive_params(robot, *, gains=None, friction_scale: float = 1.0) -> DrivePara
     Raises
     ------
     InputError
-        No ``[joint.drive]`` table, or a friction model reference (the drive takes inline LuGre).
+        No ``[joint.drive]`` table, an infinite (rigid) stiffness, or a friction model reference
+        (the drive takes inline LuGre).
     """
     if robot.drive is None:
         raise InputError("the drive model needs a [joint.drive] table per joint", source=robot.source or None,
                          field="joint[1].drive")
+    for j in range(N_AXES):
+        if not math.isfinite(robot.stiffness[j]):
+            raise InputError("the drive model needs a finite gear stiffness", source=robot.source or None,
+                             field=f"joint[{j + 1}].stiffness")
     lugre = []
     for j, spec in enumerate(robot.friction):
         if spec.lugre is None:

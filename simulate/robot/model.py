@@ -509,8 +509,6 @@ def _validate(r: Robot, source: str) -> None:
                 bad("must be > 0", i, "drive.rated_torque")
             if r.drive.friction_side[i] not in (0, 1):
                 bad("must be joint or motor", i, "drive.friction_side")
-            if not math.isfinite(r.stiffness[i]):
-                bad("must be finite for the drive model (a gear has a finite stiffness)", i, "stiffness")
         lg = r.friction[i].lugre
         if lg is not None:
             for key in ("fc", "fs", "vs", "s0", "s1", "nu", "delta"):

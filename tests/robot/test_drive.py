@@ -292,6 +292,11 @@ def test_drive_table_side_and_presence(robot_path, tmp_path):
     with pytest.raises(InputError) as ei:
         drive_params(r)
     assert ei.value.field == "joint[1].drive"
+    # a rigid joint (allowed for the compliance model) is refused by the drive model, naming the key
+    rigid = load_robot(robot_path).with_changes(stiffness=np.array([1e6, np.inf, 1e6, 1e5, 1e5, 1e5]))
+    with pytest.raises(InputError) as ei:
+        drive_params(rigid)
+    assert ei.value.field == "joint[2].stiffness"
     # round trip keeps the drive data, motor side included
     r = load_robot(robot_path)
     side = np.array(r.drive.friction_side); side[4] = int(FrictionSide.MOTOR)
