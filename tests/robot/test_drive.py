@@ -305,3 +305,25 @@ def test_drive_table_side_and_presence(robot_path, tmp_path):
     back = load_robot(save_robot(r2, tmp_path / "r2.toml"))
     assert back.equals(r2) and back.drive.friction_side[4] == FrictionSide.MOTOR
     np.testing.assert_array_equal(back.drive.damping, r.drive.damping)
+
+
+def test_step_api_matches_simulate_drive(robot, params):
+    """drive_init + drive_step called cycle by cycle (as a coupled loop does) reproduce simulate_drive;
+    friction feed-forward is off by default (the NC does not know the friction)."""
+    from simulate.robot.drive import CycleInput, command_velocity, drive_init, drive_step, new_state
+
+    assert not DriveFlags.default() & DriveFlags.FF_FRICTION
+    t, q = cosine(0.02, math.pi / 2, 1.0, q0=HOME_Q)
+    v = command_velocity(t, q)
+    a = command_velocity(t, v)
+    load = np.array([0.0, 1500.0, 300.0, 5.0, 10.0, 0.0])
+    ref = simulate_drive(robot, t, q, params=params, tau_load=load, link_inertia=JL)
+    st = new_state()
+    flags = int(DriveFlags.default())
+    drive_init(params, st, q[0], v[0], load, load, JL, flags)
+    for k in range(1, len(t)):
+        cy = CycleInput(q[k - 1], q[k], v[k - 1], v[k], a[k - 1], a[k], load, load, load, load, JL)
+        drive_step(params, st, cy, t[k] - t[k - 1], ref.substeps, flags)
+    np.testing.assert_allclose(st.q, ref.q[-1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(st.tau_s, ref.tau_gear[-1], rtol=1e-9, atol=1e-6)
+    np.testing.assert_array_equal(st.contact, ref.contact[-1])
