@@ -24,7 +24,7 @@ test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m ""
 
 bench: $(STAMP)
-	for b in friction diagnose robot toolpath machining ranking explain service; do $(BIN)/greybench bench $$b || exit 1; done
+	for b in friction diagnose robot toolpath machining ranking explain service circle; do $(BIN)/greybench bench $$b || exit 1; done
 
 clean:
 	rm -rf $(VENV) demo-output mlruns.db mlflow.db mlartifacts greybench-service
