@@ -21,7 +21,7 @@ gear ratio ``N``; equations and sources in ``docs/drive-model.md``)::
 * **Control** as an NC drive, evaluated every substep: position P from the motor encoder,
   velocity PI on the motor speed, velocity and torque feed-forward::
 
-      theta_r = r + [WINDUP] (tau_g - (d/c) d/dt tau_g) / c    motor setpoint (gear windup compensated)
+      theta_r = r + [WINDUP] (tau_g - (d/c) d/dt tau_g + [FF_FRICTION, joint side] g(r_d)) / c
       v_cmd   = kv (theta_r - theta) + ff_vel * d/dt theta_r
       u       = kp (v_cmd - omega) + ki int(v_cmd - omega) dt
                 + ff_tau ((J_m' + J_l) r_dd + tau_model) + [FF_FRICTION] g(r_d)
@@ -258,6 +258,10 @@ def drive_step(p, st, cy, T, n_sub, flags):
                 tg_d = fft * (jl * jerk + dmod)
                 th_r += (fft * (jl * rdd + mod_a) - d / c * tg_d) / c
                 th_rd += tg_d / c
+                if flags & 16 and side == 0:
+                    # joint-side friction the NC expects also passes the gear: its windup too
+                    # (position only: its derivative is an impulse at each reversal)
+                    th_r += static_friction(p, j, rd) / c
             vcmd = p.kv[j] * (th_r - theta) + ffv * th_rd
             ev = vcmd - omega
             integ += p.ki[j] * ev * h

@@ -327,3 +327,15 @@ def test_step_api_matches_simulate_drive(robot, params):
     np.testing.assert_allclose(st.q, ref.q[-1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(st.tau_s, ref.tau_gear[-1], rtol=1e-9, atol=1e-6)
     np.testing.assert_array_equal(st.contact, ref.contact[-1])
+
+
+def test_friction_feed_forward_compensates_the_joint_side_windup(robot, params):
+    """Joint-side Coulomb friction winds the gear by fc / c at constant speed; with the NC's friction
+    feed-forward (exact model) the windup compensation removes it."""
+    t, q = cosine(0.02, math.pi / 2, 3.2)
+    p = coulomb(params, 60.0)
+    base = FF | DriveFlags.FRICTION
+    off = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=JL, flags=base)
+    on = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=JL, flags=base | DriveFlags.FF_FRICTION)
+    assert abs(around(t, off.error, 3.0)[0]) == pytest.approx(60.0 / p.c[0], rel=0.01)
+    assert abs(around(t, on.error, 3.0)[0]) < 0.01 * 60.0 / p.c[0]
