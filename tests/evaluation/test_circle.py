@@ -201,3 +201,11 @@ def test_cli_writes_csv_png_and_json(tmp_path):
     assert list(df.columns[:2]) == ["angle_deg", "radial_deviation_um"] and "q6_rad" in df.columns
     assert (df.radial_deviation_um.max() - df.radial_deviation_um.min()) == pytest.approx(doc["roundness_um"], rel=1e-6)
     assert (out / "circle.png").stat().st_size > 10_000
+
+
+def test_bench_circle_reports_the_drive_speed():
+    r = runner.invoke(app, ["bench", "circle", "--repeats", "1"])
+    assert r.exit_code == 0, r.output
+    assert "drive cycles per CPU second" in r.output and "substeps per 2 ms cycle" in r.output
+    r = runner.invoke(app, ["bench", "circle", "--repeats", "0"])
+    assert r.exit_code == 2 and "repeats" in r.output
