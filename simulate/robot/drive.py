@@ -55,6 +55,7 @@ import numpy as np
 from numba import njit
 
 from identify.errors import InputError
+from simulate.robot.dynamics import _rnea_kernel
 
 N_AXES = 6
 CYCLE = 0.002   # s, interpolation cycle
@@ -418,6 +419,46 @@ def load_torques(robot, q, qd, qdd, *, wrench_tcp=None, payload=None):
     M = mass_matrix(robot, q, payload=payload, rotor=False).reshape(-1, 6, 6)
     jl = np.diagonal(M, axis1=1, axis2=2).copy()
     return tau - jl * qdd, jl
+
+
+#: Rigid-body data for :func:`load_torque_step`: dh (6, 4) [a, alpha, d, theta_offset]; mass (6,) [kg];
+#: com (6, 3) [m]; inertia (6, 3, 3) [kg m^2] (link frames, tool and payload merged into link 6);
+#: g0 (3,) gravity [m/s^2]; zero (6,), rows (8, 6) x 3 and out (8, 6): work arrays.
+DynParams = namedtuple("DynParams", "dh mass com inertia g0 zero q_rows qd_rows qdd_rows out")
+
+
+def dyn_params(robot, payload=None) -> DynParams:
+    """The :class:`DynParams` of a robot (optional payload on the flange, ``dynamics.Payload``)."""
+    from simulate.robot.dynamics import GRAVITY, link_parameters
+
+    mass, com, inertia = link_parameters(robot, payload)
+    dh = np.ascontiguousarray(np.stack([robot.a, robot.alpha, robot.d, robot.theta_offset], axis=1), float)
+    return DynParams(dh=dh, mass=np.ascontiguousarray(mass), com=np.ascontiguousarray(com),
+                     inertia=np.ascontiguousarray(inertia), g0=np.array(GRAVITY, float), zero=np.zeros(N_AXES),
+                     q_rows=np.zeros((8, N_AXES)), qd_rows=np.zeros((8, N_AXES)), qdd_rows=np.zeros((8, N_AXES)),
+                     out=np.zeros((8, N_AXES)))
+
+
+@njit(cache=True)
+def load_torque_step(dyn, q, qd, qdd, tau_process, out_load, out_jl):
+    """Per-step :func:`load_torques` for a compiled loop (one Newton-Euler call of 8 rows).
+
+    ``out_load = [M q_dd + C q_d + g]_j - M_jj q_dd_j + tau_process_j`` [Nm] and ``out_jl = M_jj``
+    [kg m^2] at the state ``q, qd, qdd`` (6,); ``tau_process`` (6,) is the joint torque the process
+    wrench demands, ``-J^T w`` [Nm] (the caller has J). Rows: the state; ``q, 0, e_j`` (j = 1..6);
+    ``q, 0, 0``, so ``M_jj = row_j[j] - g_j``. Not thread-safe (``dyn`` holds the work arrays).
+    """
+    for r in range(8):
+        for i in range(N_AXES):
+            dyn.q_rows[r, i] = q[i]
+            dyn.qd_rows[r, i] = qd[i] if r == 0 else 0.0
+            dyn.qdd_rows[r, i] = qdd[i] if r == 0 else (1.0 if r == i + 1 else 0.0)
+    _rnea_kernel(dyn.dh, dyn.mass, dyn.com, dyn.inertia, dyn.zero, dyn.q_rows, dyn.qd_rows, dyn.qdd_rows,
+                 dyn.g0, dyn.out)
+    for j in range(N_AXES):
+        mjj = dyn.out[j + 1, j] - dyn.out[7, j]
+        out_jl[j] = mjj
+        out_load[j] = dyn.out[0, j] - mjj * qdd[j] + tau_process[j]
 
 
 @dataclass(frozen=True, eq=False)

@@ -339,3 +339,20 @@ def test_friction_feed_forward_compensates_the_joint_side_windup(robot, params):
     on = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=JL, flags=base | DriveFlags.FF_FRICTION)
     assert abs(around(t, off.error, 3.0)[0]) == pytest.approx(60.0 / p.c[0], rel=0.01)
     assert abs(around(t, on.error, 3.0)[0]) < 0.01 * 60.0 / p.c[0]
+
+
+def test_load_torque_step_matches_load_torques(robot):
+    """The per-step (compiled-loop) load equals the vectorised one, process wrench included."""
+    from simulate.robot.drive import dyn_params, load_torque_step
+    from simulate.robot.kinematics import jacobian
+
+    rng = np.random.default_rng(11)
+    dyn = dyn_params(robot)
+    for _ in range(5):
+        q = HOME_Q + rng.normal(0, 0.2, 6)
+        qd, qdd, w = rng.normal(0, 0.5, 6), rng.normal(0, 2.0, 6), rng.normal(0, 300.0, 6)
+        tl, jl = load_torques(robot, q[None], qd[None], qdd[None], wrench_tcp=w[None])
+        out_l, out_j = np.empty(6), np.empty(6)
+        load_torque_step(dyn, q, qd, qdd, -jacobian(robot, q).T @ w, out_l, out_j)
+        np.testing.assert_allclose(out_j, jl[0], rtol=1e-10)
+        np.testing.assert_allclose(out_l, tl[0], rtol=1e-10, atol=1e-8)
