@@ -7,7 +7,7 @@ Friction references name registered MLflow models ``<robot>-axis<N>-friction`` b
 """
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -23,7 +23,8 @@ MAX_SERIES = 200_000
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # every number finite: NaN and Infinity (accepted by Python's JSON reader) are refused as 422
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 # ---- health and models ------------------------------------------------------------------
@@ -121,7 +122,7 @@ class SimulationRequest(Strict):
 
 
 class JobStatus(Strict):
-    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    model_config = ConfigDict(extra="forbid", populate_by_name=True, allow_inf_nan=False)
 
     id: str = Field(description="job id (32 hex digits)")
     kind: JobKind
@@ -134,6 +135,30 @@ class JobStatus(Strict):
     error: dict[str, Any] | None = Field(None, description="why it failed: message and, for bad input, "
                                                            "source/line/column/field/row")
     result: dict[str, Any] | None = Field(None, description="summary of the result")
+
+
+class SimulationJobStatus(JobStatus):
+    """Status of a pose simulation job (``POST /simulations``); result: ranking, poses, backend, friction."""
+
+    kind: Literal[JobKind.simulation] = Field(description="'simulation'")
+
+
+class DiagnoseJobStatus(JobStatus):
+    """Status of a friction diagnosis job (``POST /diagnose``); result: cause, ranking, baseline, extended, gain."""
+
+    kind: Literal[JobKind.diagnose] = Field(description="'diagnose'")
+
+
+class ExplainJobStatus(JobStatus):
+    """Status of an explain job (``POST /explain``); result: cause, ranking, calibrated, rms_before/after [m], gain."""
+
+    kind: Literal[JobKind.explain] = Field(description="'explain'")
+
+
+#: Any job's status: one of the kinds, told apart by ``kind`` (OpenAPI ``oneOf`` with a discriminator).
+AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus], Field(discriminator="kind")]
+STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: DiagnoseJobStatus,
+                  JobKind.explain: ExplainJobStatus}
 
 
 class RankingEntry(BaseModel):
