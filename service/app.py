@@ -158,9 +158,8 @@ class BodyLimit:
 # ---- helpers --------------------------------------------------------------------------------
 def _status(rec: JobRecord) -> JobStatus:
     return STATUS_BY_KIND[rec.kind](id=rec.id, kind=rec.kind, state=rec.state, progress=rec.progress,
-                                    message=rec.message,
-                     created=rec.created, started=rec.started, finished=rec.finished, error=rec.error,
-                     result=rec.result)
+                                    message=rec.message, created=rec.created, started=rec.started,
+                                    finished=rec.finished, error=rec.error, result=rec.result)
 
 
 def _job(request: Request, job_id: str, kind: JobKind | None = None) -> JobRecord:
@@ -318,7 +317,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
                   default_response_class=SafeJSONResponse,
                   description="Pose ranking and feature deviation reports from the robotic machining simulation "
                               "with the chosen friction models (paper 3.8). SI units unless a field says mm.",
-                  responses={401: {"model": ErrorBody}, 413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
+                  responses={400: {"model": ErrorBody}, 401: {"model": ErrorBody}, 413: {"model": ErrorBody},
+                             422: {"model": ErrorBody}})
     app.state.settings = settings
     app.state.store = store
     app.state.lock = lock
