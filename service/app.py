@@ -18,6 +18,7 @@ import io
 import json
 import math
 import sqlite3
+import threading
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Literal
@@ -288,6 +289,13 @@ def _read_csv(text: str, source: str) -> pd.DataFrame:
         raise InputError(f"not a readable CSV table: {str(exc).splitlines()[0]}", source=source) from None
 
 
+def _warm_up() -> None:
+    try:
+        import mlflow  # noqa: F401
+    except Exception:  # an import failure shows where mlflow is used, with its own message
+        pass
+
+
 # ---- app ------------------------------------------------------------------------------------
 def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     """The service app; settings from the environment when not given (validated here)."""
@@ -309,6 +317,9 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
+        # the model registry's client (mlflow) takes seconds to import: load it in the background
+        # at start so the first /models or submission does not wait for it
+        threading.Thread(target=_warm_up, name="warm-up", daemon=True).start()
         yield
         app.state.manager.shutdown()
         lock.release()
