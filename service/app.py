@@ -204,8 +204,10 @@ def _submitted(request: Request, kind: JobKind, job: dict, prepare, location: st
                             headers={"Location": f"{location}/{rec.id}"})
 
 
-def _program(body) -> tuple[str, str]:
-    """(text, source) of a named program or inline G-code, parsed once to give 422 naming the line."""
+def _program(body, limits) -> tuple[str, str]:
+    """(text, source) of a named program or inline G-code, parsed once to give 422 naming the line
+    (its length checked first: parsing a huge program is itself the cost)."""
+    from simulate.costs import check_program_size
     from simulate.toolpath.gcode import parse_program
 
     if body.program is not None:
@@ -213,8 +215,20 @@ def _program(body) -> tuple[str, str]:
         text, source = path.read_text(), path.name
     else:
         text, source = body.gcode, "gcode"
+    check_program_size(text, limits, source=source, field="program" if body.program is not None else "gcode")
     parse_program(text, source=source)
     return text, source
+
+
+def _cost(body, text: str, source: str, stock_text: str, stock_source: str, spacing_mm: float, spacing_field: str,
+          simulations: int, limits) -> None:
+    """Refuse (422 naming the field) a job whose estimated time or memory exceeds the limits."""
+    from simulate.costs import CostFields, check_machining_cost
+
+    fields = CostFields(program="program" if body.program is not None else "gcode", spacing=spacing_field,
+                        stock="stock")
+    check_machining_cost(text, stock_text, spacing_mm * 1e-3, limits, simulations=simulations, source=source,
+                         stock_source=stock_source, fields=fields)
 
 
 def _stock(body: SimulationRequest | ExplainRequest) -> tuple[str, str]:
@@ -402,10 +416,13 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     @app.post("/simulations", status_code=202, response_model=SimulationJobStatus, dependencies=keyed,
               tags=["simulations"], responses={**not_found, 429: {"model": ErrorBody}})
     def submit_simulation(body: SimulationRequest, request: Request) -> JSONResponse:
-        text, source = _program(body)
+        limits = settings.cost_limits()
+        text, source = _program(body, limits)
         stock_text, stock_source = _stock(body)
         robot = _robot(body.robot)
         poses = _poses(body)
+        _cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
+              len(poses) * (4 if body.options.shares else 1), limits)
         friction = _friction(body, robot, settings.mlflow_tracking_uri)
         job = {"program_source": source, "stock_source": stock_source, "robot": robot, "poses": poses,
                "friction": friction, "options": body.options.model_dump(),
@@ -518,8 +535,10 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     def explain(body: ExplainRequest, request: Request) -> JSONResponse:
         from simulate.toolpath.placement import parse_poses
 
-        text, source = _program(body)
-        stock_text, _ = _stock(body)
+        limits = settings.cost_limits()
+        text, source = _program(body, limits)
+        stock_text, stock_source = _stock(body)
+        _cost(body, text, source, stock_text, stock_source, body.spacing_mm, "spacing_mm", 1 + body.max_sims, limits)
         robot = _robot(body.robot)
         scan = _read_csv(body.scan_csv, "scan.csv")
         for col in ("feature", "x", "y", "z"):

@@ -24,7 +24,7 @@ variable                         meaning
 ``GREYBENCH_MAX_PROGRAM_LINES``  longest G-code program accepted [lines], default 200000
 ``GREYBENCH_MAX_CUT_SECONDS``    longest programmed machining time per pose [s] (2 ms samples),
                                  default 14400
-``GREYBENCH_MAX_JOB_MEMORY_MB``  largest estimated memory of one job [MiB], default 2048
+``GREYBENCH_MAX_JOB_MEMORY_MB``  largest estimated memory of one job [MiB], default 4096
 ``GREYBENCH_MAX_BODY_BYTES``     largest request body in bytes (413 above), default 2 MiB
 ``RAY_ADDRESS``                  when set, pose simulations run as Ray tasks on that cluster
                                  (``local`` starts a local Ray instance)
@@ -60,7 +60,7 @@ class ServiceSettings(BaseSettings):
     max_program_lines: int = Field(200_000, ge=10, le=100_000_000, description="longest program [lines]")
     max_cut_seconds: float = Field(14_400.0, gt=0, le=1e7, allow_inf_nan=False,
                                    description="longest programmed machining time per pose [s]")
-    max_job_memory_mb: float = Field(2048.0, gt=0, le=1e7, allow_inf_nan=False,
+    max_job_memory_mb: float = Field(4096.0, gt=0, le=1e7, allow_inf_nan=False,
                                      description="largest estimated memory of one job [MiB]")
     max_body_bytes: int = Field(2 * 1024 * 1024, ge=1024, le=1024 ** 3, description="largest request body [bytes]")
     ray_address: str | None = Field(None, validation_alias=AliasChoices("RAY_ADDRESS", "GREYBENCH_RAY_ADDRESS"),

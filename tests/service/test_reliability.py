@@ -36,8 +36,8 @@ def slow_program(factor: int = 10) -> str:
 
 
 #: Runs for minutes: long enough to cancel it or crash its server while it runs.
-LONG_JOB = {"gcode": slow_program(), "stock": "iso160", "pose_set": "iso160", "options": {"spacing_mm": 2.0, "shares": True},
-            "friction": ROBOT_FRICTION}
+LONG_JOB = {"gcode": slow_program(), "stock": "iso160", "pose_set": "iso160",
+            "options": {"spacing_mm": 2.0, "shares": True}, "friction": ROBOT_FRICTION}
 
 
 # ---- helpers --------------------------------------------------------------------------------
@@ -123,7 +123,8 @@ def fabricate_finished_job(data_dir: Path) -> tuple[str, dict[str, bytes]]:
              "report.json": json.dumps({"poses": [{"pose": "near", "steps": 10}],
                                         "features": [{"name": "circle", "nominal": 108.0, "tolerance": 0.02,
                                                       "deviation": {"near": 0.011}}]}).encode(),
-             "report.csv": b"feature,nominal,tolerance,pose,deviation,in_tolerance\ncircle,108.0,0.02,near,0.011,True\n",
+             "report.csv": (b"feature,nominal,tolerance,pose,deviation,in_tolerance\n"
+                            b"circle,108.0,0.02,near,0.011,True\n"),
              "workpiece/near.glb": glb}
     d = data_dir / "jobs" / rec.id
     for name, data in files.items():
@@ -137,7 +138,8 @@ def fabricate_finished_job(data_dir: Path) -> tuple[str, dict[str, bytes]]:
 
 def served_files(c: httpx.Client, job: str) -> dict[str, bytes]:
     out = {}
-    for name, url in [("ranking.json", f"/simulations/{job}/ranking"), ("report.csv", f"/simulations/{job}/report?format=csv"),
+    for name, url in [("ranking.json", f"/simulations/{job}/ranking"),
+                      ("report.csv", f"/simulations/{job}/report?format=csv"),
                       ("workpiece/near.glb", f"/simulations/{job}/workpiece/near.glb")]:
         r = c.get(url)
         assert r.status_code == 200, (url, r.status_code, r.text[:300])
@@ -218,13 +220,13 @@ def test_options_answers_with_allow_and_the_job_union_is_one_of_with_a_discrimin
     assert set(schema["discriminator"]["mapping"]) == {"simulation", "diagnose", "explain"}
 
 
-def test_schemathesis_default_checks_over_the_served_schema_find_nothing(srv):
+def test_schemathesis_default_checks_over_the_served_schema_find_nothing(srv, tmp_path):
     config = Path(__file__).with_name("schemathesis.toml")
     st = str(Path(sys.executable).parent / "st")
     r = subprocess.run([st, "--config-file", str(config), "run", f"{srv.url}/openapi.json", "-H", f"X-API-Key: {KEY}",
                         "--max-examples", "5", "--workers", "1", "--seed", "7", "--no-color",
                         "--request-timeout", "60"],
-                       capture_output=True, text=True, timeout=300)
+                       capture_output=True, text=True, timeout=300, cwd=tmp_path)  # its cache stays there
     tail = r.stdout[-3000:]
     assert r.returncode == 0, tail
     assert "generated" in tail and "failure" not in tail.split("Test cases:")[-1]
@@ -271,6 +273,22 @@ def test_a_key_beyond_its_job_limit_gets_429_while_another_key_is_served(srv):
         again = c.post("/simulations", json=LONG_JOB)
         assert again.status_code == 202
         c.delete(f"/jobs/{again.json()['id']}")
+
+
+# ---- 4. costs refused before work ---------------------------------------------------------------
+def test_costly_requests_are_refused_at_once_naming_the_field_and_the_same_within_limits_accepted(srv):
+    body = {"program": "iso320", "pose_set": "iso320", "select": ["pose1"], "friction": ROBOT_FRICTION}
+    slow = (DATA / "programs" / "iso320.nc").read_text().replace("F2000", "F0.0001")
+    with srv.client() as c:
+        r = c.post("/simulations", json={**body, "options": {"spacing_mm": 0.051}})
+        assert r.status_code == 422 and r.json()["detail"]["field"] == "options.spacing_mm", r.text
+        r = c.post("/simulations", json={**body, "program": None, "gcode": slow, "stock": "iso320"})
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"]["field"] == "gcode" and "F0.0001" in slow.splitlines()[r.json()["detail"]["line"] - 1]
+        assert c.get("/health").json()["queue"]["active"] == 0  # nothing was queued
+        r = c.post("/simulations", json={**body, "options": {"spacing_mm": 2.0}})
+        assert r.status_code == 202, r.text
+        c.delete(f"/jobs/{r.json()['id']}")
 
 
 # ---- 3. cancel means gone ----------------------------------------------------------------------
