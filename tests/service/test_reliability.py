@@ -418,3 +418,68 @@ def test_workers_and_the_processes_they_fork_die_with_their_parent(tmp_path):
             os.killpg(parent.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+
+
+# ---- soak: many clients, jobs, cancels and a crash; nothing lost ------------------------------
+SHORT_CUT = {"stock": "iso160", "pose_set": "iso160", "select": ["near"], "options": {"spacing_mm": 2.0},
+             "friction": ROBOT_FRICTION}
+UNREACHABLE = {"program": "iso160", "poses": [{"name": "far", "xyz": [9.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}],
+               "friction": ROBOT_FRICTION}
+
+
+def short_program() -> str:
+    """The 160 piece's header and its last finishing pass: a real cut of seconds."""
+    lines = (DATA / "programs" / "iso160.nc").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("(slope inner wall"))
+    return "\n".join(lines[:7] + lines[start:]) + "\n"
+
+
+@pytest.mark.slow  # about two minutes: dozens of jobs on a 2-core machine, a crash and a restart
+def test_soak_with_three_keys_cancels_and_a_crash_loses_nothing(make_server, tmp_path):
+    import random
+
+    from service.loadtest import load
+
+    rng = random.Random(21)
+    keys = [KEY, OTHER_KEY, "third-key-000111222"]
+    data = tmp_path / "soak"
+    env = dict(GREYBENCH_API_KEYS=",".join(keys), GREYBENCH_WORKERS=2, GREYBENCH_QUEUE_SIZE=6,
+               GREYBENCH_JOBS_PER_KEY=3)
+    a = make_server(data_dir=data, **env)
+    submitted: dict[str, str] = {}  # job -> key
+    statuses: dict[int, int] = {}
+    good = {"gcode": short_program(), **SHORT_CUT}
+    deadline = time.time() + 60
+    with httpx.Client(base_url=a.url, timeout=60) as c:
+        while time.time() < deadline and len(submitted) < 40:
+            key = rng.choice(keys)
+            h = {"X-API-Key": key}
+            action = rng.random()
+            if action < 0.5:
+                r = c.post("/simulations", json=good if rng.random() < 0.5 else UNREACHABLE, headers=h)
+                if r.status_code == 202:
+                    submitted[r.json()["id"]] = key
+                else:
+                    assert r.status_code == 429 and "Retry-After" in r.headers, r.text
+            elif action < 0.65 and submitted:
+                r = c.delete(f"/jobs/{rng.choice(list(submitted))}", headers=h)
+            else:
+                r = c.get(f"/jobs/{rng.choice(list(submitted))}" if submitted else "/health", headers=h)
+            statuses[r.status_code] = statuses.get(r.status_code, 0) + 1
+            time.sleep(0.2)
+        done = [j for j in submitted if c.get(f"/jobs/{j}", headers=HEADERS).json()["state"] == "succeeded"]
+        rankings = {j: c.get(f"/simulations/{j}/ranking", headers=HEADERS).json() for j in done}
+        busy = load(a.url, HEADERS, [f"/jobs/{j}" for j in list(submitted)[:5]] or ["/health"], clients=50,
+                    duration=5.0)
+        workers = job_workers(a.proc.pid)
+    a.kill()
+    wait_until(lambda: not alive(workers), 5, "workers ended with the killed server")
+    b = make_server(data_dir=data, **env)
+    with httpx.Client(base_url=b.url, headers=HEADERS, timeout=60) as c:
+        final = {j: c.get(f"/jobs/{j}").json() for j in submitted}
+        assert all(st["state"] in ("succeeded", "failed", "cancelled") for st in final.values())  # none lost
+        for j, ranking in rankings.items():
+            assert c.get(f"/simulations/{j}/ranking").json() == ranking
+    assert not any(code >= 500 for code in statuses) and busy["errors"] == 0, (statuses, busy)
+    print(f"soak: {sum(statuses.values())} requests {statuses}, {len(submitted)} jobs, {len(done)} succeeded, "
+          f"load p50 {busy['p50_ms']:.1f} ms p95 {busy['p95_ms']:.1f} ms, workers left 0")
