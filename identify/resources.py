@@ -11,7 +11,10 @@ OpenMP barriers), and a small fit runs many times slower than the sharing of cor
 quota of 1.5 cores can keep two threads busy part of the time) and an explicit setting
 (``GREYBENCH_CORES``). :func:`plan` splits those cores between a pool of worker processes and the
 threads inside each; :func:`configure_threads` applies a thread count to torch, numba and the
-OpenMP/BLAS libraries of this process (and, through the environment, of the processes it starts).
+OpenMP/BLAS libraries of this process (and, through the environment, of the processes it starts),
+and makes waiting OpenMP threads sleep rather than spin (``OMP_WAIT_POLICY=PASSIVE``): on a 2-core
+machine loaded by other processes a grey-box fit with spinning threads took 18-21 s and 35 s beside
+a busy neighbour, with passive waiting 5-9 s (``greybench bench friction`` measures it).
 """
 from __future__ import annotations
 
@@ -27,6 +30,10 @@ from identify.errors import InputError
 CORES_ENV = "GREYBENCH_CORES"
 #: Thread-count variables read by OpenMP, BLAS libraries and numba when they start.
 THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS")
+#: Waiting threads sleep instead of spinning (GNU and Intel OpenMP): a spinning thread at a barrier
+#: burns a core another process needs. Read when the OpenMP runtime loads (with torch or numba),
+#: so it must be in the environment before those imports; an explicit user setting is kept.
+PASSIVE_WAIT_ENV = {"OMP_WAIT_POLICY": "PASSIVE", "KMP_BLOCKTIME": "0"}
 
 
 def affinity_cores() -> int:
@@ -121,6 +128,8 @@ def configure_threads(n: int) -> int:
     cannot exceed the pool it started with; torch's inter-op pool can only be set before first use).
     """
     n = max(1, int(n))
+    for var, value in PASSIVE_WAIT_ENV.items():
+        os.environ.setdefault(var, value)
     for var in THREAD_ENV:
         if var == "NUMBA_NUM_THREADS" and "numba" in sys.modules:
             continue  # numba read it at import; changing it now would only confuse child processes
@@ -139,3 +148,11 @@ def configure_threads(n: int) -> int:
         except (ValueError, AttributeError):
             pass
     return n
+
+
+def configure_process(setting: int | None = None) -> ThreadPlan:
+    """Size this process's thread pools to its usable cores (one worker); call it before torch or
+    numba are imported so the OpenMP settings take effect. Returns the plan."""
+    p = plan(1, usable_cores(setting))
+    configure_threads(p.threads)
+    return p
