@@ -156,6 +156,29 @@ class BodyLimit:
         await send({"type": "http.response.body", "body": body})
 
 
+class AnswerOptions:
+    """ASGI middleware: ``OPTIONS`` on any route answers 204 with ``Allow`` (the route's methods);
+    404 for no route. No key needed: the methods are public in /openapi.json as well."""
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http" or scope["method"] != "OPTIONS":
+            return await self.app(scope, receive, send)
+        allowed: set[str] = set()
+        for route in scope["app"].router.routes:
+            match, _ = route.matches({**scope, "method": "GET"})
+            methods = getattr(route, "methods", None)
+            if match is not Match.NONE and methods:
+                allowed |= set(methods)
+        if allowed:
+            response = Response(status_code=204, headers={"Allow": ", ".join(sorted(allowed | {"OPTIONS"}))})
+        else:
+            response = SafeJSONResponse(status_code=404, content={"detail": "Not Found"})
+        await response(scope, receive, send)
+
+
 # ---- helpers --------------------------------------------------------------------------------
 def _status(rec: JobRecord) -> JobStatus:
     return STATUS_BY_KIND[rec.kind](id=rec.id, kind=rec.kind, state=rec.state, progress=rec.progress,
@@ -350,22 +373,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     app.state.manager = manager
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
 
-    @app.middleware("http")
-    async def _options(request: Request, call_next):
-        # OPTIONS on any route: 204 with the methods it allows (no key needed: the methods are
-        # public in /openapi.json as well)
-        if request.method != "OPTIONS":
-            return await call_next(request)
-        allowed: set[str] = set()
-        for route in request.app.router.routes:
-            match, _ = route.matches({**request.scope, "method": "GET"})
-            methods = getattr(route, "methods", None)
-            if match is not Match.NONE and methods:
-                allowed |= set(methods)
-        if not allowed:
-            return SafeJSONResponse(status_code=404, content={"detail": "Not Found"})
-        allow = ", ".join(sorted(allowed | {"OPTIONS"}))
-        return Response(status_code=204, headers={"Allow": allow})
+    app.add_middleware(AnswerOptions)
 
     @app.exception_handler(RequestValidationError)
     async def _schema_error(request: Request, exc: RequestValidationError):

@@ -56,5 +56,6 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                   f"transport failures or unexpected statuses")
         out.print(f"simulation job (160 test piece, 2 poses, 2 mm dexels): {job['state']} in {job['seconds']:.1f} s"
                   + ("" if job["state"] == "succeeded" else f" ({job['message']}; its ranking answers 409)"))
-        out.print(f"load: {res['requests']} requests in {res['duration']:.1f} s, {res['errors']} errors, "
-                  f"p50 {res['p50_ms']:.1f} ms, p95 {res['p95_ms']:.1f} ms")
+        out.print(f"load: {res['requests']} requests in {res['duration']:.1f} s, {res['errors']} errors "
+                  f"({res['server_errors']} 5xx), p50 {res['p50_ms']:.1f} ms, p95 {res['p95_ms']:.1f} ms, "
+                  f"throughput {res['throughput']:.0f} requests/s")
