@@ -280,6 +280,8 @@ def test_costly_requests_are_refused_at_once_naming_the_field_and_the_same_withi
     body = {"program": "iso320", "pose_set": "iso320", "select": ["pose1"], "friction": ROBOT_FRICTION}
     slow = (DATA / "programs" / "iso320.nc").read_text().replace("F2000", "F0.0001")
     with srv.client() as c:
+        # earlier cases' cancelled workers reaped first, so the count below is this case's own
+        wait_until(lambda: c.get("/health").json()["queue"]["active"] == 0, 10, "an idle server")
         r = c.post("/simulations", json={**body, "options": {"spacing_mm": 0.051}})
         assert r.status_code == 422 and r.json()["detail"]["field"] == "options.spacing_mm", r.text
         r = c.post("/simulations", json={**body, "program": None, "gcode": slow, "stock": "iso320"})
