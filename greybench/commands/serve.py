@@ -14,7 +14,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
               log_level: str = typer.Option("info", help="uvicorn log level (critical, error, warning, info, debug)")):
         """Start the REST service (uvicorn). Configuration from the environment, validated at start:
         GREYBENCH_API_KEYS (comma-separated) or GREYBENCH_DEV_MODE=1, GREYBENCH_DATA_DIR, GREYBENCH_WORKERS,
-        GREYBENCH_QUEUE_SIZE, GREYBENCH_MAX_BODY_BYTES [bytes], RAY_ADDRESS, MLFLOW_TRACKING_URI."""
+        GREYBENCH_QUEUE_SIZE, GREYBENCH_JOBS_PER_KEY, GREYBENCH_CORES, GREYBENCH_MAX_BODY_BYTES [bytes],
+        GREYBENCH_MAX_PROGRAM_LINES, GREYBENCH_MAX_CUT_SECONDS [s], GREYBENCH_MAX_JOB_MEMORY_MB [MiB],
+        RAY_ADDRESS, MLFLOW_TRACKING_URI. One server per data folder: a second one exits with code 2
+        naming the running server's pid; a damaged job store exits 2 naming the file."""
         import uvicorn
 
         from service.app import create_app
