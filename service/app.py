@@ -336,7 +336,7 @@ def _warm_up() -> None:
 # ---- app ------------------------------------------------------------------------------------
 def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     """The service app; settings from the environment when not given (validated here)."""
-    from identify.resources import plan
+    from identify.resources import plan, usable_cores
 
     settings = settings or load_settings()
     settings.data_dir.mkdir(parents=True, exist_ok=True)
@@ -344,7 +344,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     lock = DataDirLock(settings.data_dir).acquire()
     try:
         store = JobStore(settings.db_path, check=True)
-        threads = plan(settings.workers, settings.cores).threads
+        threads = plan(settings.workers, usable_cores(settings.cores)).threads  # min with affinity and quota
         manager = JobManager(store, settings.jobs_dir, workers=settings.workers, capacity=settings.capacity,
                              retry_after=settings.retry_after, per_key=settings.jobs_per_key, threads=threads,
                              ray_address=settings.ray_address)
