@@ -3,36 +3,95 @@
 ``create_app(settings)`` builds the app; ``greybench serve`` runs it with uvicorn. Every route but
 ``/health`` needs ``X-API-Key``. Bad input never gives a 5xx: schema errors and bad programs or
 records are 422 (an :class:`identify.errors.InputError` as ``detail``: message, source, line,
-column, field, row), unknown names, jobs and model references 404, unfinished results 409,
-bodies above ``GREYBENCH_MAX_BODY_BYTES`` 413, a full queue 429 with ``Retry-After``.
+column, field, row; schema errors name the field and never echo the value, so NaN, Infinity
+or a megabyte string get a short answer), requests whose estimated cost exceeds the configured
+limits 422 naming the field (:mod:`simulate.costs`), unknown names, jobs and model references 404,
+unfinished or damaged results 409 (a damaged result marks its job failed), bodies above
+``GREYBENCH_MAX_BODY_BYTES`` 413, a full queue or an API key's full share of it
+(``GREYBENCH_JOBS_PER_KEY``) 429 with ``Retry-After``. ``OPTIONS`` on any route answers 204 with
+``Allow``. One server per data folder (:class:`service.jobs.DataDirLock`); a damaged job store is
+refused at start naming the file.
 """
 from __future__ import annotations
 
 import io
 import json
+import math
+import sqlite3
+import threading
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Literal
 
 import pandas as pd
 from fastapi import Depends, FastAPI, Path as PathParam, Query, Request
-from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
+from starlette.routing import Match
 
 from identify.errors import InputError
 from service import registry
 from service.auth import require_key
-from service.jobs import JobKind, JobManager, JobRecord, JobState, JobStore, QueueFull
+from service.jobs import DataDirLock, JobKind, JobManager, JobRecord, JobState, JobStore, QueueFull, owner_of
 from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside, named_file
-from service.schemas import (DiagnoseRequest, ErrorBody, ExplainRequest, FrictionPredictRequest,
-                             FrictionPredictResponse, Health, JobStatus, ModelList, QueueInfo, Ranking, Report,
+from service.schemas import (STATUS_BY_KIND, AnyJobStatus, DiagnoseJobStatus, DiagnoseRequest, ErrorBody,
+                             ExplainJobStatus, ExplainRequest, FrictionPredictRequest, FrictionPredictResponse, Health,
+                             JobStatus, ModelList, QueueInfo, Ranking, Report, SimulationJobStatus,
                              SimulationRequest)
 from service.settings import ServiceSettings, load_settings
 
 VERSION = "0.1.0"
 
 
+#: Longest text of any string in an error answer [characters]: errors never echo a huge input.
+MAX_ERROR_TEXT = 300
+#: Longest CSV header line accepted in a request [characters], and most columns.
+MAX_CSV_HEADER_CHARS = 1000
+MAX_CSV_COLUMNS = 32
+
+
 class Conflict(RuntimeError):
-    """A result asked for before the job succeeded (409)."""
+    """A result asked for before the job succeeded, or whose files are damaged (409)."""
+
+
+def _finite(obj):
+    """``obj`` with non-finite floats as None (JSON has no NaN; a result may hold one)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+class SafeJSONResponse(JSONResponse):
+    """JSON answers that never fail on a NaN or infinity in a result (they become null)."""
+
+    def render(self, content) -> bytes:
+        return json.dumps(_finite(content), ensure_ascii=False, allow_nan=False, separators=(",", ":")).encode()
+
+
+def _short(obj):
+    """Strings in an error answer cut to :data:`MAX_ERROR_TEXT` characters."""
+    if isinstance(obj, str):
+        return obj if len(obj) <= MAX_ERROR_TEXT else obj[:MAX_ERROR_TEXT] + "..."
+    if isinstance(obj, dict):
+        return {k: _short(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_short(v) for v in obj]
+    return obj
+
+
+def _validation_detail(errors) -> list[dict]:
+    """Schema errors naming the field (``loc`` and dotted ``field``), without the offending value."""
+    out = []
+    for e in errors[:20]:
+        loc = [p if isinstance(p, int) else str(p)[:64] for p in e.get("loc", ())]
+        field = ".".join(str(p) for p in loc[1:] if p not in ("body",)) or (str(loc[0]) if loc else "")
+        out.append({"loc": loc, "field": field, "msg": str(e.get("msg", ""))[:MAX_ERROR_TEXT],
+                    "type": str(e.get("type", ""))})
+    return out
 
 
 # ---- body size ----------------------------------------------------------------------------
@@ -97,11 +156,34 @@ class BodyLimit:
         await send({"type": "http.response.body", "body": body})
 
 
+class AnswerOptions:
+    """ASGI middleware: ``OPTIONS`` on any route answers 204 with ``Allow`` (the route's methods);
+    404 for no route. No key needed: the methods are public in /openapi.json as well."""
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http" or scope["method"] != "OPTIONS":
+            return await self.app(scope, receive, send)
+        allowed: set[str] = set()
+        for route in scope["app"].router.routes:
+            match, _ = route.matches({**scope, "method": "GET"})
+            methods = getattr(route, "methods", None)
+            if match is not Match.NONE and methods:
+                allowed |= set(methods)
+        if allowed:
+            response = Response(status_code=204, headers={"Allow": ", ".join(sorted(allowed | {"OPTIONS"}))})
+        else:
+            response = SafeJSONResponse(status_code=404, content={"detail": "Not Found"})
+        await response(scope, receive, send)
+
+
 # ---- helpers --------------------------------------------------------------------------------
 def _status(rec: JobRecord) -> JobStatus:
-    return JobStatus(id=rec.id, kind=rec.kind, state=rec.state, progress=rec.progress, message=rec.message,
-                     created=rec.created, started=rec.started, finished=rec.finished, error=rec.error,
-                     result=rec.result)
+    return STATUS_BY_KIND[rec.kind](id=rec.id, kind=rec.kind, state=rec.state, progress=rec.progress,
+                                    message=rec.message, created=rec.created, started=rec.started,
+                                    finished=rec.finished, error=rec.error, result=rec.result)
 
 
 def _job(request: Request, job_id: str, kind: JobKind | None = None) -> JobRecord:
@@ -118,8 +200,37 @@ def _succeeded(rec: JobRecord) -> None:
         raise Conflict(f"job {rec.id} is {rec.state.value}, no result{reason}")
 
 
-def _program(body) -> tuple[str, str]:
-    """(text, source) of a named program or inline G-code, parsed once to give 422 naming the line."""
+def _result(request: Request, rec: JobRecord, name: str, read):
+    """``read(path)`` of a result file of a succeeded job; a missing, altered or unreadable file
+    marks the job failed and answers 409 naming the job and the file."""
+    from service.jobs import file_digest
+
+    _succeeded(rec)
+    d = request.app.state.manager.job_dir(rec.id)
+    path = inside(d, *name.split("/"))
+    expected = request.app.state.store.files(rec.id)
+    try:
+        if expected is not None and name in expected and file_digest(path) != expected[name]:
+            raise ValueError("its content changed after the job wrote it")
+        return read(path)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        reason = (f"result file {name} of job {rec.id} is damaged or missing ({str(exc)[:120]}); "
+                  f"the job is marked failed, submit it again")
+        request.app.state.store.mark_damaged(rec.id, reason)
+        raise Conflict(reason) from None
+
+
+def _submitted(request: Request, kind: JobKind, job: dict, prepare, location: str) -> JSONResponse:
+    rec = request.app.state.manager.submit(kind, job, prepare=prepare,
+                                           owner=owner_of(getattr(request.state, "api_key", None)))
+    return SafeJSONResponse(status_code=202, content=_status(rec).model_dump(mode="json"),
+                            headers={"Location": f"{location}/{rec.id}"})
+
+
+def _program(body, limits) -> tuple[str, str]:
+    """(text, source) of a named program or inline G-code, parsed once to give 422 naming the line
+    (its length checked first: parsing a huge program is itself the cost)."""
+    from simulate.costs import check_program_size
     from simulate.toolpath.gcode import parse_program
 
     if body.program is not None:
@@ -127,8 +238,20 @@ def _program(body) -> tuple[str, str]:
         text, source = path.read_text(), path.name
     else:
         text, source = body.gcode, "gcode"
+    check_program_size(text, limits, source=source, field="program" if body.program is not None else "gcode")
     parse_program(text, source=source)
     return text, source
+
+
+def _cost(body, text: str, source: str, stock_text: str, stock_source: str, spacing_mm: float, spacing_field: str,
+          simulations: int, limits) -> None:
+    """Refuse (422 naming the field) a job whose estimated time or memory exceeds the limits."""
+    from simulate.costs import CostFields, check_machining_cost
+
+    fields = CostFields(program="program" if body.program is not None else "gcode", spacing=spacing_field,
+                        stock="stock")
+    check_machining_cost(text, stock_text, spacing_mm * 1e-3, limits, simulations=simulations, source=source,
+                         stock_source=stock_source, fields=fields)
 
 
 def _stock(body: SimulationRequest | ExplainRequest) -> tuple[str, str]:
@@ -192,54 +315,96 @@ def _friction(body: SimulationRequest, robot: str, tracking_uri: str | None) -> 
 
 
 def _read_csv(text: str, source: str) -> pd.DataFrame:
+    header = text[:MAX_CSV_HEADER_CHARS + 2].split("\n", 1)[0]
+    if len(header) > MAX_CSV_HEADER_CHARS:
+        raise InputError(f"header line longer than {MAX_CSV_HEADER_CHARS} characters", source=source, line=1)
+    if header.count(",") >= MAX_CSV_COLUMNS:
+        raise InputError(f"more than {MAX_CSV_COLUMNS} columns in the header", source=source, line=1)
     try:
         return pd.read_csv(io.StringIO(text))
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeError, ValueError) as exc:
         raise InputError(f"not a readable CSV table: {str(exc).splitlines()[0]}", source=source) from None
 
 
+def _warm_up() -> None:
+    try:
+        import mlflow  # noqa: F401
+    except Exception:  # an import failure shows where mlflow is used, with its own message
+        pass
+
+
 # ---- app ------------------------------------------------------------------------------------
 def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     """The service app; settings from the environment when not given (validated here)."""
+    from identify.resources import plan, usable_cores
+
     settings = settings or load_settings()
     settings.data_dir.mkdir(parents=True, exist_ok=True)
-    store = JobStore(settings.db_path)
+    # the lock first: a second server must not touch (recover) the first one's jobs
+    lock = DataDirLock(settings.data_dir).acquire()
+    try:
+        store = JobStore(settings.db_path, check=True)
+        threads = plan(settings.workers, usable_cores(settings.cores)).threads  # min with affinity and quota
+        manager = JobManager(store, settings.jobs_dir, workers=settings.workers, capacity=settings.capacity,
+                             retry_after=settings.retry_after, per_key=settings.jobs_per_key, threads=threads,
+                             ray_address=settings.ray_address)
+    except BaseException:
+        lock.release()
+        raise
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
+        # the model registry's client (mlflow) takes seconds to import: load it in the background
+        # at start so the first /models or submission does not wait for it
+        threading.Thread(target=_warm_up, name="warm-up", daemon=True).start()
         yield
         app.state.manager.shutdown()
+        lock.release()
 
     app = FastAPI(title="greybench service", version=VERSION, lifespan=lifespan,
+                  default_response_class=SafeJSONResponse,
                   description="Pose ranking and feature deviation reports from the robotic machining simulation "
                               "with the chosen friction models (paper 3.8). SI units unless a field says mm.",
-                  responses={401: {"model": ErrorBody}, 413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
+                  responses={400: {"model": ErrorBody}, 401: {"model": ErrorBody}, 413: {"model": ErrorBody},
+                             422: {"model": ErrorBody}})
     app.state.settings = settings
     app.state.store = store
-    app.state.manager = JobManager(store, settings.jobs_dir, workers=settings.workers, capacity=settings.capacity,
-                                   retry_after=settings.retry_after, ray_address=settings.ray_address)
+    app.state.lock = lock
+    app.state.manager = manager
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+
+    app.add_middleware(AnswerOptions)
+
+    @app.exception_handler(RequestValidationError)
+    async def _schema_error(request: Request, exc: RequestValidationError):
+        return SafeJSONResponse(status_code=422, content={"detail": _validation_detail(exc.errors())})
 
     @app.exception_handler(InputError)
     async def _input_error(request: Request, exc: InputError):
-        return JSONResponse(status_code=422, content={"detail": exc.to_dict()})
+        return SafeJSONResponse(status_code=422, content={"detail": _short(exc.to_dict())})
+
+    @app.exception_handler(sqlite3.DatabaseError)
+    async def _store_error(request: Request, exc: sqlite3.DatabaseError):
+        # the job store broke while serving: name it, never a traceback
+        return SafeJSONResponse(status_code=503, content={"detail": f"job store {settings.db_path} unusable: "
+                                                                    f"{str(exc)[:200]}"})
 
     @app.exception_handler(NotFound)
     async def _not_found(request: Request, exc: NotFound):
-        return JSONResponse(status_code=404, content={"detail": exc.message})
+        return SafeJSONResponse(status_code=404, content={"detail": _short(exc.message)})
 
     @app.exception_handler(registry.ModelNotFound)
     async def _model_not_found(request: Request, exc: registry.ModelNotFound):
-        return JSONResponse(status_code=404, content={"detail": exc.message})
+        return SafeJSONResponse(status_code=404, content={"detail": _short(exc.message)})
 
     @app.exception_handler(QueueFull)
     async def _queue_full(request: Request, exc: QueueFull):
-        return JSONResponse(status_code=429, content={"detail": str(exc)},
+        return SafeJSONResponse(status_code=429, content={"detail": str(exc)},
                             headers={"Retry-After": str(exc.retry_after)})
 
     @app.exception_handler(Conflict)
     async def _conflict(request: Request, exc: Conflict):
-        return JSONResponse(status_code=409, content={"detail": str(exc)})
+        return SafeJSONResponse(status_code=409, content={"detail": _short(str(exc))})
 
     keyed = [Depends(require_key)]
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
@@ -256,13 +421,16 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     def models() -> ModelList:
         return ModelList(models=registry.list_models(settings.mlflow_tracking_uri))
 
-    @app.post("/simulations", status_code=202, response_model=JobStatus, dependencies=keyed, tags=["simulations"],
-              responses={**not_found, 429: {"model": ErrorBody}})
+    @app.post("/simulations", status_code=202, response_model=SimulationJobStatus, dependencies=keyed,
+              tags=["simulations"], responses={**not_found, 429: {"model": ErrorBody}})
     def submit_simulation(body: SimulationRequest, request: Request) -> JSONResponse:
-        text, source = _program(body)
+        limits = settings.cost_limits()
+        text, source = _program(body, limits)
         stock_text, stock_source = _stock(body)
         robot = _robot(body.robot)
         poses = _poses(body)
+        _cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
+              len(poses) * (4 if body.options.shares else 1), limits)
         friction = _friction(body, robot, settings.mlflow_tracking_uri)
         job = {"program_source": source, "stock_source": stock_source, "robot": robot, "poses": poses,
                "friction": friction, "options": body.options.model_dump(),
@@ -272,17 +440,15 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
             (d / "program.nc").write_text(text)
             (d / "stock.json").write_text(stock_text)
 
-        rec = request.app.state.manager.submit(JobKind.simulation, job, prepare=prepare)
-        return JSONResponse(status_code=202, content=_status(rec).model_dump(mode="json"),
-                            headers={"Location": f"/simulations/{rec.id}"})
+        return _submitted(request, JobKind.simulation, job, prepare, "/simulations")
 
-    @app.get("/simulations/{job_id}", response_model=JobStatus, dependencies=keyed, tags=["simulations"],
-             responses=not_found)
+    @app.get("/simulations/{job_id}", response_model=SimulationJobStatus, dependencies=keyed,
+             tags=["simulations"], responses=not_found)
     def simulation_status(request: Request, job_id: str = job_id_param) -> JobStatus:
         return _status(_job(request, job_id, JobKind.simulation))
 
-    @app.delete("/simulations/{job_id}", response_model=JobStatus, dependencies=keyed, tags=["simulations"],
-                responses=not_found)
+    @app.delete("/simulations/{job_id}", response_model=SimulationJobStatus, dependencies=keyed,
+                tags=["simulations"], responses=not_found)
     def cancel_simulation(request: Request, job_id: str = job_id_param) -> JobStatus:
         _job(request, job_id, JobKind.simulation)
         return _status(request.app.state.manager.cancel(job_id))
@@ -291,9 +457,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
              responses={**not_found, 409: {"model": ErrorBody}})
     def ranking(request: Request, job_id: str = job_id_param) -> Ranking:
         rec = _job(request, job_id, JobKind.simulation)
-        _succeeded(rec)
-        doc = json.loads((request.app.state.manager.job_dir(job_id) / "ranking.json").read_text())
-        return Ranking(job=job_id, ranking=doc["ranking"])
+        return _result(request, rec, "ranking.json",
+                       lambda p: Ranking(job=job_id, ranking=json.loads(p.read_text())["ranking"]))
 
     @app.get("/simulations/{job_id}/report", response_model=Report, dependencies=keyed, tags=["simulations"],
              responses={**not_found, 409: {"model": ErrorBody},
@@ -301,12 +466,15 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     def report(request: Request, job_id: str = job_id_param,
                format: Literal["json", "csv"] = Query("json", description="json or csv")):
         rec = _job(request, job_id, JobKind.simulation)
-        _succeeded(rec)
-        d = request.app.state.manager.job_dir(job_id)
         if format == "csv":
-            return PlainTextResponse((d / "report.csv").read_text(), media_type="text/csv")
-        doc = json.loads((d / "report.json").read_text())
-        return Report(job=job_id, poses=doc["poses"], features=doc["features"])
+            return _result(request, rec, "report.csv",
+                           lambda p: PlainTextResponse(p.read_text(), media_type="text/csv"))
+
+        def read(p: Path) -> Report:
+            doc = json.loads(p.read_text())
+            return Report(job=job_id, poses=doc["poses"], features=doc["features"])
+
+        return _result(request, rec, "report.json", read)
 
     @app.get("/simulations/{job_id}/workpiece/{pose}.glb", dependencies=keyed, tags=["simulations"],
              response_class=FileResponse,
@@ -317,10 +485,17 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         rec = _job(request, job_id, JobKind.simulation)
         _succeeded(rec)
         check_name(pose, "pose")
-        path = inside(request.app.state.manager.job_dir(job_id) / "workpiece", f"{pose}.glb")
-        if not path.is_file():
+        if pose not in (rec.result or {}).get("poses", []):
             raise NotFound(f"no workpiece for pose '{pose}' in job {job_id}")
-        return FileResponse(path, media_type="model/gltf-binary", filename=f"{pose}.glb")
+
+        def read(p: Path) -> FileResponse:
+            with p.open("rb") as f:
+                head = f.read(12)
+            if len(head) < 12 or head[:4] != b"glTF" or int.from_bytes(head[8:12], "little") != p.stat().st_size:
+                raise ValueError("not a complete binary glTF file")
+            return FileResponse(p, media_type="model/gltf-binary", filename=f"{pose}.glb")
+
+        return _result(request, rec, f"workpiece/{pose}.glb", read)
 
     @app.post("/friction/predict", response_model=FrictionPredictResponse, dependencies=keyed, tags=["friction"],
               responses=not_found)
@@ -348,7 +523,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         return FrictionPredictResponse(model=resolved.to_dict(), tau=[float(x) for x in tau],
                                        tau_friction=[float(x) for x in tau_f])
 
-    @app.post("/diagnose", status_code=202, response_model=JobStatus, dependencies=keyed, tags=["jobs"],
+    @app.post("/diagnose", status_code=202, response_model=DiagnoseJobStatus, dependencies=keyed, tags=["jobs"],
               responses={429: {"model": ErrorBody}})
     def diagnose(body: DiagnoseRequest, request: Request) -> JSONResponse:
         from identify.records import validate_frame
@@ -360,18 +535,18 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
             (d / "train.csv").write_text(body.train_csv)
             (d / "test.csv").write_text(body.test_csv)
 
-        rec = request.app.state.manager.submit(JobKind.diagnose, {"seed": body.seed, "generations": body.generations},
-                                               prepare=prepare)
-        return JSONResponse(status_code=202, content=_status(rec).model_dump(mode="json"),
-                            headers={"Location": f"/jobs/{rec.id}"})
+        return _submitted(request, JobKind.diagnose, {"seed": body.seed, "generations": body.generations}, prepare,
+                          "/jobs")
 
-    @app.post("/explain", status_code=202, response_model=JobStatus, dependencies=keyed, tags=["jobs"],
+    @app.post("/explain", status_code=202, response_model=ExplainJobStatus, dependencies=keyed, tags=["jobs"],
               responses={**not_found, 429: {"model": ErrorBody}})
     def explain(body: ExplainRequest, request: Request) -> JSONResponse:
         from simulate.toolpath.placement import parse_poses
 
-        text, source = _program(body)
-        stock_text, _ = _stock(body)
+        limits = settings.cost_limits()
+        text, source = _program(body, limits)
+        stock_text, stock_source = _stock(body)
+        _cost(body, text, source, stock_text, stock_source, body.spacing_mm, "spacing_mm", 1 + body.max_sims, limits)
         robot = _robot(body.robot)
         scan = _read_csv(body.scan_csv, "scan.csv")
         for col in ("feature", "x", "y", "z"):
@@ -395,15 +570,13 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
         job = {"program_source": source, "robot": robot, "pose": pose, "spacing_mm": body.spacing_mm,
                "max_sims": body.max_sims}
-        rec = request.app.state.manager.submit(JobKind.explain, job, prepare=prepare)
-        return JSONResponse(status_code=202, content=_status(rec).model_dump(mode="json"),
-                            headers={"Location": f"/jobs/{rec.id}"})
+        return _submitted(request, JobKind.explain, job, prepare, "/jobs")
 
-    @app.get("/jobs/{job_id}", response_model=JobStatus, dependencies=keyed, tags=["jobs"], responses=not_found)
+    @app.get("/jobs/{job_id}", response_model=AnyJobStatus, dependencies=keyed, tags=["jobs"], responses=not_found)
     def job_status(request: Request, job_id: str = job_id_param) -> JobStatus:
         return _status(_job(request, job_id))
 
-    @app.delete("/jobs/{job_id}", response_model=JobStatus, dependencies=keyed, tags=["jobs"], responses=not_found)
+    @app.delete("/jobs/{job_id}", response_model=AnyJobStatus, dependencies=keyed, tags=["jobs"], responses=not_found)
     def cancel_job(request: Request, job_id: str = job_id_param) -> JobStatus:
         _job(request, job_id)
         return _status(request.app.state.manager.cancel(job_id))

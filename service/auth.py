@@ -25,4 +25,5 @@ def require_key(request: Request, key: str | None = Security(api_key_header)) ->
     if not key_ok(key, request.app.state.settings.keys()):
         raise HTTPException(status_code=401, detail=f"missing or invalid {HEADER} header",
                             headers={"WWW-Authenticate": HEADER})
+    request.state.api_key = key  # the job owner (per-key limits)
     return key

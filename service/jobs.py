@@ -1,38 +1,55 @@
-"""Jobs: a SQLite job store that survives restarts, and a bounded pool of worker processes.
+"""Jobs: a SQLite job store that survives restarts, and supervised worker processes.
 
 Design
 ------
-- :class:`JobStore` keeps one row per job (kind, state, progress, request, result summary, error)
-  in SQLite (WAL journal, so the worker processes can write progress while the server reads).
-  Every server start has a *boot id*; on start, :meth:`JobStore.recover` marks the jobs another boot
-  left ``queued`` or ``running`` as ``failed`` with the reason (the process that ran them is gone).
-  Workers end themselves when the server process disappears; and a worker only finishes a job
-  whose row is still ``running`` under its own boot id, so a worker orphaned by a killed server
-  cannot overwrite what the new server recorded.
-- :class:`JobManager` runs jobs in a :class:`concurrent.futures.ProcessPoolExecutor` (``spawn``
-  start method: safe next to the server's threads) and admits at most ``workers + queue_size``
-  unfinished jobs; beyond that :class:`QueueFull` (the API answers 429 with ``Retry-After``).
-- Cancelling: a queued job is cancelled at once; a running one is marked ``cancelled`` and the
-  worker stops at its next progress report (cooperative: processes are never killed mid-write).
+- :class:`JobStore` keeps one row per job (kind, state, owner, progress, request, result summary,
+  error, worker pid) in SQLite (WAL journal, so the worker processes can write progress while the
+  server reads). Every server start has a *boot id*; on start, :meth:`JobStore.recover` marks the
+  jobs another boot left ``queued`` or ``running`` as ``failed`` with the reason, and ends any
+  process of theirs that is somehow still alive. A worker only finishes a job whose row is still
+  ``running`` under its own boot id, so nothing late can overwrite what the new server recorded.
+  A damaged database file is refused with :class:`identify.errors.InputError` naming the file.
+- :class:`DataDirLock`: one server per data folder. The server holds an exclusive ``flock`` on
+  ``<data_dir>/server.pid`` for its lifetime (the kernel drops it when the process dies, also on
+  ``kill -9``); a second server on the same folder is refused naming the running server's pid,
+  before it touches the job store.
+- :class:`JobManager` admits at most ``capacity`` unfinished jobs (and ``per_key`` per API key;
+  beyond either :class:`QueueFull`, the API answers 429 with ``Retry-After``) and runs each job in
+  a fresh ``spawn`` process of its own, started by one supervisor thread, at most ``workers`` at
+  once. Each worker process leads its own process group, so a cancel ends it and everything it
+  started (``killpg`` with SIGKILL) within a supervisor tick. No worker outlives its server: on
+  Linux the kernel sends SIGKILL to a worker when the server dies (``PR_SET_PDEATHSIG``, also set in
+  every process the worker forks); elsewhere a watchdog thread polls the parent pid.
 - Results live in ``<data_dir>/jobs/<id>/`` (files written by the job, renamed into place) and a
   small JSON summary in the row.
 """
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import hashlib
 import json
 import multiprocessing
+import os
+import shutil
+import signal
 import sqlite3
+import sys
 import threading
 import time
 import uuid
-from concurrent.futures import Future, ProcessPoolExecutor
+from collections import deque
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 from typing import Callable
 
+from identify.errors import InputError
+
 #: Reason recorded for jobs cut off by a restart.
 RESTART_REASON = "the service stopped while this job was {state} (server restart); submit it again"
+#: Reason recorded for a job whose worker process ended without recording an end.
+WORKER_DIED_REASON = "the worker process ended unexpectedly ({how}); submit it again"
 
 
 class JobState(str, Enum):
@@ -58,15 +75,20 @@ class JobKind(str, Enum):
 
 
 class QueueFull(RuntimeError):
-    """The bounded queue is full; retry after ``retry_after`` seconds."""
+    """The bounded queue (or the caller's share of it) is full; retry after ``retry_after`` seconds."""
 
-    def __init__(self, retry_after: int):
-        super().__init__(f"the job queue is full; retry after {retry_after} s")
+    def __init__(self, retry_after: int, message: str | None = None):
+        super().__init__(message or f"the job queue is full; retry after {retry_after} s")
         self.retry_after = retry_after
 
 
 class JobCancelled(RuntimeError):
     """Raised inside a worker when its job was cancelled."""
+
+
+def owner_of(api_key: str | None) -> str:
+    """The owner recorded with a job: a short digest of the API key (the key itself is never stored)."""
+    return hashlib.sha256((api_key or "").encode()).hexdigest()[:16]
 
 
 @dataclass(frozen=True)
@@ -88,6 +110,10 @@ class JobRecord:
         Summary of the result (files are in the job folder).
     error : dict or None
         ``{"message": ..., "source"/"line"/...}`` when failed or cancelled.
+    boot : str
+        Boot id of the server that admitted the job.
+    owner : str
+        Digest of the API key that submitted it (:func:`owner_of`).
     """
 
     id: str
@@ -102,6 +128,7 @@ class JobRecord:
     result: dict | None
     error: dict | None
     boot: str
+    owner: str = ""
 
 
 _SCHEMA = """
@@ -112,35 +139,77 @@ CREATE TABLE IF NOT EXISTS jobs (
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);
 """
+#: Columns added after the first release (added to older stores on open).
+_ADDED = {"owner": "TEXT NOT NULL DEFAULT ''", "pid": "INTEGER", "pid_start": "TEXT", "files": "TEXT"}
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file (hex): recorded when a job succeeds, checked when a result is served."""
+    h = hashlib.sha256()
+    with Path(path).open("rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def folder_digests(folder: Path) -> dict[str, str]:
+    """``relative/path -> sha256`` of every file under ``folder``."""
+    folder = Path(folder)
+    return {p.relative_to(folder).as_posix(): file_digest(p) for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
 class JobStore:
-    """Job records in SQLite at ``path``; usable from the server and from worker processes."""
+    """Job records in SQLite at ``path``; usable from the server and from worker processes.
 
-    def __init__(self, path: str | Path):
+    Raises :class:`InputError` naming the file when it is not a readable job store; with
+    ``check=True`` (the server at start) the whole file is verified (``PRAGMA quick_check``).
+    """
+
+    def __init__(self, path: str | Path, *, check: bool = False):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._local = threading.local()
-        with self._conn() as c:
-            c.executescript(_SCHEMA)
+        try:
+            conn = self._conn()
+            conn.executescript(_SCHEMA)
+            have = {row[1] for row in conn.execute("PRAGMA table_info(jobs)")}
+            for col, decl in _ADDED.items():
+                if col not in have:
+                    conn.execute(f"ALTER TABLE jobs ADD COLUMN {col} {decl}")
+            if check:
+                problems = [r[0] for r in conn.execute("PRAGMA quick_check(3)")]
+                if problems != ["ok"]:
+                    raise sqlite3.DatabaseError("; ".join(str(p) for p in problems))
+                conn.execute("SELECT id, request, result, error FROM jobs").fetchall()
+        except sqlite3.DatabaseError as exc:
+            self.close()
+            raise InputError(f"damaged job store ({str(exc)[:200]}); move the file away to start with an "
+                             f"empty store", source=str(self.path)) from None
 
     def _conn(self) -> sqlite3.Connection:
         conn = getattr(self._local, "conn", None)
         if conn is None:
             conn = sqlite3.connect(self.path, timeout=30.0, isolation_level=None, check_same_thread=False)
+            self._local.conn = conn
+            conn.execute("PRAGMA busy_timeout=30000")
             conn.execute("PRAGMA journal_mode=WAL")
             conn.execute("PRAGMA synchronous=NORMAL")
-            conn.execute("PRAGMA busy_timeout=30000")
-            self._local.conn = conn
         return conn
 
+    def close(self) -> None:
+        conn = getattr(self._local, "conn", None)
+        if conn is not None:
+            conn.close()
+            self._local.conn = None
+
     # ---- writes ----------------------------------------------------------------------
-    def create(self, kind: JobKind, request: dict, boot: str) -> JobRecord:
+    def create(self, kind: JobKind, request: dict, boot: str, owner: str = "") -> JobRecord:
         job_id = uuid.uuid4().hex
         now = time.time()
         self._conn().execute(
-            "INSERT INTO jobs (id, kind, state, boot, created, progress, message, request) VALUES (?,?,?,?,?,?,?,?)",
-            (job_id, kind.value, JobState.queued.value, boot, now, 0.0, "queued", json.dumps(request)))
+            "INSERT INTO jobs (id, kind, state, boot, created, progress, message, request, owner) "
+            "VALUES (?,?,?,?,?,?,?,?,?)",
+            (job_id, kind.value, JobState.queued.value, boot, now, 0.0, "queued", json.dumps(request), owner))
         return self.get(job_id)
 
     def start(self, job_id: str, boot: str) -> bool:
@@ -149,6 +218,10 @@ class JobStore:
             "UPDATE jobs SET state=?, started=?, message=? WHERE id=? AND state=? AND boot=?",
             (JobState.running.value, time.time(), "running", job_id, JobState.queued.value, boot))
         return cur.rowcount == 1
+
+    def set_worker(self, job_id: str, pid: int, pid_start: str | None) -> None:
+        """Record the worker process (pid and its start time, to recognise it after a crash)."""
+        self._conn().execute("UPDATE jobs SET pid=?, pid_start=? WHERE id=?", (pid, pid_start, job_id))
 
     def report(self, job_id: str, progress: float, message: str) -> JobState | None:
         """Record progress of a running job; returns the job's state (to notice a cancel)."""
@@ -159,15 +232,26 @@ class JobStore:
         return None if row is None else JobState(row[0])
 
     def finish(self, job_id: str, boot: str, state: JobState, *, result: dict | None = None,
-               error: dict | None = None, message: str = "") -> bool:
-        """Close a job that is still queued/running under ``boot``; False if it was closed already."""
+               error: dict | None = None, message: str = "", files: dict[str, str] | None = None) -> bool:
+        """Close a job that is still queued/running under ``boot``; False if it was closed already.
+
+        ``files`` maps the result files (relative paths) to their SHA-256, checked when served.
+        """
         cur = self._conn().execute(
-            "UPDATE jobs SET state=?, finished=?, progress=COALESCE(?, progress), message=?, result=?, error=? "
-            "WHERE id=? AND boot=? AND state IN (?, ?)",
+            "UPDATE jobs SET state=?, finished=?, progress=COALESCE(?, progress), message=?, result=?, error=?, "
+            "files=? WHERE id=? AND boot=? AND state IN (?, ?)",
             (state.value, time.time(), 1.0 if state is JobState.succeeded else None, message or state.value,
              None if result is None else json.dumps(result), None if error is None else json.dumps(error),
-             job_id, boot, JobState.queued.value, JobState.running.value))
+             None if files is None else json.dumps(files), job_id, boot, JobState.queued.value,
+             JobState.running.value))
         return cur.rowcount == 1
+
+    def mark_damaged(self, job_id: str, reason: str) -> None:
+        """A succeeded job whose result files are unreadable becomes failed with the reason."""
+        self._conn().execute(
+            "UPDATE jobs SET state=?, message=?, error=? WHERE id=? AND state=?",
+            (JobState.failed.value, reason[:500], json.dumps({"message": reason}), job_id,
+             JobState.succeeded.value))
 
     def cancel(self, job_id: str) -> JobRecord | None:
         """Mark a queued or running job cancelled; returns the record (None if unknown)."""
@@ -179,8 +263,14 @@ class JobStore:
         return self.get(job_id)
 
     def recover(self, boot: str) -> int:
-        """Fail the jobs that earlier boots left unfinished; returns how many."""
+        """Fail the jobs that earlier boots left unfinished (ending any worker of theirs still
+        alive); returns how many."""
         conn = self._conn()
+        for pid, pid_start in conn.execute(
+                "SELECT pid, pid_start FROM jobs WHERE state=? AND boot<>? AND pid IS NOT NULL",
+                (JobState.running.value, boot)).fetchall():
+            if pid_start is not None and process_start(pid) == pid_start:
+                kill_group(pid)
         n = 0
         for state in (JobState.queued, JobState.running):
             reason = RESTART_REASON.format(state=state.value)
@@ -193,35 +283,121 @@ class JobStore:
     # ---- reads -----------------------------------------------------------------------
     def get(self, job_id: str) -> JobRecord | None:
         row = self._conn().execute(
-            "SELECT id, kind, state, created, started, finished, progress, message, request, result, error, boot "
-            "FROM jobs WHERE id=?", (job_id,)).fetchone()
+            "SELECT id, kind, state, created, started, finished, progress, message, request, result, error, boot, "
+            "owner FROM jobs WHERE id=?", (job_id,)).fetchone()
         if row is None:
             return None
         return JobRecord(id=row[0], kind=JobKind(row[1]), state=JobState(row[2]), created=row[3], started=row[4],
                          finished=row[5], progress=float(row[6] or 0.0), message=row[7], request=json.loads(row[8]),
                          result=None if row[9] is None else json.loads(row[9]),
-                         error=None if row[10] is None else json.loads(row[10]), boot=row[11])
+                         error=None if row[10] is None else json.loads(row[10]), boot=row[11], owner=row[12] or "")
 
-    def count(self, states: tuple[JobState, ...] = (JobState.queued, JobState.running)) -> int:
+    def files(self, job_id: str) -> dict[str, str] | None:
+        """The result files' SHA-256 recorded when the job succeeded (None for older jobs)."""
+        row = self._conn().execute("SELECT files FROM jobs WHERE id=?", (job_id,)).fetchone()
+        return None if row is None or row[0] is None else json.loads(row[0])
+
+    def count(self, states: tuple[JobState, ...] = (JobState.queued, JobState.running),
+              owner: str | None = None) -> int:
+        """Jobs in ``states`` (of one ``owner`` when given)."""
         marks = ",".join("?" * len(states))
-        return int(self._conn().execute(f"SELECT COUNT(*) FROM jobs WHERE state IN ({marks})",
-                                        tuple(s.value for s in states)).fetchone()[0])
+        sql = f"SELECT COUNT(*) FROM jobs WHERE state IN ({marks})"
+        args: tuple = tuple(s.value for s in states)
+        if owner is not None:
+            sql += " AND owner=?"
+            args += (owner,)
+        return int(self._conn().execute(sql, args).fetchone()[0])
 
 
-# ---- worker side ---------------------------------------------------------------------
-def _exit_with_parent(parent_pid: int, interval: float = 0.5) -> None:
-    """Pool initializer: end this worker when the server process is gone.
+# ---- one server per data folder -------------------------------------------------------------
+class DataDirLock:
+    """Exclusive lock on a data folder for one server process (``<folder>/server.pid``).
 
-    A killed server leaves its workers orphaned (re-parented); without this they would run their
-    job to the end and burn the shared cores. The job's row stays ``running`` and the next start
-    marks it failed with the reason.
+    ``acquire()`` raises :class:`InputError` naming the folder and the pid of the server holding it.
+    The lock is an ``flock`` on an open file: the kernel releases it when the holder dies.
     """
-    import os
+
+    def __init__(self, folder: Path):
+        self.folder = Path(folder)
+        self.path = self.folder / "server.pid"
+        self._fd: int | None = None
+
+    def acquire(self) -> "DataDirLock":
+        import fcntl
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.read(fd, 32).decode(errors="replace").strip() or "unknown"
+            os.close(fd)
+            raise InputError(f"already served by another greybench serve (pid {holder}); stop it or set "
+                             f"GREYBENCH_DATA_DIR to another folder", source=str(self.folder),
+                             field="GREYBENCH_DATA_DIR") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        self._fd = fd
+        return self
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # closing drops the flock
+            self._fd = None
+
+
+# ---- processes --------------------------------------------------------------------------
+PR_SET_PDEATHSIG = 1
+
+
+def process_start(pid: int) -> str | None:
+    """Start time of a process (clock ticks since boot, from /proc), or None when unknown/gone."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat[stat.rindex(")") + 2:].split()[19]
+
+
+def kill_group(pid: int) -> None:
+    """SIGKILL the process group led by ``pid`` (falls back to the process alone)."""
+    try:
+        os.killpg(pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
+def _set_parent_death_signal() -> bool:
+    """Ask the kernel to SIGKILL this process when its parent (thread) dies; Linux only."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        return libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def die_with_parent(parent_pid: int, interval: float = 0.5) -> None:
+    """Make this process (and every process it forks later) end when ``parent_pid`` is gone."""
+    linux = _set_parent_death_signal()
+    if os.getppid() != parent_pid:  # the parent died before the signal was armed
+        os._exit(3)
+    if linux:
+        # forked children (e.g. a process pool of the pipeline) die with this process in turn
+        os.register_at_fork(after_in_child=_set_parent_death_signal)
+        return
 
     def watch() -> None:
         while True:
             if os.getppid() != parent_pid:
-                os._exit(3)
+                try:
+                    os.killpg(0, signal.SIGKILL)
+                finally:
+                    os._exit(3)
             time.sleep(interval)
 
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
@@ -229,11 +405,10 @@ def _exit_with_parent(parent_pid: int, interval: float = 0.5) -> None:
 
 def run_in_worker(db_path: str, boot: str, job_id: str, kind: str, request: dict, job_dir: str,
                   ray_address: str | None) -> str:
-    """Entry point of a worker process: run one job and record its end in the store.
+    """Run one job in this process and record its end in the store.
 
     Imports the pipeline lazily so the server process stays light.
     """
-    from identify.errors import InputError
     from service import pipeline
 
     store = JobStore(db_path)
@@ -256,16 +431,34 @@ def run_in_worker(db_path: str, boot: str, job_id: str, kind: str, request: dict
         store.finish(job_id, boot, JobState.failed, error={"message": str(exc), "missing": exc.missing},
                      message=str(exc))
         return JobState.failed.value
+    except MemoryError:
+        msg = "out of memory: the job needs more memory than this machine gives it"
+        store.finish(job_id, boot, JobState.failed, error={"message": msg}, message=msg)
+        return JobState.failed.value
     except Exception as exc:  # a bug or resource problem: recorded, never lost
         msg = f"internal error: {type(exc).__name__}: {exc}"
         store.finish(job_id, boot, JobState.failed, error={"message": msg}, message=msg[:500])
         return JobState.failed.value
-    store.finish(job_id, boot, JobState.succeeded, result=result, message="done")
+    store.finish(job_id, boot, JobState.succeeded, result=result, message="done", files=folder_digests(Path(job_dir)))
     return JobState.succeeded.value
 
 
+def _worker_main(parent_pid: int, threads: int, db_path: str, boot: str, job_id: str, kind: str, request: dict,
+                 job_dir: str, ray_address: str | None) -> None:
+    """Entry point of a worker process: own process group, dies with the server, sized thread pools."""
+    try:
+        os.setpgid(0, 0)
+    except OSError:
+        pass
+    die_with_parent(parent_pid)
+    from identify.resources import configure_threads
+
+    configure_threads(threads)
+    run_in_worker(db_path, boot, job_id, kind, request, job_dir, ray_address)
+
+
 class JobManager:
-    """Admission, submission and cancellation of jobs over a bounded process pool.
+    """Admission, submission and cancellation of jobs over supervised worker processes.
 
     Parameters
     ----------
@@ -273,75 +466,152 @@ class JobManager:
     jobs_dir : Path
         Parent of the per-job result folders.
     workers : int
-        Worker processes.
+        Jobs running at once (one process each).
     capacity : int
         Unfinished jobs admitted at once (running + waiting).
     retry_after : int
         Seconds suggested to a client refused with :class:`QueueFull`.
+    per_key : int, optional
+        Unfinished jobs admitted at once per owner (API key); default: ``capacity``.
+    threads : int
+        Threads each worker's torch/numba pools may use (see :mod:`identify.resources`).
     ray_address : str, optional
         Passed to the jobs: pose simulations as Ray tasks.
     """
 
+    #: Seconds between supervisor passes (reaping, starting) when nothing wakes it earlier.
+    TICK = 0.2
+
     def __init__(self, store: JobStore, jobs_dir: Path, *, workers: int, capacity: int, retry_after: int,
-                 ray_address: str | None = None):
+                 per_key: int | None = None, threads: int = 1, ray_address: str | None = None):
         self.store = store
         self.jobs_dir = Path(jobs_dir)
         self.jobs_dir.mkdir(parents=True, exist_ok=True)
+        self.workers = workers
         self.capacity = capacity
+        self.per_key = per_key or capacity
         self.retry_after = retry_after
+        self.threads = max(1, int(threads))
         self.ray_address = ray_address
         self.boot = uuid.uuid4().hex
         self.recovered = store.recover(self.boot)
-        import os
-
-        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                         initializer=_exit_with_parent, initargs=(os.getpid(),))
-        self._futures: dict[str, Future] = {}
+        self._ctx = multiprocessing.get_context("spawn")
+        self._pending: deque[tuple[str, JobKind, dict]] = deque()
+        self._running: dict[str, multiprocessing.process.BaseProcess] = {}
         self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        # One long-lived thread starts every worker: the kernel's parent-death signal follows the
+        # creating *thread*, so workers must not be started from short-lived request threads.
+        self._thread = threading.Thread(target=self._supervise, name="job-supervisor", daemon=True)
+        self._thread.start()
 
     def job_dir(self, job_id: str) -> Path:
         return self.jobs_dir / job_id
 
-    def submit(self, kind: JobKind, request: dict, prepare: Callable[[Path], None] | None = None) -> JobRecord:
-        """Admit and start a job; raises :class:`QueueFull` when the bounded queue is full.
+    def submit(self, kind: JobKind, request: dict, prepare: Callable[[Path], None] | None = None,
+               owner: str = "") -> JobRecord:
+        """Admit and queue a job; raises :class:`QueueFull` when the queue or the owner's share is full.
 
         ``prepare(job_dir)`` may write inputs (e.g. the program text) before the job is queued.
         """
         with self._lock:
-            self._futures = {k: f for k, f in self._futures.items() if not f.done()}
-            if len(self._futures) >= self.capacity:
+            if self.store.count() >= self.capacity:
                 raise QueueFull(self.retry_after)
-            rec = self.store.create(kind, request, self.boot)
+            mine = self.store.count(owner=owner)
+            if mine >= self.per_key:
+                raise QueueFull(self.retry_after, f"this API key has {mine} unfinished jobs, the limit per key "
+                                                  f"(GREYBENCH_JOBS_PER_KEY) is {self.per_key}; retry after "
+                                                  f"{self.retry_after} s")
+            rec = self.store.create(kind, request, self.boot, owner)
             d = self.job_dir(rec.id)
-            d.mkdir(parents=True, exist_ok=True)
-            if prepare is not None:
-                prepare(d)
-            fut = self._pool.submit(run_in_worker, str(self.store.path), self.boot, rec.id, kind.value, request,
-                                    str(d), self.ray_address)
-            fut.add_done_callback(lambda f, job_id=rec.id: self._on_done(job_id, f))
-            self._futures[rec.id] = fut
+            try:
+                d.mkdir(parents=True, exist_ok=True)
+                if prepare is not None:
+                    prepare(d)
+            except BaseException:
+                self.store.finish(rec.id, self.boot, JobState.failed, error={"message": "could not store the inputs"})
+                raise
+            self._pending.append((rec.id, kind, request))
+        self._wake.set()
         return rec
 
-    def _on_done(self, job_id: str, fut: Future) -> None:
-        # The worker records its own end; this catches a worker that died (BrokenProcessPool) or a
-        # job cancelled before it started.
-        if fut.cancelled():
-            return
-        exc = fut.exception()
-        if exc is not None:
-            msg = f"worker process failed: {type(exc).__name__}: {exc}"
-            self.store.finish(job_id, self.boot, JobState.failed, error={"message": msg}, message=msg[:500])
-
     def cancel(self, job_id: str) -> JobRecord | None:
+        """Cancel a queued job, or end the worker process group of a running one at once."""
         with self._lock:
-            fut = self._futures.get(job_id)
-            if fut is not None:
-                fut.cancel()  # succeeds only while queued in the pool
-        return self.store.cancel(job_id)
+            rec = self.store.cancel(job_id)
+            self._pending = deque(p for p in self._pending if p[0] != job_id)
+            proc = self._running.get(job_id)
+            if proc is not None and proc.pid is not None:
+                kill_group(proc.pid)
+        self._wake.set()
+        return rec
 
     def active(self) -> int:
         with self._lock:
-            return sum(1 for f in self._futures.values() if not f.done())
+            return len(self._pending) + len(self._running)
+
+    def running_pids(self) -> dict[str, int]:
+        """Worker pid per running job (what a cancel or shutdown ends)."""
+        with self._lock:
+            return {k: p.pid for k, p in self._running.items() if p.pid is not None}
+
+    # ---- supervisor ----------------------------------------------------------------------
+    def _supervise(self) -> None:
+        while not self._stop.is_set():
+            self._wake.wait(self.TICK)
+            self._wake.clear()
+            try:
+                self._pass()
+            except Exception as exc:  # never let the supervisor die silently: jobs would stall
+                print(f"job supervisor: {type(exc).__name__}: {exc}", file=sys.stderr)
+
+    def _pass(self) -> None:
+        with self._lock:
+            if self._stop.is_set():
+                return
+            for job_id, proc in list(self._running.items()):
+                if proc.is_alive():
+                    continue
+                proc.join()
+                del self._running[job_id]
+                code = proc.exitcode
+                if code:
+                    how = f"signal {-code}" if code < 0 else f"exit code {code}"
+                    msg = WORKER_DIED_REASON.format(how=how)
+                    self.store.finish(job_id, self.boot, JobState.failed, error={"message": msg}, message=msg)
+                rec = self.store.get(job_id)
+                if rec is not None and rec.state is JobState.cancelled:
+                    shutil.rmtree(self.job_dir(job_id), ignore_errors=True)  # partial files of a cancel
+            while self._pending and len(self._running) < self.workers:
+                job_id, kind, request = self._pending.popleft()
+                rec = self.store.get(job_id)
+                if rec is None or rec.state is not JobState.queued:
+                    continue
+                proc = self._ctx.Process(
+                    target=_worker_main, name=f"greybench-job-{job_id[:8]}",
+                    args=(os.getpid(), self.threads, str(self.store.path), self.boot, job_id, kind.value, request,
+                          str(self.job_dir(job_id)), self.ray_address))
+                proc.start()
+                self._running[job_id] = proc
+                self.store.set_worker(job_id, proc.pid, process_start(proc.pid))
 
     def shutdown(self) -> None:
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """End every worker process group; their jobs are recorded failed with the restart reason."""
+        self._stop.set()
+        self._wake.set()
+        with self._lock:
+            for job_id, proc in self._running.items():
+                if proc.pid is not None:
+                    kill_group(proc.pid)
+            for job_id, proc in self._running.items():
+                proc.join(5)
+                reason = RESTART_REASON.format(state="running")
+                self.store.finish(job_id, self.boot, JobState.failed, error={"message": reason}, message=reason)
+            for job_id, _, _ in self._pending:
+                reason = RESTART_REASON.format(state="queued")
+                self.store.finish(job_id, self.boot, JobState.failed, error={"message": reason}, message=reason)
+            self._running.clear()
+            self._pending.clear()
+        if self._thread is not threading.current_thread():
+            self._thread.join(5)

@@ -63,7 +63,9 @@ async def _load(base_url: str, headers: dict, paths: list[str], clients: int, du
                      "max_ms": max(lat[p]) * 1e3 if lat[p] else float("nan"), "rate": len(lat[p]) / wall})
     every = [x for p in paths for x in lat[p]]
     return {"clients": clients, "duration": wall, "endpoints": rows, "requests": len(every),
-            "errors": sum(errors.values()), "p50_ms": percentile_ms(every, 50), "p95_ms": percentile_ms(every, 95)}
+            "errors": sum(errors.values()), "p50_ms": percentile_ms(every, 50), "p95_ms": percentile_ms(every, 95),
+            "throughput": len(every) / wall, "server_errors": sum(n for p in paths for code, n in codes[p].items()
+                                                                 if isinstance(code, int) and code >= 500)}
 
 
 def load(base_url: str, headers: dict, paths: list[str], clients: int = 50, duration: float = 20.0,

@@ -7,7 +7,7 @@ Friction references name registered MLflow models ``<robot>-axis<N>-friction`` b
 """
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -22,8 +22,19 @@ MAX_PROGRAM_CHARS = 1_000_000
 MAX_SERIES = 200_000
 
 
+def _given(name: str, type_: str) -> dict:
+    """JSON Schema: ``name`` present and not null (of ``type_``)."""
+    return {"required": [name], "properties": {name: {"type": type_}}}
+
+
+def _exactly_one(a: str, a_type: str, b: str, b_type: str) -> dict:
+    """JSON Schema ``oneOf``: exactly one of two fields given (what the model validator enforces)."""
+    return {"oneOf": [_given(a, a_type), _given(b, b_type)]}
+
+
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # every number finite: NaN and Infinity (accepted by Python's JSON reader) are refused as 422
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 # ---- health and models ------------------------------------------------------------------
@@ -88,6 +99,13 @@ class SimulationOptions(Strict):
 
 
 class SimulationRequest(Strict):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"allOf": [
+        _exactly_one("program", "string", "gcode", "string"), _exactly_one("pose_set", "string", "poses", "array"),
+        # inline G-code needs a stock description
+        {"anyOf": [{"not": _given("gcode", "string")}, _given("stock", "string")]},
+        # 'select' picks poses of 'pose_set'
+        {"anyOf": [{"not": _given("select", "array")}, _given("pose_set", "string")]}]})
+
     program: Name | None = Field(None, description="named program in data/programs (e.g. iso160); or give gcode")
     gcode: str | None = Field(None, max_length=MAX_PROGRAM_CHARS, description="G-code text (mm, as in the program)")
     stock: Name | None = Field(None, description="stock description data/programs/<stock>.stock.json "
@@ -121,7 +139,7 @@ class SimulationRequest(Strict):
 
 
 class JobStatus(Strict):
-    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    model_config = ConfigDict(extra="forbid", populate_by_name=True, allow_inf_nan=False)
 
     id: str = Field(description="job id (32 hex digits)")
     kind: JobKind
@@ -134,6 +152,30 @@ class JobStatus(Strict):
     error: dict[str, Any] | None = Field(None, description="why it failed: message and, for bad input, "
                                                            "source/line/column/field/row")
     result: dict[str, Any] | None = Field(None, description="summary of the result")
+
+
+class SimulationJobStatus(JobStatus):
+    """Status of a pose simulation job (``POST /simulations``); result: ranking, poses, backend, friction."""
+
+    kind: Literal[JobKind.simulation] = Field(description="'simulation'")
+
+
+class DiagnoseJobStatus(JobStatus):
+    """Status of a friction diagnosis job (``POST /diagnose``); result: cause, ranking, baseline, extended, gain."""
+
+    kind: Literal[JobKind.diagnose] = Field(description="'diagnose'")
+
+
+class ExplainJobStatus(JobStatus):
+    """Status of an explain job (``POST /explain``); result: cause, ranking, calibrated, rms_before/after [m], gain."""
+
+    kind: Literal[JobKind.explain] = Field(description="'explain'")
+
+
+#: Any job's status: one of the kinds, told apart by ``kind`` (OpenAPI ``oneOf`` with a discriminator).
+AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus], Field(discriminator="kind")]
+STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: DiagnoseJobStatus,
+                  JobKind.explain: ExplainJobStatus}
 
 
 class RankingEntry(BaseModel):
@@ -199,6 +241,12 @@ class DiagnoseRequest(Strict):
 
 
 class ExplainRequest(Strict):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"allOf": [
+        _exactly_one("program", "string", "gcode", "string"),
+        {"anyOf": [{"not": _given("gcode", "string")}, _given("stock", "string")]},
+        # a pose given by name needs 'pose_set'
+        {"anyOf": [{"not": {"properties": {"pose": {"type": "string"}}}}, _given("pose_set", "string")]}]})
+
     scan_csv: str = Field(min_length=1, max_length=MAX_PROGRAM_CHARS * 8,
                           description="measured CMM points, CSV feature,x,y,z (workpiece frame) [m]")
     program: Name | None = Field(None, description="named program in data/programs; or give gcode")

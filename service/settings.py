@@ -15,7 +15,16 @@ variable                         meaning
 ``GREYBENCH_WORKERS``            worker processes running jobs (1..64), default 2
 ``GREYBENCH_QUEUE_SIZE``         jobs waiting beyond the running ones before 429 (0..10000),
                                  default 8
+``GREYBENCH_JOBS_PER_KEY``       unfinished (queued + running) jobs one API key may have;
+                                 beyond it 429 while other keys are still served, default 4
 ``GREYBENCH_RETRY_AFTER``        seconds suggested in ``Retry-After`` with a 429, default 10
+``GREYBENCH_CORES``              cores the service may use (default: the affinity mask and the
+                                 cgroup quota, :mod:`identify.resources`); each worker's torch and
+                                 numba threads get an equal share
+``GREYBENCH_MAX_PROGRAM_LINES``  longest G-code program accepted [lines], default 200000
+``GREYBENCH_MAX_CUT_SECONDS``    longest programmed machining time per pose [s] (2 ms samples),
+                                 default 14400
+``GREYBENCH_MAX_JOB_MEMORY_MB``  largest estimated memory of one job [MiB], default 4096
 ``GREYBENCH_MAX_BODY_BYTES``     largest request body in bytes (413 above), default 2 MiB
 ``RAY_ADDRESS``                  when set, pose simulations run as Ray tasks on that cluster
                                  (``local`` starts a local Ray instance)
@@ -45,7 +54,14 @@ class ServiceSettings(BaseSettings):
     data_dir: Path = Field(Path("greybench-service"), description="job store and results folder")
     workers: int = Field(2, ge=1, le=64, description="worker processes [-]")
     queue_size: int = Field(8, ge=0, le=10_000, description="waiting jobs beyond the running ones [-]")
+    jobs_per_key: int = Field(4, ge=1, le=10_000, description="unfinished jobs per API key [-]")
     retry_after: int = Field(10, ge=1, le=3600, description="Retry-After with a 429 [s]")
+    cores: int | None = Field(None, ge=1, le=4096, description="cores the service may use [-]")
+    max_program_lines: int = Field(200_000, ge=10, le=100_000_000, description="longest program [lines]")
+    max_cut_seconds: float = Field(14_400.0, gt=0, le=1e7, allow_inf_nan=False,
+                                   description="longest programmed machining time per pose [s]")
+    max_job_memory_mb: float = Field(4096.0, gt=0, le=1e7, allow_inf_nan=False,
+                                     description="largest estimated memory of one job [MiB]")
     max_body_bytes: int = Field(2 * 1024 * 1024, ge=1024, le=1024 ** 3, description="largest request body [bytes]")
     ray_address: str | None = Field(None, validation_alias=AliasChoices("RAY_ADDRESS", "GREYBENCH_RAY_ADDRESS"),
                                     description="Ray cluster for pose simulations")
@@ -82,6 +98,13 @@ class ServiceSettings(BaseSettings):
     def jobs_dir(self) -> Path:
         """Folder of per-job result folders."""
         return self.data_dir / "jobs"
+
+    def cost_limits(self):
+        """The limits the cost estimate of a job is checked against (:mod:`simulate.costs`)."""
+        from simulate.costs import CostLimits
+
+        return CostLimits(max_lines=self.max_program_lines, max_cut_seconds=self.max_cut_seconds,
+                          max_memory_bytes=self.max_job_memory_mb * 1024 ** 2)
 
     @property
     def capacity(self) -> int:

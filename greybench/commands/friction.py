@@ -499,6 +499,23 @@ def _bench_greybox(pass_samples: int, recurrent_samples: int, fit_samples: int, 
     return rows
 
 
+def _bench_busy_neighbour(samples: int, epochs: int) -> list[tuple]:
+    """Rows: a grey-box fit alone and beside a busy neighbour (every core busy), with the thread
+    pools sized to the usable cores (:mod:`identify.resources`) and with library defaults."""
+    from greybench.neighbour_bench import measure
+
+    with progress(f"grey-box fits ({samples} samples, {epochs} epochs) alone and beside a busy neighbour",
+                  total=4, enabled=True) as advance:
+        res = measure(samples, epochs, advance)
+    sized, unsized = res["sized"], res["unsized"]
+    return [("grey-box fit beside a busy neighbour, pools sized to the usable cores", f"{sized['beside_s']:.1f} s",
+             "<= 2.5x alone (fair share of the cores)",
+             f"{sized['slowdown']:.1f}x its {sized['alone_s']:.1f} s alone ({res['cores']} usable cores)"),
+            ("grey-box fit beside a busy neighbour, library default pools", f"{unsized['beside_s']:.1f} s", "",
+             f"{unsized['slowdown']:.1f}x its {unsized['alone_s']:.1f} s alone; "
+             f"{unsized['beside_s'] / sized['alone_s']:.1f}x the sized fit alone")]
+
+
 def bench_friction(
     samples: int = typer.Option(60_000, "--samples", help="Record length [samples] at 1 kHz."),
     repeats: int = typer.Option(20, "--repeats", help="Repetitions of the simulation timing."),
@@ -509,6 +526,8 @@ def bench_friction(
     greybox_fit_samples: int = typer.Option(60_000, "--greybox-fit-samples", help="UT record length [samples] of the "
                                                                                   "full grey-box fit timing (0 skips)."),
     greybox_only: bool = typer.Option(False, "--greybox-only", help="Only the grey-box rows."),
+    neighbour_samples: int = typer.Option(10_000, "--neighbour-samples", help="UT record length [samples] of the "
+                                                                              "fits beside a busy neighbour (0 skips)."),
 ) -> None:
     """LuGre simulation speed (samples/s) vs scipy solve_ivp (LSODA); GA + polish fit time;
     grey-box forward+backward time [ms] vs a step-by-step recurrent pass, and grey-box fit time [s]."""
@@ -519,6 +538,8 @@ def bench_friction(
     if greybox_fit_samples < 0:
         raise InputError("must be >= 0", field="--greybox-fit-samples")
     greybox_rows = _bench_greybox(pass_samples, recurrent_samples, greybox_fit_samples, min(repeats, 10))
+    if neighbour_samples > 0:
+        greybox_rows += _bench_busy_neighbour(neighbour_samples, epochs=60)
     if greybox_only:
         table = Table(title="bench friction (grey-box), one run")
         for col in ("item", "measured", "target", "ratio / note"):

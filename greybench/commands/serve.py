@@ -14,7 +14,10 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
               log_level: str = typer.Option("info", help="uvicorn log level (critical, error, warning, info, debug)")):
         """Start the REST service (uvicorn). Configuration from the environment, validated at start:
         GREYBENCH_API_KEYS (comma-separated) or GREYBENCH_DEV_MODE=1, GREYBENCH_DATA_DIR, GREYBENCH_WORKERS,
-        GREYBENCH_QUEUE_SIZE, GREYBENCH_MAX_BODY_BYTES [bytes], RAY_ADDRESS, MLFLOW_TRACKING_URI."""
+        GREYBENCH_QUEUE_SIZE, GREYBENCH_JOBS_PER_KEY, GREYBENCH_CORES, GREYBENCH_MAX_BODY_BYTES [bytes],
+        GREYBENCH_MAX_PROGRAM_LINES, GREYBENCH_MAX_CUT_SECONDS [s], GREYBENCH_MAX_JOB_MEMORY_MB [MiB],
+        RAY_ADDRESS, MLFLOW_TRACKING_URI. One server per data folder: a second one exits with code 2
+        naming the running server's pid; a damaged job store exits 2 naming the file."""
         import uvicorn
 
         from service.app import create_app
@@ -56,5 +59,6 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
                   f"transport failures or unexpected statuses")
         out.print(f"simulation job (160 test piece, 2 poses, 2 mm dexels): {job['state']} in {job['seconds']:.1f} s"
                   + ("" if job["state"] == "succeeded" else f" ({job['message']}; its ranking answers 409)"))
-        out.print(f"load: {res['requests']} requests in {res['duration']:.1f} s, {res['errors']} errors, "
-                  f"p50 {res['p50_ms']:.1f} ms, p95 {res['p95_ms']:.1f} ms")
+        out.print(f"load: {res['requests']} requests in {res['duration']:.1f} s, {res['errors']} errors "
+                  f"({res['server_errors']} 5xx), p50 {res['p50_ms']:.1f} ms, p95 {res['p95_ms']:.1f} ms, "
+                  f"throughput {res['throughput']:.0f} requests/s")

@@ -48,5 +48,8 @@ def test_without_a_key_only_health_answers(case, base_url):
     response = case.call(base_url=base_url, headers={"X-API-Key": "not-a-key"}, timeout=60)
     if case.path == "/health" and case.method.upper() == "GET":
         assert response.status_code == 200
+    elif case.method.upper() == "OPTIONS":  # the allowed methods, public in /openapi.json as well
+        allow = {k.lower(): v for k, v in response.headers.items()}["allow"]
+        assert response.status_code == 204 and "OPTIONS" in str(allow)
     else:
         assert response.status_code in (401, 404, 405, 413, 422), (case.method, case.path, response.status_code)
