@@ -15,9 +15,10 @@ Every fit is one run with
   measured against predicted friction (paper Fig. 3), and the friction-velocity hysteresis.
 
 Registered models are named per robot and axis (:func:`registered_name`, e.g.
-``max100-axis1-friction``); a new version becomes ``champion`` when there is none, otherwise
-``challenger``; :func:`promote` moves ``champion`` only when the challenger's test RMSE is
-lower.
+``max100-axis1-friction``); every new version becomes ``challenger`` (an untested model never
+drives a simulation by itself); only :func:`promote` makes a ``champion``: the first promotion
+of a name makes the challenger champion, later ones move ``champion`` only when the
+challenger's test RMSE is lower.
 """
 from __future__ import annotations
 
@@ -213,7 +214,7 @@ class FitRun:
     version : str or None
         Its new version.
     alias : str or None
-        ``champion`` or ``challenger`` (the alias the new version got).
+        ``challenger`` (the alias the new version got; only :func:`promote` makes a champion).
     """
 
     run_id: str
@@ -256,8 +257,7 @@ def log_fit(model: FrictionModel, train: AxisRecord, test: AxisRecord | None = N
     experiment : str
         Experiment name (created when missing).
     register : str, optional
-        Registered-model name; the new version gets ``champion`` if there is none, else
-        ``challenger``.
+        Registered-model name; the new version gets the alias ``challenger``.
     parent_run_id : str, optional
         Nest the run under this parent (``train-robot``).
     """
@@ -325,20 +325,14 @@ def log_fit(model: FrictionModel, train: AxisRecord, test: AxisRecord | None = N
 
 
 def register_version(model_uri: str, name: str) -> tuple[str, str]:
-    """Register ``model_uri`` under ``name``; alias ``champion`` if none yet, else ``challenger``."""
+    """Register ``model_uri`` under ``name`` as the ``challenger`` (champion only via :func:`promote`)."""
     mlflow = _mlflow()
-    from mlflow.exceptions import MlflowException
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient()
     mv = mlflow.register_model(model_uri, name)
-    try:
-        client.get_model_version_by_alias(name, CHAMPION)
-        alias = CHALLENGER
-    except MlflowException:
-        alias = CHAMPION
-    client.set_registered_model_alias(name, alias, mv.version)
-    return str(mv.version), alias
+    client.set_registered_model_alias(name, CHALLENGER, mv.version)
+    return str(mv.version), CHALLENGER
 
 
 @dataclass
@@ -351,19 +345,22 @@ class Promotion:
         Registered-model name.
     promoted : bool
         Whether ``champion`` moved to the challenger.
-    champion_version, challenger_version : str
-        Versions compared (champion before the decision).
+    champion_version : str or None
+        The champion before the decision (None: there was none, the challenger became the first).
+    challenger_version : str
+        The challenger compared.
     champion_rmse, challenger_rmse : float
-        Their test RMSE [Nm].
+        Their test RMSE [Nm] (champion NaN when there was none).
     improvement : float
-        champion_rmse - challenger_rmse [Nm] (positive: the challenger is better).
+        champion_rmse - challenger_rmse [Nm] (positive: the challenger is better; NaN for a first
+        champion).
     improvement_pct : float
         The same relative to the champion [%].
     """
 
     name: str
     promoted: bool
-    champion_version: str
+    champion_version: str | None
     challenger_version: str
     champion_rmse: float
     challenger_rmse: float
@@ -371,6 +368,9 @@ class Promotion:
     improvement_pct: float
 
     def message(self) -> str:
+        if self.champion_version is None:
+            return (f"{self.name}: version {self.challenger_version} becomes the first champion (test RMSE "
+                    f"{self.challenger_rmse:.4f} Nm)")
         if self.promoted:
             return (f"{self.name}: champion moved to version {self.challenger_version} (test RMSE "
                     f"{self.challenger_rmse:.4f} Nm, better by {self.improvement:.4f} Nm = {self.improvement_pct:.1f}% "
@@ -393,13 +393,14 @@ def _version_test_rmse(client, name: str, mv) -> float:
 
 
 def promote(name: str) -> Promotion:
-    """Move ``champion`` to the ``challenger`` version when its test RMSE is lower.
+    """Make the ``challenger`` version ``champion``: at once when the name has no champion yet,
+    otherwise only when the challenger's test RMSE is lower. The challenger must have been
+    tested (a ``test_rmse`` metric) in both cases; a promoted challenger loses its alias.
 
     Raises
     ------
     InputError
-        Unknown registered model, no champion or challenger alias, or a version without
-        ``test_rmse``.
+        Unknown registered model, no challenger alias, or a version without ``test_rmse``.
     """
     _mlflow()
     from mlflow.exceptions import MlflowException
@@ -410,16 +411,23 @@ def promote(name: str) -> Promotion:
         client.get_registered_model(name)
     except MlflowException:
         raise InputError("no such registered model", source=tracking_uri(), field=name) from None
-    versions = {}
-    for alias in (CHAMPION, CHALLENGER):
-        try:
-            versions[alias] = client.get_model_version_by_alias(name, alias)
-        except MlflowException:
-            raise InputError(f"has no '{alias}' alias (register another fit first)", source=name,
-                             field=alias) from None
-    champ, chall = versions[CHAMPION], versions[CHALLENGER]
-    r_champ = _version_test_rmse(client, name, champ)
+    try:
+        chall = client.get_model_version_by_alias(name, CHALLENGER)
+    except MlflowException:
+        raise InputError(f"has no '{CHALLENGER}' alias (register another fit first)", source=name,
+                         field=CHALLENGER) from None
+    try:
+        champ = client.get_model_version_by_alias(name, CHAMPION)
+    except MlflowException:
+        champ = None
     r_chall = _version_test_rmse(client, name, chall)
+    nan = float("nan")
+    if champ is None:
+        client.set_registered_model_alias(name, CHAMPION, chall.version)
+        client.delete_registered_model_alias(name, CHALLENGER)
+        return Promotion(name=name, promoted=True, champion_version=None, challenger_version=str(chall.version),
+                         champion_rmse=nan, challenger_rmse=r_chall, improvement=nan, improvement_pct=nan)
+    r_champ = _version_test_rmse(client, name, champ)
     better = r_chall < r_champ
     if better:
         client.set_registered_model_alias(name, CHAMPION, chall.version)
@@ -427,7 +435,7 @@ def promote(name: str) -> Promotion:
     diff = r_champ - r_chall
     return Promotion(name=name, promoted=better, champion_version=str(champ.version),
                      challenger_version=str(chall.version), champion_rmse=r_champ, challenger_rmse=r_chall,
-                     improvement=diff, improvement_pct=100.0 * diff / r_champ if r_champ > 0 else float("nan"))
+                     improvement=diff, improvement_pct=100.0 * diff / r_champ if r_champ > 0 else nan)
 
 
 def start_parent_run(experiment: str, run_name: str, params: dict | None = None) -> str:

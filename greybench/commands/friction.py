@@ -184,7 +184,8 @@ def fit(
     experiment: str = typer.Option("friction", "--experiment", help="MLflow experiment name."),
     track: bool = typer.Option(True, "--track/--no-track", help="Record the fit as an MLflow run (default on)."),
     register: bool = typer.Option(True, "--register/--no-register", help="Register the model as <robot>-axis<N>-friction "
-                                                                         "(alias champion if none, else challenger)."),
+                                                                         "with alias challenger (greybench promote makes "
+                                                                         "the champion)."),
     as_json: bool = typer.Option(False, "--json", help='Print {"model", "params", "train", "test", "run"} as one JSON object.'),
 ) -> None:
     """Fit a friction model (co-identifying inertia J [kg m^2] and offset c [Nm] unless the
@@ -410,7 +411,8 @@ def promote(
     name: str = typer.Option(..., "--name", help="Registered model, e.g. max100-axis1-friction."),
     as_json: bool = typer.Option(False, "--json", help="Print the decision as one JSON object (RMSE in Nm)."),
 ) -> None:
-    """Move the 'champion' alias to the 'challenger' version if its test RMSE [Nm] is lower; say by how much."""
+    """Make the 'challenger' version 'champion': at once when there is no champion yet, otherwise
+    only if its test RMSE [Nm] is lower; say by how much."""
     from identify.tracking import promote as do_promote
 
     res = do_promote(name)

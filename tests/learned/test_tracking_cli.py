@@ -40,8 +40,14 @@ def test_fit_run_params_metrics_plots_and_roundtrips(mlflow_store, short_files, 
                "--axis", "2", "--json")
     doc = _json(res)
     run_id = doc["run"]["run_id"]
-    assert doc["run"]["registered"] == "max100-axis2-friction" and doc["run"]["alias"] == "champion"
-    client = mlflow.MlflowClient(mlflow_store)
+    # a new version is only the challenger; promote makes it the first champion
+    assert doc["run"]["registered"] == "max100-axis2-friction" and doc["run"]["alias"] == "challenger"
+    client = mlflow.MlflowClient(mlflow_store, registry_uri=mlflow_store)
+    with pytest.raises(mlflow.exceptions.MlflowException):
+        client.get_model_version_by_alias("max100-axis2-friction", "champion")
+    promoted = _json(_run("promote", "--name", "max100-axis2-friction", "--json"))
+    assert promoted["promoted"] is True and promoted["champion_version"] is None
+    assert promoted["challenger_version"] == doc["run"]["version"]
     run = client.get_run(run_id)
     for key in ("train_rmse", "train_r2", "test_rmse", "test_r2"):
         assert key in run.data.metrics
@@ -68,10 +74,17 @@ def test_fit_run_params_metrics_plots_and_roundtrips(mlflow_store, short_files, 
 def test_promote_moves_champion_only_when_better(mlflow_store, short_files):
     train, test = short_files
     name = "max100-axis1-friction"
+    client = mlflow.MlflowClient(mlflow_store, registry_uri=mlflow_store)
     first = _json(_run("fit", "--model", "stribeck", "--train", train, "--test", test, "--json"))
-    assert first["run"]["alias"] == "champion"
+    assert first["run"]["alias"] == "challenger"  # never champion by itself, even in a fresh store
+    with pytest.raises(mlflow.exceptions.MlflowException):
+        client.get_model_version_by_alias(name, "champion")
+    res = _run("promote", "--name", name)
+    assert res.exit_code == 0 and "version 1 becomes the first champion" in res.stdout
+    assert str(client.get_model_version_by_alias(name, "champion").version) == "1"
     worse = _json(_run("fit", "--model", "coulomb-viscous", "--train", train, "--test", test, "--json"))
     assert worse["run"]["alias"] == "challenger"
+    assert str(client.get_model_version_by_alias(name, "champion").version) == "1"
     doc = _json(_run("promote", "--name", name, "--json"))
     assert doc["promoted"] is False and doc["champion_version"] == "1"
     assert doc["improvement"] == pytest.approx(first["test"]["rmse"] - worse["test"]["rmse"])
@@ -79,12 +92,23 @@ def test_promote_moves_champion_only_when_better(mlflow_store, short_files):
     assert better["run"]["alias"] == "challenger" and better["test"]["rmse"] < first["test"]["rmse"]
     res = _run("promote", "--name", name)
     assert res.exit_code == 0 and "champion moved to version 3" in res.stdout and "better by" in res.stdout
-    client = mlflow.MlflowClient(mlflow_store)
     assert str(client.get_model_version_by_alias(name, "champion").version) == "3"
     res = _run("promote", "--name", name)  # no challenger left
     assert res.exit_code == 2 and "challenger" in res.output
     res = _run("promote", "--name", "nope-axis9-friction")
     assert res.exit_code == 2 and "nope-axis9-friction" in res.output
+
+
+def test_first_promotion_needs_a_tested_challenger(mlflow_store, short_files):
+    train, _ = short_files
+    name = "max100-axis4-friction"
+    fitted = _json(_run("fit", "--model", "coulomb-viscous", "--train", train, "--axis", "4", "--json"))
+    assert fitted["run"]["alias"] == "challenger"
+    res = _run("promote", "--name", name)
+    assert res.exit_code == 2 and "test_rmse" in res.output
+    client = mlflow.MlflowClient(mlflow_store, registry_uri=mlflow_store)
+    with pytest.raises(mlflow.exceptions.MlflowException):
+        client.get_model_version_by_alias(name, "champion")
 
 
 def test_compare_json_rows_sorted(mlflow_store, short_files):
@@ -96,7 +120,7 @@ def test_compare_json_rows_sorted(mlflow_store, short_files):
     assert [r["test_rmse"] for r in rows] == sorted(r["test_rmse"] for r in rows)
     for r in rows:
         assert {"test_r2", "fit_time_s", "n_parameters", "run_id"} <= set(r)
-    client = mlflow.MlflowClient(mlflow_store)
+    client = mlflow.MlflowClient(mlflow_store, registry_uri=mlflow_store)
     exp = client.get_experiment_by_name("compare")
     runs = client.search_runs([exp.experiment_id])
     children = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == doc["parent_run_id"]]
@@ -147,7 +171,7 @@ def test_train_robot_one_run_per_axis(mlflow_store, tmp_path):
                      "--axes", "1,3", "--json"))
     assert [r["axis"] for r in doc["axes"]] == [1, 3]
     assert doc["axes"][1]["registered"] == "max100-axis3-friction"
-    client = mlflow.MlflowClient(mlflow_store)
+    client = mlflow.MlflowClient(mlflow_store, registry_uri=mlflow_store)
     runs = client.search_runs([client.get_experiment_by_name("train-robot").experiment_id])
     children = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == doc["parent_run_id"]]
     assert sorted(r.data.params["axis"] for r in children) == ["1", "3"]
