@@ -56,7 +56,15 @@ def test_fit_run_params_metrics_plots_and_roundtrips(mlflow_store, short_files, 
     assert "fitted.s0" in run.data.params and run.data.params["hp.epochs"] == "5"
     assert len(client.get_metric_history(run_id, "loss")) == 5
     plots = {a.path for a in client.list_artifacts(run_id, "plots")}
-    assert plots == {"plots/prediction_time.png", "plots/parity.png", "plots/hysteresis.png"}
+    assert plots == {"plots/prediction_time.png", "plots/parity.png", "plots/hysteresis.png",
+                     "plots/residual_analysis.png"}
+    # the residual analysis of the test record: its RMS is the test RMSE, lag 0 correlates fully
+    resid = mlflow.artifacts.load_dict(f"runs:/{run_id}/residual_analysis.json")
+    assert resid["record"] == "test record" and resid["autocorr"][0] == pytest.approx(1.0)
+    assert resid["rms_nm"] == pytest.approx(doc["test"]["rmse"], rel=1e-9)
+    assert len(resid["crosscorr"]) == 2 * len(resid["autocorr"]) - 1
+    assert run.data.metrics["resid_rms_nm"] == pytest.approx(doc["test"]["rmse"], rel=1e-9)
+    assert 0 <= run.data.metrics["resid_acf_outside_pct"] <= 100
 
     rec = load_record(test)
     direct = load_model(tmp_path / "m").predict(rec)
@@ -125,6 +133,24 @@ def test_compare_json_rows_sorted(mlflow_store, short_files):
     runs = client.search_runs([exp.experiment_id])
     children = [r for r in runs if r.data.tags.get("mlflow.parentRunId") == doc["parent_run_id"]]
     assert len(children) == 3
+    for child in children:
+        arts = {a.path for a in client.list_artifacts(child.info.run_id, "plots")}
+        assert {"plots/prediction_time.png", "plots/residual_analysis.png"} <= arts
+        assert "resid_acf_outside_pct" in child.data.metrics
+    # the parent is the dashboard: one metric per model, the overlay and all residual analyses
+    parent = client.get_run(doc["parent_run_id"])
+    assert parent.info.status == "FINISHED"
+    for r in rows:
+        assert parent.data.metrics[f"test_rmse/{r['model']}"] == pytest.approx(r["test_rmse"])
+        assert f"resid_xcorr_outside_pct/{r['model']}" in parent.data.metrics
+    assert parent.data.metrics["best_test_rmse"] == pytest.approx(rows[0]["test_rmse"])
+    assert parent.data.tags["best_model"] == rows[0]["model"]
+    assert rows[0]["model"] in parent.data.tags["mlflow.note.content"]
+    arts = {a.path for a in client.list_artifacts(doc["parent_run_id"], "plots")}
+    assert arts == {"plots/prediction_overlay.png", "plots/residual_analysis.png"}
+    table = mlflow.artifacts.load_dict(f"runs:/{doc['parent_run_id']}/comparison.json")
+    column = table["columns"].index("model")
+    assert [row[column] for row in table["data"]] == [r["model"] for r in rows]
     res = _run("compare", "--train", train, "--test", test, "--models", "coulomb-viscous,stribeck", "--no-track")
     assert res.exit_code == 0 and "test RMSE" in res.stdout
 
