@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from identify.errors import InputError
+from identify.files import as_created
 
 from .dexel import RayFamily, TriDexel
 from .simulation import StepTable
@@ -42,6 +43,7 @@ class VirtualWorkpiece:
         os.close(fd)
         try:
             np.savez_compressed(tmp, **arrays)
+            as_created(tmp)
             os.replace(tmp, p)
         finally:
             if os.path.exists(tmp):
