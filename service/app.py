@@ -17,6 +17,7 @@ from typing import Literal
 import pandas as pd
 from fastapi import Depends, FastAPI, Path as PathParam, Query, Request
 from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse
+from fastapi_offline import FastAPIOffline
 
 from identify.errors import InputError
 from service import registry
@@ -210,10 +211,15 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         yield
         app.state.manager.shutdown()
 
-    app = FastAPI(title="greybench service", version=VERSION, lifespan=lifespan,
-                  description="Pose ranking and feature deviation reports from the robotic machining simulation "
-                              "with the chosen friction models (paper 3.8). SI units unless a field says mm.",
-                  responses={401: {"model": ErrorBody}, 413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
+    # /docs and /redoc load Swagger UI and ReDoc from the fastapi-offline package, not a CDN:
+    # the pages work on a machine without internet (a shop-floor network)
+    # (validatorUrl None: Swagger UI would otherwise fetch a badge from its public validator)
+    app = FastAPIOffline(title="greybench service", version=VERSION, lifespan=lifespan,
+                         swagger_ui_parameters={"validatorUrl": None},
+                         description="Pose ranking and feature deviation reports from the robotic machining "
+                                     "simulation with the chosen friction models (paper 3.8). SI units unless a "
+                                     "field's name says mm.",
+                         responses={401: {"model": ErrorBody}, 413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
     app.state.settings = settings
     app.state.store = store
     app.state.manager = JobManager(store, settings.jobs_dir, workers=settings.workers, capacity=settings.capacity,
