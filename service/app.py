@@ -309,10 +309,10 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         rec = _job(request, job_id, JobKind.simulation)
         _succeeded(rec)
         d = request.app.state.manager.job_dir(job_id)
-        if format == "csv":
-            return PlainTextResponse((d / "report.csv").read_text(), media_type="text/csv")
         doc = json.loads((d / "report.json").read_text())
-        return Report(job=job_id, poses=doc["poses"], features=doc["features"])
+        if format == "csv":  # from report.json: the same unit-named fields as the JSON report
+            return PlainTextResponse(Report.csv_from_stored(doc), media_type="text/csv")
+        return Report.from_stored(job_id, doc)
 
     @app.get("/simulations/{job_id}/workpiece/{pose}.glb", dependencies=keyed, tags=["simulations"],
              response_class=FileResponse,
