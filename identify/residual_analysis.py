@@ -27,6 +27,9 @@ from scipy.stats import norm
 
 #: Default number of lags [samples] (the convention of system-identification tools).
 MAX_LAG = 25
+#: Shortest lag window [s] of a fit's residual analysis: at 1 kHz, 25 lags cover only 25 ms, shorter
+#: than the friction transients a model can miss (pre-sliding, Stribeck: tens to hundreds of ms).
+MIN_LAG_WINDOW_S = 0.25
 #: Default confidence level of the bands [-].
 CONFIDENCE = 0.99
 
@@ -160,38 +163,34 @@ def residual_analysis(residual: np.ndarray, u: np.ndarray, dt: float, max_lag: i
 
 def figure(analyses: dict[str, ResidualAnalysis], title: str = "residual analysis"):
     """Residual autocorrelation (top) and input-residual cross-correlation (bottom) of one or more
-    fits, each with its confidence band (dashed, the model's colour); lag axis in ms."""
+    fits against the lag [ms], each with its confidence band (dashed, in the fit's colour)."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7))
-    many = len(analyses) > 1
-    width = 0.8 / max(len(analyses), 1)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7.5))
     for i, (label, a) in enumerate(analyses.items()):
         colour = f"C{i % 10}"
         ms = 1e3 * a.dt
-        shift = (i - (len(analyses) - 1) / 2) * width * ms if many else 0.0
-        ax1.vlines(a.lags * ms + shift, 0, a.autocorr, colors=colour, lw=1.5 if not many else 1.0, label=label)
-        ax1.plot(a.lags * ms + shift, a.autocorr, "o", ms=2.5, color=colour)
-        ax2.vlines(a.cross_lags * ms + shift, 0, a.crosscorr, colors=colour, lw=1.5 if not many else 1.0, label=label)
-        ax2.plot(a.cross_lags * ms + shift, a.crosscorr, "o", ms=2.5, color=colour)
-        for ax, band, lo in ((ax1, a.auto_band, a.lags[1] * ms), (ax2, a.cross_band, a.cross_lags[0] * ms)):
-            hi = (a.lags[-1] if ax is ax1 else a.cross_lags[-1]) * ms
+        marker = "o" if a.lags.size <= 60 else None
+        ax1.plot(a.lags * ms, a.autocorr, color=colour, lw=1.2, marker=marker, ms=3, label=label)
+        ax2.plot(a.cross_lags * ms, a.crosscorr, color=colour, lw=1.2, marker=marker, ms=3, label=label)
+        for ax, band, lags in ((ax1, a.auto_band, a.lags[1:]), (ax2, a.cross_band, a.cross_lags)):
             for sign in (1, -1):
-                ax.hlines(sign * band, lo, hi, colors=colour if many else "red", linestyles="dashed", lw=0.8)
+                ax.plot(lags * ms, np.full(lags.size, sign * band), color=colour, ls="--", lw=0.8)
     first = next(iter(analyses.values()))
-    conf = f"{100 * first.confidence:g} % confidence band (dashed)"
-    ax1.axhline(0, color="black", lw=0.5)
+    fig.suptitle(f"{title}\nresidual tau - tau_pred, {100 * first.confidence:g} % confidence bands dashed "
+                 f"({first.n} samples)", fontsize=10)
+    for ax in (ax1, ax2):
+        ax.axhline(0, color="black", lw=0.5)
+        ax.grid(alpha=0.3)
     ax1.set_xlabel("lag [ms]")
-    ax1.set_ylabel("autocorrelation of the residual [-]")
-    ax1.set_title(f"{title}: whiteness of the residual tau - tau_pred, {conf}")
-    ax2.axhline(0, color="black", lw=0.5)
+    ax1.set_ylabel("autocorrelation [-]")
+    ax1.set_title("whiteness: autocorrelation of the residual", fontsize=10)
     ax2.set_xlabel("lag [ms] (positive: the velocity leads the residual)")
-    ax2.set_ylabel("cross-correlation qd - residual [-]")
-    ax2.set_title("independence of the residual from the input (joint velocity qd)")
-    if many:
-        ax1.legend(loc="upper right", fontsize=8)
+    ax2.set_ylabel("cross-correlation [-]")
+    ax2.set_title("independence: cross-correlation of the joint velocity qd and the residual", fontsize=10)
+    ax1.legend(loc="upper right", fontsize=8, ncol=2)
     fig.tight_layout()
     return fig

@@ -157,11 +157,15 @@ def load_tracked_model(ref: str) -> FrictionModel:
 # ---- plots -----------------------------------------------------------------------------
 def analyse_residual(record: AxisRecord, pred) -> ResidualAnalysis:
     """Residual analysis of a prediction ``pred`` [Nm] on ``record``: the residual
-    ``tau - pred`` [Nm] against the input ``qd`` [rad/s] (:mod:`identify.residual_analysis`)."""
+    ``tau - pred`` [Nm] against the input ``qd`` [rad/s] (:mod:`identify.residual_analysis`),
+    lags up to 25 samples or 0.25 s, whichever is longer."""
     import numpy as np
 
-    return residual_analysis(record.tau - np.asarray(pred, dtype=float), record.qd, record.sample_time,
-                             max_lag=min(25, record.n - 1))
+    from identify.residual_analysis import MAX_LAG, MIN_LAG_WINDOW_S
+
+    dt = record.sample_time
+    max_lag = min(max(MAX_LAG, int(round(MIN_LAG_WINDOW_S / dt))), record.n - 1)
+    return residual_analysis(record.tau - np.asarray(pred, dtype=float), record.qd, dt, max_lag=max_lag)
 
 
 def overlay_figure(record: AxisRecord, preds: dict[str, "object"], label: str):
