@@ -224,6 +224,29 @@ def progress(description: str, total: float | None = None, enabled: bool = True)
         plain.finish(ok)
 
 
+def wait_until_answers(url: str, proc, timeout_s: float = 180.0, poll_s: float = 0.25) -> bool:
+    """Wait until ``url`` answers an HTTP GET (any status below 500) while the server process
+    ``proc`` (a ``subprocess.Popen``) runs; False when it exits first or ``timeout_s`` [s] passes."""
+    import urllib.error
+    import urllib.request
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            return False
+        try:
+            with urllib.request.urlopen(url, timeout=2.0) as resp:
+                if resp.status < 500:
+                    return True
+        except urllib.error.HTTPError as exc:
+            if exc.code < 500:
+                return True
+        except (urllib.error.URLError, OSError):
+            pass
+        time.sleep(poll_s)
+    return False
+
+
 def print_summary(title: str, info: dict) -> None:
     """A two-column (item, value) table of a command's summary on stdout."""
     from rich.table import Table

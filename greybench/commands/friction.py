@@ -2,6 +2,7 @@
 promote, ui; ``bench friction``. Fits are tracked in MLflow (:mod:`identify.tracking`)."""
 from __future__ import annotations
 
+import sys
 import time
 from enum import Enum
 from pathlib import Path
@@ -439,19 +440,38 @@ def ui(
     port: int = typer.Option(5000, "--port", help="TCP port."),
     print_only: bool = typer.Option(False, "--print-only", help="Print the mlflow ui command instead of running it."),
 ) -> None:
-    """Start the MLflow UI on the tracking store (MLFLOW_TRACKING_URI or ./mlruns.db)."""
+    """Start the MLflow UI on the tracking store (MLFLOW_TRACKING_URI or ./mlruns.db); its URL is
+    printed once the UI answers (starting takes seconds to a minute), then it runs until Ctrl-C."""
     import shlex
     import subprocess
 
+    from greybench.support import err, wait_until_answers
     from identify.tracking import ui_command
 
     if not 0 < port < 65536:
         raise InputError("must be 1..65535", field="--port")
     cmd = ui_command(host, port)
-    out.print(" ".join(shlex.quote(c) for c in cmd), highlight=False, soft_wrap=True)
     if print_only:
+        out.print(" ".join(shlex.quote(c) for c in cmd), highlight=False, soft_wrap=True)
         return
-    raise typer.Exit(code=subprocess.call(cmd))
+    local = {"0.0.0.0": "127.0.0.1", "::": "[::1]"}.get(host, f"[{host}]" if ":" in host else host)
+    url = f"http://{local}:{port}/"
+    proc = subprocess.Popen(cmd, stdout=2)  # mlflow's own messages to stderr: stdout carries only the URL
+    try:
+        with progress(f"starting the MLflow UI on port {port}"):
+            up = wait_until_answers(url, proc)
+        if not up:
+            proc.terminate()
+            code = proc.wait()
+            err.print(f"error: the MLflow UI did not answer at {url} (exit code {code}; is the port taken?)",
+                      highlight=False, markup=False, soft_wrap=True)
+            raise typer.Exit(code=1)
+        out.print(f"MLflow UI: {url}", highlight=False, soft_wrap=True)
+        sys.stdout.flush()
+        raise typer.Exit(code=proc.wait())
+    except KeyboardInterrupt:
+        proc.terminate()
+        raise typer.Exit(code=proc.wait()) from None
 
 
 def _bench_greybox(pass_samples: int, recurrent_samples: int, fit_samples: int, repeats: int) -> list[tuple]:
