@@ -65,6 +65,7 @@ from enum import Enum
 import numpy as np
 
 from identify.errors import InputError
+from identify.files import as_created
 from identify.metrics import Metrics
 from identify.models.base import FrictionModel
 from identify.records import AxisRecord
@@ -740,6 +741,7 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
                              source=str(target))
     target.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    as_created(stage, directory=True)
     try:
         result.extended.save(stage)
         result.baseline.save(stage / BASELINE_DIR)

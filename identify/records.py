@@ -37,6 +37,7 @@ import pandas as pd
 from scipy.signal import savgol_filter
 
 from identify.errors import InputError
+from identify.files import as_created
 
 REQUIRED = ("t", "q", "tau")
 OPTIONAL = ("qd", "qdd", "temp", "tau_load", "tau_rb")
@@ -176,6 +177,7 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
             df.to_csv(tmp, index=False, float_format="%.10g")
         else:
             df.to_parquet(tmp, index=False)
+        as_created(tmp)
         os.replace(tmp, p)
     finally:
         if os.path.exists(tmp):

@@ -11,13 +11,21 @@ Every fit is one run with
   ``n_parameters``;
 - artifacts: the model (an MLflow pyfunc wrapping the saved model folder: ``mlflow.pyfunc.
   load_model(uri).predict(frame)`` takes a DataFrame with the axis-record columns and returns
-  the torque [Nm]) and three plots: prediction and measurement over time, the parity plot of
-  measured against predicted friction (paper Fig. 3), and the friction-velocity hysteresis.
+  the torque [Nm]) and four plots: prediction and measurement over time, the parity plot of
+  measured against predicted friction (paper Fig. 3), the friction-velocity hysteresis and the
+  residual analysis (:mod:`identify.residual_analysis`: residual autocorrelation and
+  velocity-residual cross-correlation with 99 % bands, also as ``residual_analysis.json`` and as
+  ``resid_*`` metrics), all on the test record when given.
+
+``compare`` makes one parent run with a child run per model (:func:`log_comparison`): the parent
+carries ``<metric>/<model>`` metrics (one row in the MLflow compare view holds every model), the
+comparison table, the overlay of all models' predictions and their residual analyses in one plot.
 
 Registered models are named per robot and axis (:func:`registered_name`, e.g.
-``max100-axis1-friction``); a new version becomes ``champion`` when there is none, otherwise
-``challenger``; :func:`promote` moves ``champion`` only when the challenger's test RMSE is
-lower.
+``max100-axis1-friction``); every new version becomes ``challenger`` (an untested model never
+drives a simulation by itself); only :func:`promote` makes a ``champion``: the first promotion
+of a name makes the challenger champion, later ones move ``champion`` only when the
+challenger's test RMSE is lower.
 """
 from __future__ import annotations
 
@@ -33,6 +41,8 @@ from identify.errors import InputError
 from identify.metrics import Metrics
 from identify.models import FrictionModel, load_model
 from identify.records import AxisRecord, validate_frame
+from identify.residual_analysis import ResidualAnalysis, residual_analysis
+from identify.residual_analysis import figure as residual_figure
 
 DB_FILE = "mlruns.db"
 ARTIFACT_DIR = "mlartifacts"
@@ -145,19 +155,70 @@ def load_tracked_model(ref: str) -> FrictionModel:
 
 
 # ---- plots -----------------------------------------------------------------------------
-def figures(model: FrictionModel, record: AxisRecord, label: str) -> dict[str, "object"]:
+def analyse_residual(record: AxisRecord, pred) -> ResidualAnalysis:
+    """Residual analysis of a prediction ``pred`` [Nm] on ``record``: the residual
+    ``tau - pred`` [Nm] against the input ``qd`` [rad/s] (:mod:`identify.residual_analysis`),
+    lags up to 25 samples or 0.25 s, whichever is longer."""
+    import numpy as np
+
+    from identify.residual_analysis import MAX_LAG, MIN_LAG_WINDOW_S
+
+    dt = record.sample_time
+    max_lag = min(max(MAX_LAG, int(round(MIN_LAG_WINDOW_S / dt))), record.n - 1)
+    return residual_analysis(record.tau - np.asarray(pred, dtype=float), record.qd, dt, max_lag=max_lag)
+
+
+def overlay_figure(record: AxisRecord, preds: dict[str, "object"], label: str):
+    """Measured torque and every model's prediction [Nm] over time on one record (top), their
+    errors (bottom), and a zoom on the 2 s around the largest error (right)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig = plt.figure(figsize=(13, 7))
+    grid = fig.add_gridspec(2, 2, width_ratios=[3, 1.2], height_ratios=[3, 1.3])
+    ax1, ax2 = fig.add_subplot(grid[0, 0]), fig.add_subplot(grid[1, 0])
+    zoom = fig.add_subplot(grid[:, 1])
+    errors = np.abs(np.stack([np.asarray(p, dtype=float) for p in preds.values()]) - record.tau)
+    t0 = float(record.t[np.unravel_index(np.argmax(errors), errors.shape)[1]])
+    sel = (record.t >= t0 - 1.0) & (record.t <= t0 + 1.0)
+    ax1.plot(record.t, record.tau, lw=0.8, color="black", label="measured")
+    zoom.plot(record.t[sel], record.tau[sel], lw=1.0, color="black", label="measured")
+    for i, (name, p) in enumerate(preds.items()):
+        p = np.asarray(p)
+        colour = f"C{i % 10}"
+        ax1.plot(record.t, p, lw=0.5, color=colour, label=name)
+        ax2.plot(record.t, p - record.tau, lw=0.4, color=colour, label=name)
+        zoom.plot(record.t[sel], p[sel], lw=0.8, color=colour, label=name)
+    ax1.set_ylabel("torque [Nm]")
+    ax1.set_title(f"prediction overlay on the {label}")
+    ax1.legend(loc="upper right", fontsize=8, ncol=2)
+    ax2.set_ylabel("error [Nm]")
+    ax2.set_xlabel("t [s]")
+    ax2.sharex(ax1)
+    zoom.set_title(f"zoom: 2 s around t = {t0:.2f} s")
+    zoom.set_xlabel("t [s]")
+    zoom.set_ylabel("torque [Nm]")
+    fig.tight_layout()
+    return fig
+
+
+def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> dict[str, "object"]:
     """The three diagnostic figures of a fit on ``record`` (matplotlib, Agg).
 
     Returns a dict file name -> Figure: ``prediction_time.png`` (measured and predicted
     torque over time, with the error), ``parity.png`` (measured vs predicted friction torque
     with the identity line, paper Fig. 3) and ``hysteresis.png`` (friction vs velocity).
+    ``pred`` [Nm] is the model's prediction on ``record`` when already computed.
     """
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    pred = model.predict(record)
+    pred = model.predict(record) if pred is None else pred
     rigid = model.rigid_part(record)
     f_meas = record.tau - rigid
     f_pred = pred - rigid
@@ -213,7 +274,7 @@ class FitRun:
     version : str or None
         Its new version.
     alias : str or None
-        ``champion`` or ``challenger`` (the alias the new version got).
+        ``challenger`` (the alias the new version got; only :func:`promote` makes a champion).
     """
 
     run_id: str
@@ -256,8 +317,7 @@ def log_fit(model: FrictionModel, train: AxisRecord, test: AxisRecord | None = N
     experiment : str
         Experiment name (created when missing).
     register : str, optional
-        Registered-model name; the new version gets ``champion`` if there is none, else
-        ``challenger``.
+        Registered-model name; the new version gets the alias ``challenger``.
     parent_run_id : str, optional
         Nest the run under this parent (``train-robot``).
     """
@@ -302,10 +362,17 @@ def log_fit(model: FrictionModel, train: AxisRecord, test: AxisRecord | None = N
             for part, m in scores.items():
                 final.update({f"{part}_rmse": m.rmse, f"{part}_r2": m.r2, f"{part}_nrmse": m.nrmse,
                               f"{part}_max_error": m.max_error})
+            rec, label = (test, "test record") if test is not None else (train, "training record")
+            pred = model.predict(rec)
+            resid = analyse_residual(rec, pred)
+            final.update(resid.metrics())
             mlflow.log_metrics(final)
+            mlflow.log_dict({"record": label, **resid.to_dict()}, "residual_analysis.json")
             if plots:
-                rec, label = (test, "test record") if test is not None else (train, "training record")
-                for fname, fig in figures(model, rec, label).items():
+                figs = figures(model, rec, label, pred=pred)
+                figs["residual_analysis.png"] = residual_figure({model.name: resid},
+                                                                title=f"{model.name} on the {label}")
+                for fname, fig in figs.items():
                     mlflow.log_figure(fig, f"plots/{fname}")
                     plt.close(fig)
             with tempfile.TemporaryDirectory() as tmp:
@@ -325,20 +392,14 @@ def log_fit(model: FrictionModel, train: AxisRecord, test: AxisRecord | None = N
 
 
 def register_version(model_uri: str, name: str) -> tuple[str, str]:
-    """Register ``model_uri`` under ``name``; alias ``champion`` if none yet, else ``challenger``."""
+    """Register ``model_uri`` under ``name`` as the ``challenger`` (champion only via :func:`promote`)."""
     mlflow = _mlflow()
-    from mlflow.exceptions import MlflowException
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient()
     mv = mlflow.register_model(model_uri, name)
-    try:
-        client.get_model_version_by_alias(name, CHAMPION)
-        alias = CHALLENGER
-    except MlflowException:
-        alias = CHAMPION
-    client.set_registered_model_alias(name, alias, mv.version)
-    return str(mv.version), alias
+    client.set_registered_model_alias(name, CHALLENGER, mv.version)
+    return str(mv.version), CHALLENGER
 
 
 @dataclass
@@ -351,19 +412,22 @@ class Promotion:
         Registered-model name.
     promoted : bool
         Whether ``champion`` moved to the challenger.
-    champion_version, challenger_version : str
-        Versions compared (champion before the decision).
+    champion_version : str or None
+        The champion before the decision (None: there was none, the challenger became the first).
+    challenger_version : str
+        The challenger compared.
     champion_rmse, challenger_rmse : float
-        Their test RMSE [Nm].
+        Their test RMSE [Nm] (champion NaN when there was none).
     improvement : float
-        champion_rmse - challenger_rmse [Nm] (positive: the challenger is better).
+        champion_rmse - challenger_rmse [Nm] (positive: the challenger is better; NaN for a first
+        champion).
     improvement_pct : float
         The same relative to the champion [%].
     """
 
     name: str
     promoted: bool
-    champion_version: str
+    champion_version: str | None
     challenger_version: str
     champion_rmse: float
     challenger_rmse: float
@@ -371,6 +435,9 @@ class Promotion:
     improvement_pct: float
 
     def message(self) -> str:
+        if self.champion_version is None:
+            return (f"{self.name}: version {self.challenger_version} becomes the first champion (test RMSE "
+                    f"{self.challenger_rmse:.4f} Nm)")
         if self.promoted:
             return (f"{self.name}: champion moved to version {self.challenger_version} (test RMSE "
                     f"{self.challenger_rmse:.4f} Nm, better by {self.improvement:.4f} Nm = {self.improvement_pct:.1f}% "
@@ -393,13 +460,14 @@ def _version_test_rmse(client, name: str, mv) -> float:
 
 
 def promote(name: str) -> Promotion:
-    """Move ``champion`` to the ``challenger`` version when its test RMSE is lower.
+    """Make the ``challenger`` version ``champion``: at once when the name has no champion yet,
+    otherwise only when the challenger's test RMSE is lower. The challenger must have been
+    tested (a ``test_rmse`` metric) in both cases; a promoted challenger loses its alias.
 
     Raises
     ------
     InputError
-        Unknown registered model, no champion or challenger alias, or a version without
-        ``test_rmse``.
+        Unknown registered model, no challenger alias, or a version without ``test_rmse``.
     """
     _mlflow()
     from mlflow.exceptions import MlflowException
@@ -410,16 +478,23 @@ def promote(name: str) -> Promotion:
         client.get_registered_model(name)
     except MlflowException:
         raise InputError("no such registered model", source=tracking_uri(), field=name) from None
-    versions = {}
-    for alias in (CHAMPION, CHALLENGER):
-        try:
-            versions[alias] = client.get_model_version_by_alias(name, alias)
-        except MlflowException:
-            raise InputError(f"has no '{alias}' alias (register another fit first)", source=name,
-                             field=alias) from None
-    champ, chall = versions[CHAMPION], versions[CHALLENGER]
-    r_champ = _version_test_rmse(client, name, champ)
+    try:
+        chall = client.get_model_version_by_alias(name, CHALLENGER)
+    except MlflowException:
+        raise InputError(f"has no '{CHALLENGER}' alias (register another fit first)", source=name,
+                         field=CHALLENGER) from None
+    try:
+        champ = client.get_model_version_by_alias(name, CHAMPION)
+    except MlflowException:
+        champ = None
     r_chall = _version_test_rmse(client, name, chall)
+    nan = float("nan")
+    if champ is None:
+        client.set_registered_model_alias(name, CHAMPION, chall.version)
+        client.delete_registered_model_alias(name, CHALLENGER)
+        return Promotion(name=name, promoted=True, champion_version=None, challenger_version=str(chall.version),
+                         champion_rmse=nan, challenger_rmse=r_chall, improvement=nan, improvement_pct=nan)
+    r_champ = _version_test_rmse(client, name, champ)
     better = r_chall < r_champ
     if better:
         client.set_registered_model_alias(name, CHAMPION, chall.version)
@@ -427,7 +502,7 @@ def promote(name: str) -> Promotion:
     diff = r_champ - r_chall
     return Promotion(name=name, promoted=better, champion_version=str(champ.version),
                      challenger_version=str(chall.version), champion_rmse=r_champ, challenger_rmse=r_chall,
-                     improvement=diff, improvement_pct=100.0 * diff / r_champ if r_champ > 0 else float("nan"))
+                     improvement=diff, improvement_pct=100.0 * diff / r_champ if r_champ > 0 else nan)
 
 
 def start_parent_run(experiment: str, run_name: str, params: dict | None = None) -> str:
@@ -450,6 +525,69 @@ def end_run(run_id: str, status: str = "FINISHED", metrics: dict | None = None) 
     for k, v in (metrics or {}).items():
         client.log_metric(run_id, k, float(v))
     client.set_terminated(run_id, status=status)
+
+
+#: Per-model metrics of a comparison's parent run, logged as ``<metric>/<model>``.
+COMPARISON_METRICS = ("test_rmse", "test_r2", "train_rmse", "fit_time_s", "n_parameters", "resid_acf_outside_pct",
+                      "resid_xcorr_outside_pct")
+
+
+def log_comparison(parent_run_id: str, models: dict[str, FrictionModel], record: AxisRecord,
+                   rows: list[dict], label: str = "test record") -> dict[str, ResidualAnalysis]:
+    """Make a parent run the comparison dashboard of its child fits.
+
+    Logs on ``parent_run_id``: metrics ``<metric>/<model>`` for every row and every name in
+    :data:`COMPARISON_METRICS` (test RMSE [Nm], R^2 [-], fit time [s], parameter count [-],
+    shares of residual-correlation lags outside their bands [%]), ``best_test_rmse`` [Nm], the
+    tag ``best_model``, the table ``comparison.json`` (MLflow table artifact) and a markdown
+    summary as the run's description; plots ``plots/prediction_overlay.png`` (every model's
+    prediction over the measurement) and ``plots/residual_analysis.png`` (all models' residual
+    correlations with their bands). Returns the residual analyses by model name.
+    """
+    mlflow = _mlflow()
+    from mlflow.entities import Metric
+    from mlflow.tracking import MlflowClient
+
+    import matplotlib.pyplot as plt
+
+    client = MlflowClient()
+    preds = {name: model.predict(record) for name, model in models.items()}
+    analyses = {name: analyse_residual(record, pred) for name, pred in preds.items()}
+    now = int(1000 * __import__("time").time())
+    metrics = []
+    for row in rows:
+        extra = analyses[row["model"]].metrics() if row["model"] in analyses else {}
+        for key in COMPARISON_METRICS:
+            value = row.get(key, extra.get(key))
+            if value is not None:
+                metrics.append(Metric(f"{key}/{row['model']}", float(value), now, 0))
+    best = min(rows, key=lambda r: r["test_rmse"])
+    metrics.append(Metric("best_test_rmse", float(best["test_rmse"]), now, 0))
+    client.log_batch(parent_run_id, metrics=metrics)
+    client.set_tag(parent_run_id, "best_model", best["model"])
+    header = "| rank | model | test RMSE [Nm] | test R^2 | fit time [s] | residual ACF outside band [%] |"
+    lines = [f"Comparison of {len(rows)} friction models on the {label}, sorted by test RMSE.", "", header,
+             "|---|---|---|---|---|---|"]
+    table = []
+    for i, row in enumerate(sorted(rows, key=lambda r: r["test_rmse"]), 1):
+        a = analyses.get(row["model"])
+        outside = a.auto_outside_pct if a else float("nan")
+        lines.append(f"| {i} | {row['model']} | {row['test_rmse']:.4f} | {row['test_r2']:.5f} | "
+                     f"{row['fit_time_s']:.1f} | {outside:.0f} |")
+        table.append({"rank": i, "model": row["model"], "test_rmse_nm": row["test_rmse"], "test_r2": row["test_r2"],
+                      "train_rmse_nm": row.get("train_rmse"), "fit_time_s": row["fit_time_s"],
+                      "n_parameters": row.get("n_parameters"), "resid_acf_outside_pct": outside,
+                      "resid_xcorr_outside_pct": a.cross_outside_pct if a else float("nan"),
+                      "run_id": row.get("run_id")})
+    client.set_tag(parent_run_id, "mlflow.note.content", "\n".join(lines))
+    client.log_table(parent_run_id, data=pd.DataFrame(table), artifact_file="comparison.json")
+    client.log_dict(parent_run_id, {name: {"record": label, **a.to_dict()} for name, a in analyses.items()},
+                    "residual_analysis.json")
+    for fname, fig in (("prediction_overlay.png", overlay_figure(record, preds, label)),
+                       ("residual_analysis.png", residual_figure(analyses, title=f"all models on the {label}"))):
+        client.log_figure(parent_run_id, fig, f"plots/{fname}")
+        plt.close(fig)
+    return analyses
 
 
 def ui_command(host: str = "127.0.0.1", port: int = 5000) -> list[str]:

@@ -27,6 +27,7 @@ import pandas as pd
 from fastapi import Depends, FastAPI, Path as PathParam, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
+from fastapi_offline import FastAPIOffline
 from starlette.routing import Match
 
 from identify.errors import InputError
@@ -361,12 +362,17 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         app.state.manager.shutdown()
         lock.release()
 
-    app = FastAPI(title="greybench service", version=VERSION, lifespan=lifespan,
-                  default_response_class=SafeJSONResponse,
-                  description="Pose ranking and feature deviation reports from the robotic machining simulation "
-                              "with the chosen friction models (paper 3.8). SI units unless a field says mm.",
-                  responses={400: {"model": ErrorBody}, 401: {"model": ErrorBody}, 413: {"model": ErrorBody},
-                             422: {"model": ErrorBody}})
+    # /docs and /redoc load Swagger UI and ReDoc from the fastapi-offline package, not a CDN:
+    # the pages work on a machine without internet (a shop-floor network)
+    # (validatorUrl None: Swagger UI would otherwise fetch a badge from its public validator)
+    app = FastAPIOffline(title="greybench service", version=VERSION, lifespan=lifespan,
+                         default_response_class=SafeJSONResponse,
+                         swagger_ui_parameters={"validatorUrl": None},
+                         description="Pose ranking and feature deviation reports from the robotic machining "
+                                     "simulation with the chosen friction models (paper 3.8). SI units unless a "
+                                     "field's name says mm.",
+                         responses={400: {"model": ErrorBody}, 401: {"model": ErrorBody}, 413: {"model": ErrorBody},
+                                    422: {"model": ErrorBody}})
     app.state.settings = settings
     app.state.store = store
     app.state.lock = lock
@@ -466,15 +472,12 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     def report(request: Request, job_id: str = job_id_param,
                format: Literal["json", "csv"] = Query("json", description="json or csv")):
         rec = _job(request, job_id, JobKind.simulation)
+        # the CSV is built from report.json: the same unit-named fields as the JSON report
         if format == "csv":
-            return _result(request, rec, "report.csv",
-                           lambda p: PlainTextResponse(p.read_text(), media_type="text/csv"))
-
-        def read(p: Path) -> Report:
-            doc = json.loads(p.read_text())
-            return Report(job=job_id, poses=doc["poses"], features=doc["features"])
-
-        return _result(request, rec, "report.json", read)
+            return _result(request, rec, "report.json",
+                           lambda p: PlainTextResponse(Report.csv_from_stored(json.loads(p.read_text())),
+                                                       media_type="text/csv"))
+        return _result(request, rec, "report.json", lambda p: Report.from_stored(job_id, json.loads(p.read_text())))
 
     @app.get("/simulations/{job_id}/workpiece/{pose}.glb", dependencies=keyed, tags=["simulations"],
              response_class=FileResponse,

@@ -143,8 +143,9 @@ def list_models(tracking_uri: str | None = None) -> list[dict]:
                     metrics = {k: float(run_metrics[k]) for k in METRIC_KEYS if k in run_metrics}
                 except Exception:  # a deleted run: list the version without metrics
                     metrics = {}
+            created = mv.creation_timestamp / 1000.0 if mv.creation_timestamp else None  # [s since the epoch]
             versions.append({"version": int(mv.version), "aliases": sorted(aliases_by_version.get(str(mv.version), [])),
-                             "run_id": mv.run_id, "status": str(mv.status), "created": mv.creation_timestamp,
+                             "run_id": mv.run_id, "status": str(mv.status), "created": created,
                              "metrics": metrics})
         versions.sort(key=lambda v: v["version"])
         out.append({"name": rm.name, "description": rm.description or "",

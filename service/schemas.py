@@ -7,15 +7,28 @@ Friction references name registered MLflow models ``<robot>-axis<N>-friction`` b
 """
 from __future__ import annotations
 
+from datetime import datetime, timezone
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from service.jobs import JobKind, JobState
 from service.paths import NAME_PATTERN
 
 Name = Annotated[str, Field(pattern=NAME_PATTERN, min_length=1, max_length=64)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+def _utc(value: Any) -> Any:
+    """Seconds since the Unix epoch -> an aware UTC datetime (ISO 8601 in JSON, e.g.
+    ``2026-05-04T12:00:00.250000Z``)."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return datetime.fromtimestamp(value, tz=timezone.utc)
+    return value
+
+
+#: A moment, ISO 8601 in UTC on the wire (the stores keep epoch seconds).
+UtcTime = Annotated[datetime, BeforeValidator(_utc)]
 #: Largest G-code text accepted inline [characters]; the body limit applies as well.
 MAX_PROGRAM_CHARS = 1_000_000
 #: Largest series in /friction/predict [samples].
@@ -57,7 +70,7 @@ class ModelVersionInfo(Strict):
     aliases: list[str] = Field(description="aliases pointing at this version, e.g. champion")
     run_id: str | None = Field(None, description="MLflow run that produced the version")
     status: str
-    created: int | None = Field(None, description="creation time [ms since the Unix epoch]")
+    created: UtcTime | None = Field(None, description="when the version was registered (ISO 8601, UTC)")
     metrics: dict[str, float] = Field(description="logged metrics: test_rmse/train_rmse [Nm], test_r2/train_r2 [-]")
 
 
@@ -146,9 +159,9 @@ class JobStatus(Strict):
     state: JobState
     progress: float = Field(description="fraction done [0..1]")
     message: str = Field(description="what the job is doing or did last")
-    created: float = Field(description="[s since the Unix epoch]")
-    started: float | None = Field(None, description="[s since the Unix epoch]")
-    finished: float | None = Field(None, description="[s since the Unix epoch]")
+    created: UtcTime = Field(description="when the job was accepted (ISO 8601, UTC)")
+    started: UtcTime | None = Field(None, description="when a worker started it (ISO 8601, UTC)")
+    finished: UtcTime | None = Field(None, description="when it ended (ISO 8601, UTC)")
     error: dict[str, Any] | None = Field(None, description="why it failed: message and, for bad input, "
                                                            "source/line/column/field/row")
     result: dict[str, Any] | None = Field(None, description="summary of the result")
@@ -191,20 +204,66 @@ class Ranking(Strict):
     ranking: list[RankingEntry]
 
 
-class FeatureRow(BaseModel):
-    name: str
-    nominal: float | str | None = Field(None, description="nominal value [mm, or deg for angles]")
-    tolerance: float = Field(description="[mm]")
-    deviation: dict[str, float | None] = Field(description="pose -> deviation [mm]")
-
-    model_config = ConfigDict(extra="allow")
+class FeatureRow(Strict):
+    name: str = Field(description="Table-2 row (ISO 10791-7 feature)")
+    nominal_mm: float | None = Field(None, description="nominal size [mm]; null for form rows (roundness, "
+                                                       "straightness), the 30/60 deg angles and the slope angle")
+    nominal_deg: float | None = Field(None, description="nominal angle [deg] of the slope angle row; null otherwise")
+    nominal_text: str = Field(description="the nominal as printed in Table 2 ('-' for form rows)")
+    tolerance_mm: float = Field(description="tolerance [mm]")
+    deviation_mm: dict[str, float | None] = Field(description="pose -> deviation [mm]")
+    worst_instance: dict[str, str] = Field(default_factory=dict,
+                                           description="pose -> the instance (wall, edge, line) the deviation is from")
 
 
 class Report(Strict):
     job: str
-    poses: list[dict[str, Any]] = Field(description="per pose: steps, duration [s], switching points, "
-                                                    "tracking error [m], peak force [N], peak deflection [m]")
+    poses: list[dict[str, Any]] = Field(description="per pose: steps, simulated_time_s [s], switching points, "
+                                                    "max_tracking_error_m [m], peak_force_n [N], peak_deflection_m [m]")
     features: list[FeatureRow]
+
+    @classmethod
+    def from_stored(cls, job: str, doc: dict) -> "Report":
+        """From a job's ``report.json`` (rows with ``nominal``, ``tolerance``, ``deviation`` in mm or deg)."""
+        return cls(job=job, poses=doc["poses"], features=[feature_row(r) for r in doc["features"]])
+
+    @staticmethod
+    def csv_from_stored(doc: dict) -> str:
+        """The CSV report (:func:`report_csv`) of a job's ``report.json``."""
+        return report_csv(doc)
+
+
+def feature_row(row: dict) -> FeatureRow:
+    """A stored Table-2 row with the unit in every field name; form rows lose their nominal."""
+    from simulate.evaluation.features import FORM_ROWS
+
+    nominal, text = row.get("nominal"), str(row.get("nominal_text", ""))
+    form = row["name"] in FORM_ROWS
+    angle = text.endswith(" deg")
+    return FeatureRow(name=row["name"], nominal_mm=None if form or angle else nominal,
+                      nominal_deg=nominal if angle and not form else None, nominal_text="-" if form else text,
+                      tolerance_mm=row["tolerance"], deviation_mm=row["deviation"],
+                      worst_instance=row.get("worst_instance") or {})
+
+
+#: Columns of the CSV report (one row per feature and pose).
+REPORT_CSV_COLUMNS = ("feature", "nominal_mm", "nominal_deg", "tolerance_mm", "pose", "deviation_mm", "in_tolerance")
+
+
+def report_csv(doc: dict) -> str:
+    """The report as CSV (:data:`REPORT_CSV_COLUMNS`), from a job's ``report.json``."""
+    import csv
+    import io
+
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(REPORT_CSV_COLUMNS)
+    for stored in doc["features"]:
+        row = feature_row(stored)
+        for pose, dev in row.deviation_mm.items():
+            ok = None if dev is None else abs(dev) <= row.tolerance_mm
+            w.writerow([row.name, row.nominal_mm, row.nominal_deg, row.tolerance_mm, pose, dev, ok])
+    return buf.getvalue()
 
 
 # ---- friction ---------------------------------------------------------------------------

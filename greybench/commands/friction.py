@@ -2,6 +2,7 @@
 promote, ui; ``bench friction``. Fits are tracked in MLflow (:mod:`identify.tracking`)."""
 from __future__ import annotations
 
+import sys
 import time
 from enum import Enum
 from pathlib import Path
@@ -184,7 +185,8 @@ def fit(
     experiment: str = typer.Option("friction", "--experiment", help="MLflow experiment name."),
     track: bool = typer.Option(True, "--track/--no-track", help="Record the fit as an MLflow run (default on)."),
     register: bool = typer.Option(True, "--register/--no-register", help="Register the model as <robot>-axis<N>-friction "
-                                                                         "(alias champion if none, else challenger)."),
+                                                                         "with alias challenger (greybench promote makes "
+                                                                         "the champion)."),
     as_json: bool = typer.Option(False, "--json", help='Print {"model", "params", "train", "test", "run"} as one JSON object.'),
 ) -> None:
     """Fit a friction model (co-identifying inertia J [kg m^2] and offset c [Nm] unless the
@@ -194,20 +196,22 @@ def fit(
     train_rec = load_axis_record(train, axis)
     test_rec = load_axis_record(test, axis) if test else None
     robot_name = _robot_name(robot)
-    with progress(f"fitting {model}", total=None, enabled=not as_json):
+    run = None
+    with progress(f"fit {model}") as advance:
+        advance.describe("fitting")
         t0 = time.perf_counter()
         est.fit(train_rec)
         fit_time = time.perf_counter() - t0
-    metrics = {"train": est.train_metrics_}
-    if test_rec is not None:
-        metrics["test"] = est.score(test_rec)
-    if out_dir is not None:
-        est.save(out_dir)
-    run = None
-    if track:
-        from identify.tracking import log_fit, registered_name
+        metrics = {"train": est.train_metrics_}
+        if test_rec is not None:
+            advance.describe("scoring the test record")
+            metrics["test"] = est.score(test_rec)
+        if out_dir is not None:
+            est.save(out_dir)
+        if track:
+            from identify.tracking import log_fit, registered_name
 
-        with progress("logging to MLflow", total=None, enabled=not as_json):
+            advance.describe("logging to MLflow (plots, residual analysis, model)")
             run = log_fit(est, train_rec, test_rec, fit_time=fit_time, experiment=experiment, axis=axis or 1,
                           robot=robot_name, register=registered_name(robot_name, axis or 1) if register else None)
     if as_json:
@@ -286,15 +290,17 @@ def compare(
     robot_name = _robot_name(robot)
     parent = None
     if track:
-        from identify.tracking import end_run, log_fit, start_parent_run
+        from identify.tracking import end_run, log_comparison, log_fit, start_parent_run
 
         parent = start_parent_run(experiment, "compare", {"train_file": str(train), "test_file": str(test),
                                                            "models": ",".join(names), "axis": axis or 1,
                                                            "robot": robot_name})
     rows = []
+    fitted = {}
     try:
-        with progress("comparing", total=len(names), enabled=not as_json) as advance:
-            for name in names:
+        with progress("compare", total=len(names) + (1 if track else 0)) as advance:
+            for i, name in enumerate(names, 1):
+                advance.describe(f"fitting {name}, model {i} of {len(names)}")
                 est = _make(name, seed, epochs)
                 t0 = time.perf_counter()
                 est.fit(train_rec)
@@ -303,10 +309,16 @@ def compare(
                 row = {"model": name, "test_rmse": te.rmse, "test_r2": te.r2, "train_rmse": est.train_metrics_.rmse,
                        "train_r2": est.train_metrics_.r2, "fit_time_s": fit_time, "n_parameters": est.n_parameters()}
                 if track:
+                    advance.describe(f"logging {name} to MLflow")
                     run = log_fit(est, train_rec, test_rec, fit_time=fit_time, experiment=experiment, axis=axis or 1,
                                   robot=robot_name, parent_run_id=parent)
                     row["run_id"] = run.run_id
+                    fitted[name] = est
                 rows.append(row)
+                advance(1)
+            if track:
+                advance.describe("logging the comparison (overlay, residual analysis) to MLflow")
+                log_comparison(parent, fitted, test_rec, rows)
                 advance(1)
     except BaseException:
         if parent:
@@ -314,13 +326,13 @@ def compare(
         raise
     rows.sort(key=lambda r: r["test_rmse"])
     if parent:
-        end_run(parent, metrics={"best_test_rmse": rows[0]["test_rmse"]})
+        end_run(parent)
     if as_json:
         emit_json({"experiment": experiment if track else None, "parent_run_id": parent, "axis": axis or 1,
                    "rows": rows})
         return
     table = Table(title=f"compare on {test} (axis {axis or 1}), sorted by test RMSE")
-    for col in ("rank", "model", "test RMSE [Nm]", "test R^2", "train RMSE [Nm]", "fit time [s]", "parameters"):
+    for col in ("rank", "model", "test RMSE [Nm]", "test R^2", "train RMSE [Nm]", "fit time \\[s]", "parameters"):
         table.add_column(col, justify="left" if col == "model" else "right")
     for i, r in enumerate(rows, 1):
         table.add_row(str(i), r["model"], f"{r['test_rmse']:.4f}", f"{r['test_r2']:.5f}", f"{r['train_rmse']:.4f}",
@@ -363,15 +375,17 @@ def train_robot(
     robot_name = _robot_name(robot)
     ext = Path(log).suffix.lower()
     with tempfile.TemporaryDirectory(prefix="greybench-train-robot-") as tmp:
-        train_paths = prepare_log(rob, log, Path(tmp) / "train").paths
-        test_paths = prepare_log(rob, test, Path(tmp) / "test").paths if test else None
+        with progress("train-robot: splitting the logs (rigid-body model)"):
+            train_paths = prepare_log(rob, log, Path(tmp) / "train").paths
+            test_paths = prepare_log(rob, test, Path(tmp) / "test").paths if test else None
         parent = start_parent_run(experiment, f"train-robot {robot_name} {model}",
                                   {"log": str(log), "test_log": str(test) if test else "", "robot": robot_name,
                                    "model": model, "axes": ",".join(map(str, axis_list)), "format": ext})
         rows = []
         try:
-            with progress(f"train-robot {model}", total=len(axis_list), enabled=not as_json) as advance:
+            with progress(f"train-robot {model}", total=len(axis_list)) as advance:
                 for a in axis_list:
+                    advance.describe(f"axis {a}: fitting and logging")
                     rec = load_record(train_paths[a - 1])
                     rec_t = load_record(test_paths[a - 1]) if test_paths else None
                     est = _make(model, seed, epochs)
@@ -397,7 +411,7 @@ def train_robot(
                    "axes": rows})
         return
     table = Table(title=f"train-robot {robot_name}: {model} per axis (parent run {parent})")
-    for col in ("axis", "train RMSE [Nm]", "train R^2", "test RMSE [Nm]", "fit time [s]", "registered", "run"):
+    for col in ("axis", "train RMSE [Nm]", "train R^2", "test RMSE [Nm]", "fit time \\[s]", "registered", "run"):
         table.add_column(col)
     for r in rows:
         table.add_row(str(r["axis"]), f"{r['train_rmse']:.4f}", f"{r['train_r2']:.4f}",
@@ -410,7 +424,8 @@ def promote(
     name: str = typer.Option(..., "--name", help="Registered model, e.g. max100-axis1-friction."),
     as_json: bool = typer.Option(False, "--json", help="Print the decision as one JSON object (RMSE in Nm)."),
 ) -> None:
-    """Move the 'champion' alias to the 'challenger' version if its test RMSE [Nm] is lower; say by how much."""
+    """Make the 'challenger' version 'champion': at once when there is no champion yet, otherwise
+    only if its test RMSE [Nm] is lower; say by how much."""
     from identify.tracking import promote as do_promote
 
     res = do_promote(name)
@@ -425,19 +440,38 @@ def ui(
     port: int = typer.Option(5000, "--port", help="TCP port."),
     print_only: bool = typer.Option(False, "--print-only", help="Print the mlflow ui command instead of running it."),
 ) -> None:
-    """Start the MLflow UI on the tracking store (MLFLOW_TRACKING_URI or ./mlruns.db)."""
+    """Start the MLflow UI on the tracking store (MLFLOW_TRACKING_URI or ./mlruns.db); its URL is
+    printed once the UI answers (starting takes seconds to a minute), then it runs until Ctrl-C."""
     import shlex
     import subprocess
 
+    from greybench.support import err, wait_until_answers
     from identify.tracking import ui_command
 
     if not 0 < port < 65536:
         raise InputError("must be 1..65535", field="--port")
     cmd = ui_command(host, port)
-    out.print(" ".join(shlex.quote(c) for c in cmd), highlight=False, soft_wrap=True)
     if print_only:
+        out.print(" ".join(shlex.quote(c) for c in cmd), highlight=False, soft_wrap=True)
         return
-    raise typer.Exit(code=subprocess.call(cmd))
+    local = {"0.0.0.0": "127.0.0.1", "::": "[::1]"}.get(host, f"[{host}]" if ":" in host else host)
+    url = f"http://{local}:{port}/"
+    proc = subprocess.Popen(cmd, stdout=2)  # mlflow's own messages to stderr: stdout carries only the URL
+    try:
+        with progress(f"starting the MLflow UI on port {port}"):
+            up = wait_until_answers(url, proc)
+        if not up:
+            proc.terminate()
+            code = proc.wait()
+            err.print(f"error: the MLflow UI did not answer at {url} (exit code {code}; is the port taken?)",
+                      highlight=False, markup=False, soft_wrap=True)
+            raise typer.Exit(code=1)
+        out.print(f"MLflow UI: {url}", highlight=False, soft_wrap=True)
+        sys.stdout.flush()
+        raise typer.Exit(code=proc.wait())
+    except KeyboardInterrupt:
+        proc.terminate()
+        raise typer.Exit(code=proc.wait()) from None
 
 
 def _bench_greybox(pass_samples: int, recurrent_samples: int, fit_samples: int, repeats: int) -> list[tuple]:

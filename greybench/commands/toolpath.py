@@ -10,7 +10,7 @@ import pandas as pd
 import typer
 from rich.table import Table
 
-from greybench.support import DATA_DIR, emit_json, guarded, out, print_summary, resolve_robot
+from greybench.support import DATA_DIR, emit_json, guarded, out, print_summary, progress, resolve_robot
 from identify.errors import InputError
 from identify.records import write_table
 from simulate.toolpath.gcode import read_program
@@ -80,13 +80,22 @@ def interpolate_cmd(
         raise InputError("output must end in .csv or .parquet", source=str(out_file))
     limits = PathLimits(acceleration=acceleration, jerk=jerk, rapid_speed=rapid_speed, cycle=cycle * 1e-3)
     limits.validate()
-    prog = read_program(program)
-    placements = load_poses(pose)
-    placement = select_pose(placements, name, source=str(pose))
-    rob = load_robot(resolve_robot(robot))
-    ip = interpolate(prog, limits)
-    jt = joint_trajectory(rob, ip, placement, source=str(program))
-    write_table(trajectory_frame(jt), out_file)
+    with progress("interpolate", total=4) as advance:
+        advance.describe("reading the program")
+        prog = read_program(program)
+        placements = load_poses(pose)
+        placement = select_pose(placements, name, source=str(pose))
+        rob = load_robot(resolve_robot(robot))
+        advance(1)
+        advance.describe("interpolating")
+        ip = interpolate(prog, limits)
+        advance(1)
+        advance.describe("inverse kinematics")
+        jt = joint_trajectory(rob, ip, placement, source=str(program))
+        advance(1)
+        advance.describe(f"writing {out_file}")
+        write_table(trajectory_frame(jt), out_file)
+        advance(1)
     summary = {"out": str(out_file), "pose": placement.name, "samples": len(ip), "duration_s": ip.duration,
                "path_length_m": prog.length, "max_speed_m_s": float(ip.v.max()),
                "switching_steps": int((jt.switch > 0).sum()),
@@ -133,7 +142,7 @@ def bench_toolpath(
         return
     table = Table(title=f"toolpath bench: test piece {size}, {n} points at 2 ms, {len(prog.segments)} segments "
                         f"(best of {repeat})")
-    for col in ("part", "time [s]", "points/s", "us/point", "x target 1e6/s"):
+    for col in ("part", "time \\[s]", "points/s", "us/point", "x target 1e6/s"):
         table.add_column(col, justify="left" if col == "part" else "right")
     for name, s in rows.items():
         table.add_row(name, f"{s:.4f}", f"{n / s:,.0f}", f"{s / n * 1e6:.3f}", f"{n / s / 1e6:.2f}")

@@ -24,6 +24,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from identify.errors import InputError, NotFittedError
+from identify.files import as_created
 from identify.metrics import Metrics, evaluate
 from identify.records import AxisRecord
 
@@ -105,6 +106,7 @@ class FrictionModel:
         target = Path(directory)
         target.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+        as_created(tmp, directory=True)
         try:
             doc = {
                 "model": self.name,

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from identify.errors import InputError
+from identify.files import as_created
 from simulate.toolpath.testpiece import TestPiece
 
 #: Probe groups :func:`simulate.evaluation.features.evaluate_scan` needs.
@@ -263,6 +264,7 @@ def write_scan(scan: Scan, path: str | Path) -> Path:
             for name, pts in scan.points.items():
                 for x, y, z in pts:
                     w.writerow([name, repr(float(x)), repr(float(y)), repr(float(z))])
+        as_created(tmp)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

@@ -67,6 +67,10 @@ ROW_SURFACES = {"circle height zMZ": ("circle_floor",), "circle diameter": ("cir
                 "slope angle": ("slope_line_1", "slope_line_2", "slope_line_3")}
 
 
+#: Rows whose tolerance is a form tolerance: a width, no nominal size.
+FORM_ROWS = ("circle roundness", "square straightness (4x)", "slope straightness")
+
+
 @dataclass(frozen=True)
 class FeatureRow:
     """One row of Table 2.
@@ -75,9 +79,10 @@ class FeatureRow:
     ----------
     name : str
     nominal : float or None
-        m (lengths) or rad (``slope angle``); None for the 30/60 deg row (two nominals).
+        m (lengths) or rad (``slope angle``); None for form rows (roundness, straightness: a form
+        tolerance has no nominal size) and for the 30/60 deg row (two nominals).
     nominal_unit : str
-        ``"m"``, ``"rad"`` or ``""``.
+        ``"m"``, ``"rad"`` or ``""`` (no nominal).
     tolerance : float
         m.
     deviation : float
@@ -110,13 +115,13 @@ class FeatureRow:
 
     def nominal_text(self) -> str:
         if self.nominal is None:
-            return "30/60 deg"
+            return "30/60 deg" if self.name.startswith("angles") else "-"
         if self.nominal_unit == "rad":
             return f"{math.degrees(self.nominal):g} deg"
         return f"{self.nominal / MM:g}"
 
     def nominal_display(self) -> float | None:
-        """Nominal as printed in Table 2: mm, or deg for an angle; None for 30/60."""
+        """Nominal as printed in Table 2: mm, or deg for an angle; None for 30/60 and form rows."""
         if self.nominal is None:
             return None
         return math.degrees(self.nominal) if self.nominal_unit == "rad" else self.nominal / MM
@@ -209,7 +214,7 @@ def evaluate_scan(scan: Scan, piece: TestPiece) -> FeatureTable:
                            ls.diameter - piece.circle_diameter, {"diameter": ls.diameter - piece.circle_diameter},
                            "diameter", ls.diameter))
     mz = fit_circle_mz(wall)
-    rows.append(FeatureRow("circle roundness", piece.circle_diameter, "m", tol["circle roundness"], mz.roundness,
+    rows.append(FeatureRow("circle roundness", None, "", tol["circle roundness"], mz.roundness,
                            {"roundness": mz.roundness}, "roundness"))
 
     # square
@@ -232,7 +237,7 @@ def evaluate_scan(scan: Scan, piece: TestPiece) -> FeatureTable:
                            inst, k, lengths[k]))
     inst = {n: fit_line_mz(p).straightness for n, p in walls.items()}
     k, dev = _worst(inst)
-    rows.append(FeatureRow("square straightness (4x)", piece.square_side, "m", tol["square straightness (4x)"],
+    rows.append(FeatureRow("square straightness (4x)", None, "", tol["square straightness (4x)"],
                            dev, inst, k))
 
     # angled edges, from the square's +y wall as datum (direction +x)
@@ -258,7 +263,7 @@ def evaluate_scan(scan: Scan, piece: TestPiece) -> FeatureTable:
     length_x = piece.slope_x[1] - piece.slope_x[0]
     inst = {f"slope_line_{i}": fit_line_mz(scan[f"slope_line_{i}"][:, [0, 2]]).straightness for i in (1, 2, 3)}
     k, dev = _worst(inst)
-    rows.append(FeatureRow("slope straightness", length_x, "m", tol["slope straightness"], dev, inst, k))
+    rows.append(FeatureRow("slope straightness", None, "", tol["slope straightness"], dev, inst, k))
     n = plane.normal
     ang = math.atan2(-n[0], n[2])  # rise along +x in the x-z plane
     dev = (ang - piece.slope_angle) * length_x

@@ -251,3 +251,128 @@ def _build(occ, cell_vertex, xlo, xhi, xhs, xls, xcnt, ylo, yhi, yhs, yls, ycnt,
                         faces[f, 0], faces[f, 1], faces[f, 2] = v[0], v[2], v[1]
                         faces[f + 1, 0], faces[f + 1, 1], faces[f + 1, 2] = v[0], v[3], v[2]
                     f += 2
+
+
+def merge_flat_quads(mesh: SurfaceMesh, label: np.ndarray, tol: float = 1e-9) -> SurfaceMesh:
+    """Fewer triangles, same picture: merge coplanar lattice quads of one label into rectangles.
+
+    A quad (the two triangles of one crossed lattice edge) is mergeable when its four vertices lie
+    in one plane normal to x, y or z (within ``tol`` [m]), span exactly one lattice cell, and carry
+    the same ``label`` (e.g. the packed colour; stock surface and a flat machined floor of one
+    colour are what merge). Mergeable quads of one plane, facing and label are covered greedily by
+    maximal rectangles (rows first), each two triangles on the original corner vertices, wound
+    like the quads they replace. Everything else is kept as it is, so the colour pattern of the
+    machined surface is untouched; the merged regions were one colour before as well.
+
+    The result is still closed as a surface, but rectangle edges can carry T-junctions (vertices
+    of finer neighbours lying on them), which renderers draw without visible gaps.
+
+    Parameters
+    ----------
+    mesh : SurfaceMesh
+        From :func:`surface_mesh` (faces in quad pairs).
+    label : np.ndarray (V,) int64
+        Per vertex; quads merge only with quads of the same label.
+    """
+    faces = mesh.faces
+    quads = faces.reshape(-1, 2, 3)
+    n_quads = quads.shape[0]
+    # the 4 corners of each quad: face 0 is (v0, v1, v2) or (v0, v2, v1), face 1 adds v3
+    corners = np.concatenate([quads[:, 0, :], quads[:, 1, 2:3]], axis=1)
+    last_in_first = (quads[:, 1, 2:3] == quads[:, 0, :]).any(axis=1)
+    corners[:, 3] = np.where(last_in_first, quads[:, 1, 1], quads[:, 1, 2])
+    P = mesh.vertices[corners]                      # (Q, 4, 3)
+    span = P.max(axis=1) - P.min(axis=1)            # (Q, 3)
+    lab = label[corners]
+    same_label = np.all(lab == lab[:, :1], axis=1)
+    pitch = mesh.pitch
+    keep = np.ones(n_quads, bool)
+    new_faces = []
+    tri0 = mesh.vertices[quads[:, 0, :]]
+    normal = np.cross(tri0[:, 1] - tri0[:, 0], tri0[:, 2] - tri0[:, 0])
+    origin = mesh.vertices.min(axis=0)
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        ok = (same_label & (span[:, a] <= tol) & (np.abs(span[:, b] - pitch) <= 1e-6 * pitch)
+              & (np.abs(span[:, c] - pitch) <= 1e-6 * pitch))
+        idx = np.flatnonzero(ok)
+        if idx.size == 0:
+            continue
+        sign = np.sign(normal[idx, a]).astype(np.int64)
+        plane = np.round(P[idx, 0, a] / max(tol, 1e-12)).astype(np.int64)
+        u = np.round((P[idx, :, b].min(axis=1) - origin[b]) / pitch).astype(np.int64)
+        v = np.round((P[idx, :, c].min(axis=1) - origin[c]) / pitch).astype(np.int64)
+        keys = (lab[idx, 0], plane, sign)
+        order = np.lexsort(keys)
+        changed = np.zeros(order.size - 1, bool)
+        for key in keys:
+            changed |= np.diff(key[order]) != 0
+        bounds = np.flatnonzero(changed) + 1
+        for members in np.split(order, bounds):
+            if members.size < 2:
+                continue
+            q = idx[members]
+            uu, vv = u[members], v[members]
+            u0, v0 = uu.min(), vv.min()
+            grid = np.full((uu.max() - u0 + 1, vv.max() - v0 + 1), -1, np.int64)
+            grid[uu - u0, vv - v0] = np.arange(members.size)
+            # corner vertex of each grid point, from the quads' own corners
+            node = np.full((grid.shape[0] + 1, grid.shape[1] + 1), -1, np.int64)
+            cu = np.round((P[q, :, b] - origin[b]) / pitch).astype(np.int64) - u0
+            cv = np.round((P[q, :, c] - origin[c]) / pitch).astype(np.int64) - v0
+            node[cu.ravel(), cv.ravel()] = corners[q].ravel()
+            rects = _greedy_rectangles(grid >= 0)
+            if len(rects) >= members.size:
+                continue
+            keep[q] = False
+            s = sign[members[0]]
+            for (i0, j0, i1, j1) in rects:   # cells i0..i1-1, j0..j1-1
+                p00, p10, p11, p01 = node[i0, j0], node[i1, j0], node[i1, j1], node[i0, j1]
+                if s > 0:   # counter-clockwise seen from +a: b then c
+                    new_faces += [(p00, p10, p11), (p00, p11, p01)]
+                else:
+                    new_faces += [(p00, p11, p10), (p00, p01, p11)]
+    kept = quads[keep].reshape(-1, 3)
+    all_faces = np.concatenate([kept, np.asarray(new_faces, np.int64).reshape(-1, 3)])
+    used = np.zeros(len(mesh.vertices), bool)
+    used[all_faces.ravel()] = True
+    remap = np.cumsum(used) - 1
+    return SurfaceMesh(mesh.vertices[used], remap[all_faces], mesh.vertex_step[used], mesh.stride, mesh.pitch)
+
+
+@njit(cache=True)
+def _greedy_rectangles_kernel(occ, out):
+    nu, nv = occ.shape
+    used = np.zeros((nu, nv), np.bool_)
+    n = 0
+    for j in range(nv):
+        for i in range(nu):
+            if not occ[i, j] or used[i, j]:
+                continue
+            i1 = i + 1
+            while i1 < nu and occ[i1, j] and not used[i1, j]:
+                i1 += 1
+            j1 = j + 1
+            while j1 < nv:
+                full = True
+                for k in range(i, i1):
+                    if not occ[k, j1] or used[k, j1]:
+                        full = False
+                        break
+                if not full:
+                    break
+                j1 += 1
+            for jj in range(j, j1):
+                for k in range(i, i1):
+                    used[k, jj] = True
+            out[n, 0], out[n, 1], out[n, 2], out[n, 3] = i, j, i1, j1
+            n += 1
+    return n
+
+
+def _greedy_rectangles(occ: np.ndarray) -> np.ndarray:
+    """Cover the True cells of a 2-D grid with disjoint maximal rectangles (rows first, then
+    columns); rows ``(i0, j0, i1, j1)`` cover cells ``i0..i1-1`` x ``j0..j1-1``."""
+    out = np.empty((int(occ.sum()), 4), np.int64)
+    n = _greedy_rectangles_kernel(np.ascontiguousarray(occ), out)
+    return out[:n]

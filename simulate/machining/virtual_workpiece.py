@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from identify.errors import InputError
+from identify.files import as_created
 
 from .dexel import RayFamily, TriDexel
 from .simulation import StepTable
@@ -42,6 +43,7 @@ class VirtualWorkpiece:
         os.close(fd)
         try:
             np.savez_compressed(tmp, **arrays)
+            as_created(tmp)
             os.replace(tmp, p)
         finally:
             if os.path.exists(tmp):
@@ -133,17 +135,98 @@ def machined_points(vw: VirtualWorkpiece, variable: str = "deflection"):
     return np.concatenate(P), np.concatenate(V)
 
 
-def _colours(values):
-    """RGBA (uint8) viridis colours of ``values`` scaled to their finite range; NaN -> light grey."""
+#: Display unit of each variable: (factor from SI, label) for legends and renderings.
+DISPLAY_UNITS = {"deflection": (1e6, "µm"), "tracking_error": (1e6, "µm"), "force": (1.0, "N"),
+                 "peak_force": (1.0, "N"), "time": (1.0, "s"), "line": (1.0, "-"), "switch": (1.0, "bits")}
+#: RGBA of the stock surface (not machined) [0..255].
+STOCK_GREY = (200, 200, 200, 255)
+
+
+def colour_range(values) -> tuple[float, float]:
+    """The colour scale's ends (SI): the smallest and largest finite value, so every machined
+    vertex, features included, gets a colour inside the scale and none is clipped to an end colour.
+    A constant field gets a scale of width 1 (SI) around nothing: ``(v, v + 1)``."""
+    v = np.asarray(values, float)
+    ok = np.isfinite(v)
+    if not ok.any():
+        return 0.0, 1.0
+    lo, hi = float(v[ok].min()), float(v[ok].max())
+    return (lo, hi) if hi > lo else (lo, lo + 1.0)
+
+
+def _colours(values, lo: float | None = None, hi: float | None = None):
+    """RGBA (uint8, sRGB) viridis colours of ``values`` over ``lo..hi`` (default:
+    :func:`colour_range`); NaN (stock surface) -> light grey. Returns ``(colours, lo, hi)``."""
     import matplotlib
 
     v = np.asarray(values, float)
     ok = np.isfinite(v)
-    lo, hi = (float(v[ok].min()), float(v[ok].max())) if ok.any() else (0.0, 1.0)
-    norm = np.where(ok, (np.nan_to_num(v) - lo) / (hi - lo), 0.0) if hi > lo else np.zeros_like(v)
-    cols = (matplotlib.colormaps["viridis"](norm) * 255).astype(np.uint8)
-    cols[~ok] = (200, 200, 200, 255)
+    if lo is None or hi is None:
+        lo, hi = colour_range(v)
+    norm = np.clip(np.where(ok, (np.nan_to_num(v) - lo) / (hi - lo), 0.0), 0.0, 1.0)
+    cols = np.round(matplotlib.colormaps["viridis"](norm) * 255).astype(np.uint8)
+    cols[~ok] = STOCK_GREY
     return cols, lo, hi
+
+
+def srgb_to_linear(rgba: np.ndarray) -> np.ndarray:
+    """uint8 sRGB(A) colours -> uint8 linear RGB(A) (alpha kept): glTF's vertex colours (COLOR_0)
+    are linear, viewers encode them to sRGB for display; writing sRGB values there would show every
+    colour lighter and the map washed out (IEC 61966-2-1 transfer function)."""
+    c = np.asarray(rgba, float) / 255.0
+    out = c.copy()
+    rgb = c[..., :3]
+    out[..., :3] = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    return np.round(out * 255.0).astype(np.uint8)
+
+
+def legend_png(variable: str, lo: float, hi: float) -> bytes:
+    """The colour legend of a coloured part as PNG bytes: viridis from ``lo`` to ``hi`` (SI) labelled
+    in the variable's display unit, and the stock-surface grey."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import Normalize
+    from matplotlib.patches import Patch
+
+    factor, unit = DISPLAY_UNITS[variable]
+    fig, ax = plt.subplots(figsize=(2.4, 5.0), dpi=100)
+    sm = plt.cm.ScalarMappable(norm=Normalize(lo * factor, hi * factor), cmap=matplotlib.colormaps["viridis"])
+    fig.colorbar(sm, cax=ax, label=f"{variable.replace('_', ' ')} [{unit}]")
+    fig.legend(handles=[Patch(color=np.array(STOCK_GREY) / 255.0, label="stock surface")], loc="lower center",
+               fontsize=8, frameon=False)
+    fig.subplots_adjust(left=0.15, right=0.45, top=0.95, bottom=0.12)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _legend_quad(png: bytes, bounds: np.ndarray):
+    """A textured rectangle showing the legend, standing beside the part (+x side, facing -y),
+    as tall as the part is deep in y (at least 40 mm)."""
+    import io
+
+    import trimesh
+    from PIL import Image
+
+    image = Image.open(io.BytesIO(png)).convert("RGBA")
+    size = bounds[1] - bounds[0]
+    height = max(float(size[1]) * 0.8, 0.04)
+    width = height * image.width / image.height
+    x0 = float(bounds[1][0]) + 0.05 * max(float(size[0]), 0.02)
+    y0 = float(bounds[0][1]) + 0.1 * float(size[1])
+    z0 = float(bounds[0][2])
+    vertices = np.array([[x0, y0, z0], [x0 + width, y0, z0], [x0 + width, y0, z0 + height], [x0, y0, z0 + height]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    material = trimesh.visual.material.PBRMaterial(name="legend", baseColorTexture=image, doubleSided=True,
+                                                   metallicFactor=0.0, roughnessFactor=1.0)
+    visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
+    return trimesh.Trimesh(vertices, faces, visual=visual, process=False)
 
 
 def step_values(vw: VirtualWorkpiece, step: np.ndarray, variable: str = "deflection") -> np.ndarray:
@@ -158,31 +241,55 @@ def step_values(vw: VirtualWorkpiece, step: np.ndarray, variable: str = "deflect
     return out
 
 
-def coloured_mesh(vw: VirtualWorkpiece, variable: str = "deflection", stride: int | None = None):
+def coloured_mesh(vw: VirtualWorkpiece, variable: str = "deflection", stride: int | None = None,
+                  merge: bool = True):
     """The closed surface (:func:`simulate.machining.surface_mesh.surface_mesh`) as a trimesh with
-    vertex colours of ``variable`` (stock surface grey); returns ``(mesh, values per vertex)``."""
-    from .surface_mesh import surface_mesh
+    sRGB vertex colours of ``variable`` over :func:`colour_range` (stock surface grey); with
+    ``merge``, flat quads of one colour are merged into rectangles
+    (:func:`simulate.machining.surface_mesh.merge_flat_quads`: same surface and colours, a fraction
+    of the triangles). Returns ``(mesh, values per vertex, (lo, hi))``."""
+    from .surface_mesh import merge_flat_quads, surface_mesh
 
     sm = surface_mesh(vw.workpiece, stride=stride)
     vals = step_values(vw, sm.vertex_step, variable)
-    cols, _, _ = _colours(vals)
-    return sm.trimesh(cols), vals
+    cols, lo, hi = _colours(vals)
+    if merge:
+        packed = cols.astype(np.int64) @ np.array([1 << 24, 1 << 16, 1 << 8, 1], np.int64)
+        sm = merge_flat_quads(sm, packed)
+        vals = step_values(vw, sm.vertex_step, variable)
+        cols, _, _ = _colours(vals, lo, hi)
+    return sm.trimesh(cols), vals, (lo, hi)
 
 
 def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", max_points: int = 2_000_000,
                   stride: int | None = None):
-    """Write ``surface_<variable>.ply`` and ``.glb``: the closed triangle surface of the part with
-    vertex colours of ``variable`` (viridis over its range, stock surface grey). Written to temp
-    files and renamed. ``max_points`` is kept for compatibility (the mesh size is set by
-    ``stride``, see :func:`simulate.machining.surface_mesh.choose_stride`). Returns the paths."""
-    mesh, _ = coloured_mesh(vw, variable, stride)
+    """Write ``surface_<variable>.ply``, ``surface_<variable>.glb`` and the colour legend
+    ``surface_<variable>_legend.png``: the closed triangle surface of the part with vertex colours of
+    ``variable`` (viridis over the range of the machined surface, stock surface grey), flat
+    single-coloured regions merged (:func:`coloured_mesh`). The GLB holds two nodes: ``part`` (linear
+    vertex colours, as glTF defines them) and ``legend``, a rectangle beside the part textured with
+    the legend image. Each file is written to a temp file and renamed. ``max_points`` is kept for
+    compatibility (the mesh size is set by ``stride``, see
+    :func:`simulate.machining.surface_mesh.choose_stride`). Returns the paths."""
+    import trimesh
+
+    mesh, _, (lo, hi) = coloured_mesh(vw, variable, stride)
+    png = legend_png(variable, lo, hi)
+    part = trimesh.Trimesh(mesh.vertices, mesh.faces,
+                           vertex_colors=srgb_to_linear(np.asarray(mesh.visual.vertex_colors)), process=False)
+    scene = trimesh.Scene()
+    scene.add_geometry(part, geom_name="part", node_name="part")
+    scene.add_geometry(_legend_quad(png, mesh.bounds), geom_name="legend", node_name="legend")
     out_dir = Path(out_dir)
+    contents = {f"surface_{variable}.ply": lambda: mesh.export(file_type="ply"),
+                f"surface_{variable}.glb": lambda: scene.export(file_type="glb"),
+                f"surface_{variable}_legend.png": lambda: png}
     paths = []
-    for ext in ("ply", "glb"):
-        p = out_dir / f"surface_{variable}.{ext}"
+    for name, make in contents.items():
+        p = out_dir / name
         tmp = p.with_name(p.name + ".tmp")
         try:
-            data = mesh.export(file_type=ext)
+            data = make()
             tmp.write_bytes(data if isinstance(data, bytes) else data.encode())
             os.replace(tmp, p)
         finally:
@@ -203,8 +310,7 @@ def render_png(vw: VirtualWorkpiece, path, variable: str = "deflection", max_poi
     if len(pts) > max_points:
         sel = np.random.default_rng(0).choice(len(pts), max_points, replace=False)
         pts, vals = pts[sel], vals[sel]
-    unit = {"deflection": (1e6, "um"), "tracking_error": (1e6, "um"), "force": (1, "N"), "peak_force": (1, "N"),
-            "time": (1, "s"), "line": (1, "-"), "switch": (1, "bits")}[variable]
+    unit = DISPLAY_UNITS[variable]
     fig, ax = plt.subplots(figsize=(8, 7), dpi=110)
     sc = ax.scatter(pts[:, 0] * 1e3, pts[:, 1] * 1e3, c=vals * unit[0], s=0.3, cmap="viridis")
     fig.colorbar(sc, ax=ax, label=f"{variable.replace('_', ' ')} [{unit[1]}]")
@@ -255,8 +361,7 @@ def render_mesh_png(vw: VirtualWorkpiece, path, variable: str = "deflection", ma
     order = np.argsort(tri.mean(axis=1) @ view)   # far first
     tri, n, fval = tri[order], n[order], fval[order]
     xy = np.stack([tri @ right, tri @ up], axis=-1) * 1e3
-    unit = {"deflection": (1e6, "um"), "tracking_error": (1e6, "um"), "force": (1, "N"), "peak_force": (1, "N"),
-            "time": (1, "s"), "line": (1, "-"), "switch": (1, "bits")}[variable]
+    unit = DISPLAY_UNITS[variable]
     v = fval * unit[0]
     ok = np.isfinite(v)
     lo, hi = (float(v[ok].min()), float(v[ok].max())) if ok.any() else (0.0, 1.0)

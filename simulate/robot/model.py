@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from identify.errors import InputError
+from identify.files import as_created
 
 N_JOINTS = 6
 
@@ -610,6 +611,7 @@ def save_robot(robot: Robot, path: str | os.PathLike) -> Path:
     try:
         with os.fdopen(fd, "w") as fh:
             fh.write(text)
+        as_created(tmp)
         os.replace(tmp, p)
     except BaseException:
         if os.path.exists(tmp):

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from identify.errors import InputError
+from identify.files import as_created
 
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 JOINT_COLUMNS = tuple(f"q{i}" for i in range(1, 7))
@@ -47,6 +48,7 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
             df.to_parquet(tmp, index=False)
         else:
             df.to_csv(tmp, index=False, float_format="%.17g")
+        as_created(tmp)
         os.replace(tmp, p)
     except BaseException:
         if os.path.exists(tmp):

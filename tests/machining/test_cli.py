@@ -35,10 +35,10 @@ def test_machine_writes_workpiece_meshes_png_and_json(small_job, tmp_path):
     assert 0 < info["peak_deflection"] < 2e-3
     names = sorted(p.name for p in out.iterdir())
     assert names == ["render3d_deflection.png", "render_deflection.png", "surface_deflection.glb",
-                     "surface_deflection.ply", "virtual_workpiece.npz"]
+                     "surface_deflection.ply", "surface_deflection_legend.png", "virtual_workpiece.npz"]
     vw = VirtualWorkpiece.load(out / "virtual_workpiece.npz")
     assert len(vw.steps.t) == info["steps"]
-    m = trimesh.load(out / "surface_deflection.glb", force="mesh")
+    m = trimesh.load(out / "surface_deflection.glb").geometry["part"]  # beside it: the legend
     assert len(m.faces) > 0
     np.testing.assert_allclose(m.bounds, [[0, 0, -0.006], [0.02, 0.02, 0.0]], atol=1e-6)
     for png in ("render_deflection.png", "render3d_deflection.png"):

@@ -1,17 +1,20 @@
 """Surface mesh of the tri-dexel workpiece: closed, right volume and bounds, walls at the exact
 dexel ends, vertex colours in GLB and PLY."""
+import io
 import math
 
+import matplotlib
 import numpy as np
 import pytest
 import trimesh
+from PIL import Image
 
 from simulate.machining.cutting import Spindle, load_material
 from simulate.machining.dexel import TriDexel
 from simulate.machining.simulation import simulate_machining
-from simulate.machining.surface_mesh import surface_mesh
+from simulate.machining.surface_mesh import _greedy_rectangles, surface_mesh
 from simulate.machining.tools import make_cutter
-from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes
+from simulate.machining.virtual_workpiece import VirtualWorkpiece, coloured_mesh, export_meshes
 
 
 @pytest.mark.parametrize("stride", [1, 2])
@@ -66,14 +69,91 @@ def test_machined_slot_walls_at_dexel_ends():
 def test_glb_and_ply_load_back_with_colours(tmp_path):
     vw = _pocketed()
     paths = export_meshes(vw, tmp_path, "deflection")
-    assert sorted(p.name for p in paths) == ["surface_deflection.glb", "surface_deflection.ply"]
+    assert sorted(p.name for p in paths) == ["surface_deflection.glb", "surface_deflection.ply",
+                                             "surface_deflection_legend.png"]
     assert not list(tmp_path.glob("*.tmp"))
     wp = vw.workpiece
-    for p in paths:
-        m = trimesh.load(p, force="mesh")
+    glb = trimesh.load(tmp_path / "surface_deflection.glb")  # a scene: the part and its legend
+    assert set(glb.geometry) == {"part", "legend"}
+    ply = trimesh.load(tmp_path / "surface_deflection.ply", force="mesh")
+    for m in (glb.geometry["part"], ply):
         assert len(m.faces) > 0
         np.testing.assert_allclose(m.bounds, [wp.lower, [0.03, 0.02, 0.01]], atol=1e-6)
         cols = np.asarray(m.visual.vertex_colors)
         assert cols.shape == (len(m.vertices), 4)
         assert len(np.unique(cols[:, :3], axis=0)) > 5   # a colour map, not one colour
-    assert math.isfinite(trimesh.load(paths[1], force="mesh").volume)
+    assert math.isfinite(ply.volume)
+    # glTF vertex colours are linear: encoded back to sRGB they are the PLY's (sRGB) colours
+    part = glb.geometry["part"]
+    np.testing.assert_array_equal(part.vertices, ply.vertices)
+    lin = np.asarray(part.visual.vertex_colors)[:, :3] / 255.0
+    srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055) * 255.0
+    dark = np.asarray(ply.visual.vertex_colors)[:, :3] > 40   # linear uint8 is coarse near black
+    assert np.abs(srgb - np.asarray(ply.visual.vertex_colors)[:, :3])[dark].max() <= 3.0
+    # the legend: a textured rectangle in the GLB, the same image beside it
+    legend = glb.geometry["legend"]
+    image = legend.visual.material.baseColorTexture
+    png = (tmp_path / "surface_deflection_legend.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and image.size == Image.open(io.BytesIO(png)).size
+    assert legend.bounds[0][0] > wp.upper[0]   # beside the part, not in it
+
+
+def test_colour_scale_covers_the_machined_surface():
+    vw = _pocketed()
+    mesh, vals, (lo, hi) = coloured_mesh(vw, "deflection", stride=1, merge=False)
+    ok = np.isfinite(vals)
+    assert ok.sum() > 50
+    # every machined vertex inside the scale: the ends are its extremes, no colour clipped
+    assert lo == pytest.approx(vals[ok].min()) and hi == pytest.approx(vals[ok].max())
+    # each colour decodes back to its value: no part of the machined surface is clipped to an end
+    cols = np.asarray(mesh.visual.vertex_colors)[ok, :3].astype(float)
+    lut = np.round(matplotlib.colormaps["viridis"](np.linspace(0, 1, 256))[:, :3] * 255)
+    level = np.argmin(((cols[:, None, :] - lut[None]) ** 2).sum(axis=2), axis=1) / 255.0
+    np.testing.assert_allclose(level, (vals[ok] - lo) / (hi - lo), atol=2.5 / 255)  # 256 levels
+    assert (np.asarray(mesh.visual.vertex_colors)[~ok] == (200, 200, 200, 255)).all()
+
+
+def test_merging_flat_quads_keeps_surface_and_colours():
+    vw = _pocketed()
+    full, _, (lo, hi) = coloured_mesh(vw, "deflection", stride=1, merge=False)
+    merged, _, scale = coloured_mesh(vw, "deflection", stride=1, merge=True)
+    assert scale == (lo, hi)
+    assert len(merged.faces) < 0.5 * len(full.faces)
+    assert merged.is_winding_consistent
+    assert merged.volume == pytest.approx(full.volume, rel=1e-9)
+    assert merged.area == pytest.approx(full.area, rel=1e-9)
+    np.testing.assert_allclose(merged.bounds, full.bounds, atol=1e-15)
+
+    def area_per_colour(m):
+        cols = np.asarray(m.visual.vertex_colors)[m.faces]        # (F, 3, 4)
+        one = (cols == cols[:, :1]).all(axis=(1, 2))
+        assert one.mean() > 0.5
+        key = cols[:, 0].astype(np.int64) @ np.array([1 << 24, 1 << 16, 1 << 8, 1])
+        total = {}
+        for k, a in zip(key[one], m.area_faces[one]):
+            total[k] = total.get(k, 0.0) + a
+        return total, m.area_faces[~one].sum()
+
+    # the colour pattern: the area of every single-coloured region and of the mixed faces is unchanged
+    a_full, mixed_full = area_per_colour(full)
+    a_merged, mixed_merged = area_per_colour(merged)
+    assert set(a_full) == set(a_merged)
+    for k in a_full:
+        assert a_merged[k] == pytest.approx(a_full[k], rel=1e-9, abs=1e-15)
+    assert mixed_merged == pytest.approx(mixed_full, rel=1e-9)
+    # every vertex kept is an original vertex with its original colour
+    lookup = {tuple(v): tuple(c) for v, c in zip(full.vertices, np.asarray(full.visual.vertex_colors))}
+    for v, c in zip(merged.vertices, np.asarray(merged.visual.vertex_colors)):
+        assert lookup[tuple(v)] == tuple(c)
+
+
+def test_greedy_rectangles_cover_exactly_once():
+    rng = np.random.default_rng(5)
+    occ = rng.random((40, 30)) < 0.7
+    occ[5:25, 3:20] = True
+    rects = _greedy_rectangles(occ)
+    cover = np.zeros(occ.shape, int)
+    for i0, j0, i1, j1 in rects:
+        cover[i0:i1, j0:j1] += 1
+    np.testing.assert_array_equal(cover, occ.astype(int))
+    assert len(rects) < occ.sum() / 2

@@ -143,8 +143,8 @@ def service_tracking_store(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def registered_model(tmp_path_factory, service_tracking_store):
-    """A Coulomb-viscous model fitted on a synthetic record, registered as max100-axis1-friction@champion
-    (version 1) in the session's MLflow store; returns (fitted model, a test record, run id)."""
+    """A Coulomb-viscous model fitted on a synthetic record, registered as max100-axis1-friction@challenger and
+    promoted to champion (version 1) in the session's MLflow store; returns (fitted model, a test record, run id)."""
     import mlflow
 
     from identify.models import make_model
@@ -169,5 +169,9 @@ def registered_model(tmp_path_factory, service_tracking_store):
     name = "max100-axis1-friction"
     client.create_registered_model(name)
     mv = client.create_model_version(name, f"runs:/{run.info.run_id}/model", run_id=run.info.run_id)
-    client.set_registered_model_alias(name, "champion", mv.version)
+    # registered as the challenger and promoted, the way a fit becomes champion (never by itself)
+    client.set_registered_model_alias(name, "challenger", mv.version)
+    from identify.tracking import promote
+
+    assert promote(name).promoted
     return model, rec, run.info.run_id

@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import io
 import time
+from datetime import datetime, timedelta
 
 import pytest
 
@@ -41,20 +42,26 @@ def check_results(c, job: str, poses: list[str]) -> dict:
     names = [f["name"] for f in report["features"]]
     assert len(names) == 10 and names[0] == "circle height zMZ" and names[-1] == "slope angle"
     for f in report["features"]:
-        assert set(f["deviation"]) == set(poses) and f["tolerance"] > 0
+        assert set(f["deviation_mm"]) == set(poses) and f["tolerance_mm"] > 0
     # the ranking score is the sum of |deviation| / tolerance over the rows (issue 8)
     for e in entries:
-        total = sum(abs(f["deviation"][e["pose"]]) / f["tolerance"] for f in report["features"])
+        total = sum(abs(f["deviation_mm"][e["pose"]]) / f["tolerance_mm"] for f in report["features"])
         assert total == pytest.approx(e["score"], rel=1e-9)
     assert {p["pose"] for p in report["poses"]} == set(poses)
+    # units in the field names; form rows (roundness, straightness) have no nominal size
+    by_name = {f["name"]: f for f in report["features"]}
+    for form in ("circle roundness", "square straightness (4x)", "slope straightness"):
+        assert by_name[form]["nominal_mm"] is None and by_name[form]["nominal_text"] == "-"
+    assert by_name["circle diameter"]["nominal_mm"] > 0 and by_name["circle diameter"]["nominal_deg"] is None
+    assert by_name["slope angle"]["nominal_deg"] > 0 and by_name["slope angle"]["nominal_mm"] is None
 
     text = c.get(f"/simulations/{job}/report", params={"format": "csv"})
     assert text.status_code == 200 and text.headers["content-type"].startswith("text/csv")
     rows = list(csv.DictReader(io.StringIO(text.text)))
     assert len(rows) == 10 * len(poses)
     first = next(r for r in rows if r["feature"] == "circle diameter" and r["pose"] == poses[0])
-    dev = next(f for f in report["features"] if f["name"] == "circle diameter")["deviation"][poses[0]]
-    assert float(first["deviation"]) == pytest.approx(dev)
+    dev = next(f for f in report["features"] if f["name"] == "circle diameter")["deviation_mm"][poses[0]]
+    assert float(first["deviation_mm"]) == pytest.approx(dev)
 
     for pose in poses:
         glb = c.get(f"/simulations/{job}/workpiece/{pose}.glb")
@@ -77,6 +84,9 @@ def test_submit_poll_rank_report_glb_and_restart(make_server):
         st, seen = poll(c, job, timeout=3600)
         assert st["state"] == "succeeded", st
         assert st["progress"] == 1.0 and seen == sorted(seen)  # progress never goes back
+        # ISO 8601 UTC timestamps, in order
+        created, started, finished = (datetime.fromisoformat(st[k]) for k in ("created", "started", "finished"))
+        assert created.utcoffset() == timedelta(0) and created <= started <= finished
         report = check_results(c, job, poses)
     # a short load on the finished job's status and ranking
     res = load(srv.url, {"X-API-Key": KEY}, [f"/simulations/{job}", f"/simulations/{job}/ranking"],
