@@ -19,8 +19,6 @@ model files as bytes), so the results are identical.
 """
 from __future__ import annotations
 
-import csv
-import io
 import json
 import os
 import shutil
@@ -32,6 +30,7 @@ from typing import Callable
 import numpy as np
 
 from identify.errors import InputError
+from service import schemas
 from service.jobs import JobKind
 from service.paths import DATA_DIR
 
@@ -299,19 +298,6 @@ def rank(outcomes: list[PoseOutcome]) -> tuple[list[dict], list[dict]]:
     return ranking, features
 
 
-def report_csv(features: list[dict], poses: list[str]) -> str:
-    """``feature,nominal,tolerance,pose,deviation,in_tolerance`` rows (mm as in Table 2)."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["feature", "nominal", "tolerance", "pose", "deviation", "in_tolerance"])
-    for row in features:
-        for pose in poses:
-            dev = row["deviation"].get(pose)
-            ok = None if dev is None else abs(dev) <= row["tolerance"]
-            w.writerow([row["name"], row["nominal"], row["tolerance"], pose, dev, ok])
-    return buf.getvalue()
-
-
 def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address: str | None) -> dict:
     tasks = pose_tasks(request, job_dir, progress)
     outcomes = run_ray(tasks, progress, ray_address) if ray_address else run_local(tasks, progress)
@@ -323,7 +309,8 @@ def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address
             _write_atomic(job_dir / "workpiece" / f"{o.pose}.glb", o.glb)
     report = {"poses": [o.summary for o in outcomes], "features": features}
     _write_atomic(job_dir / "report.json", json.dumps(report, indent=1))
-    _write_atomic(job_dir / "report.csv", report_csv(features, poses))
+    # the stored CSV is the one the API serves (unit-named columns, from report.json)
+    _write_atomic(job_dir / "report.csv", schemas.report_csv(report))
     _write_atomic(job_dir / "ranking.json", json.dumps({"ranking": ranking}, indent=1))
     return {"ranking": ranking, "poses": poses, "backend": "ray" if ray_address else "local",
             "friction": request.get("friction", [])}

@@ -123,8 +123,8 @@ def fabricate_finished_job(data_dir: Path) -> tuple[str, dict[str, bytes]]:
              "report.json": json.dumps({"poses": [{"pose": "near", "steps": 10}],
                                         "features": [{"name": "circle", "nominal": 108.0, "tolerance": 0.02,
                                                       "deviation": {"near": 0.011}}]}).encode(),
-             "report.csv": (b"feature,nominal,tolerance,pose,deviation,in_tolerance\n"
-                            b"circle,108.0,0.02,near,0.011,True\n"),
+             "report.csv": (b"feature,nominal_mm,nominal_deg,tolerance_mm,pose,deviation_mm,in_tolerance\n"
+                            b"circle,108.0,,0.02,near,0.011,True\n"),
              "workpiece/near.glb": glb}
     d = data_dir / "jobs" / rec.id
     for name, data in files.items():
