@@ -34,6 +34,7 @@ import numpy as np
 from identify.errors import InputError
 from service.jobs import JobKind
 from service.paths import DATA_DIR
+from simulate.defaults import DEXEL_SPACING, RANKING_DEXEL_SPACING
 
 Progress = Callable[[float, str], None]
 MM = 1e-3
@@ -152,7 +153,7 @@ def simulate_pose(task: PoseTask) -> PoseOutcome:
     if not isinstance(stock, dict) or stock.get("size_mm") not in (160, 320):
         raise InputError("the ranking needs an ISO 10791-7 test-piece stock (size_mm 160 or 320)",
                          source=task.stock_source, field="size_mm")
-    settings = ranking_mod.RankSettings(spacing=float(opts.get("spacing_mm", 2.0)) * MM,
+    settings = ranking_mod.RankSettings(spacing=float(opts.get("spacing_mm", RANKING_DEXEL_SPACING / MM)) * MM,
                                         material=opts.get("material") or "Al7075", size=int(stock["size_mm"]))
     components = ranking_mod.Components(deflection=bool(opts.get("deflection", True)),
                                         friction=bool(opts.get("friction", True)),
@@ -361,7 +362,8 @@ def run_explain(request: dict, job_dir: Path, progress: Progress) -> dict:
     robot = load_robot(DATA_DIR / "robots" / f"{request['robot']}.toml")
     (job_dir / "pose.json").write_text(json.dumps({"poses": [request["pose"]]}))
     setup = load_setup(job_dir / "program.nc", job_dir / "pose.json", request["pose"]["name"],
-                       stock=job_dir / "program.stock.json", spacing=float(request.get("spacing_mm", 1.0)) * MM)
+                       stock=job_dir / "program.stock.json",
+                       spacing=float(request.get("spacing_mm", DEXEL_SPACING / MM)) * MM)
     measured = read_measured_scan(job_dir / "scan.csv", setup.piece)
     progress(0.05, "simulating the nominal part")
     setup.trajectory(robot)  # reachability errors before the long part
