@@ -75,7 +75,8 @@ class AxisFriction(Strict):
     axis: int = Field(ge=1, le=6, description="joint number 1..6")
     model: str = Field("champion", min_length=1, max_length=64,
                        description="registry alias (e.g. champion, challenger) or version number of "
-                                   "<robot>-axis<N>-friction; 'robot' keeps the robot file's friction")
+                                   "<robot>-axis<N>-friction, any model type (coulomb-viscous, stribeck, lugre, "
+                                   "lugre-extended, greybox, residual, lstm); 'robot' keeps the robot file's friction")
 
 
 class SimulationOptions(Strict):
@@ -163,7 +164,8 @@ class FeatureRow(BaseModel):
 class Report(Strict):
     job: str
     poses: list[dict[str, Any]] = Field(description="per pose: steps, duration [s], switching points, "
-                                                    "tracking error [m], peak force [N], peak deflection [m]")
+                                                    "tracking error [m], peak force [N], peak deflection [m], "
+                                                    "friction (per joint the model kind and registered version used)")
     features: list[FeatureRow]
 
 

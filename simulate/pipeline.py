@@ -377,25 +377,27 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
     rpm = s.spindle_rpm or prog.spindle_rpm
     c0 = time.perf_counter()
     R = job.placement.T[:3, :3]
-    n = len(jt.t)
     C = workpiece_compliance(robot, jt.q, R, s.stiffness_scale) if comp.deflection else None
-    fr = None
-    err = np.zeros((n, 3))
+    servo = None
     if comp.servo:
-        from simulate.robot.servo import simulate_servo
+        from simulate.machining.simulation import loop_servo
+        from simulate.robot.friction import loop_friction
 
-        sv = simulate_servo(robot, jt.t, jt.q, friction=comp.friction, backlash=comp.switching,
-                            substeps=s.substeps)
-        err = sv.tcp_error(robot) @ R   # base -> workpiece frame: R^T e, row-wise
-    if job.offset is not None:
-        err = err + np.asarray(job.offset, float)
-    timings["robot (compliance, servo)"] = time.perf_counter() - c0
+        fp, fr = loop_friction(robot, job.friction, enabled=comp.friction)
+        servo = loop_servo(robot, jt.q, jt.t, R, fp, backlash=comp.switching, with_friction=comp.friction,
+                           substeps=s.substeps)
+    else:
+        fr = [{"joint": j, "kind": "none", "source": "no servo"} for j in range(1, 7)]
+    n = len(jt.t)
+    offset = np.zeros((n, 3)) if job.offset is None else np.broadcast_to(np.asarray(job.offset, float), (n, 3))
+    timings["robot (compliance, servo setup)"] = time.perf_counter() - c0
     c0 = time.perf_counter()
     wp = stock_workpiece(prog, s)
     timings["stock"] = time.perf_counter() - c0
     res = simulate_machining(wp, cutter, jt.t, jt.line, jt.xyz, mat, Spindle.from_rpm(rpm), compliance=C,
-                             tracking_error=err, switch=jt.switch if comp.switching else None,
-                             forces=comp.deflection, advance=advance, profile=profile)
+                             tracking_error=offset, switch=jt.switch if comp.switching else None,
+                             advance=advance, profile=profile, servo=servo)
+    err = res.steps.tracking_error
     timings["coupled loop"] = res.wall_time
     scan = table = None
     if size is not None:
