@@ -212,6 +212,7 @@ def simulate_pose(task: PoseTask) -> PoseOutcome:
         "peak_force_n": float(steps.peak_force.max()),
         "peak_deflection_m": float(np.linalg.norm(steps.deflection, axis=1).max()),
         "max_tracking_error_m": float(np.linalg.norm(terr, axis=1).max()),
+        "rms_tracking_error_m": float(np.sqrt(np.mean(np.sum(terr ** 2, axis=1)))),
         "score": float(table.score),
         "in_tolerance": int(table.n_in_tolerance),
         "worst_feature": table.worst.name,
