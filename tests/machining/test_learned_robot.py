@@ -99,3 +99,26 @@ def test_bad_model_reference_exits_2_naming_the_key(tmp_path, case):
     msg = r.output.strip()
     assert len(msg.splitlines()) == 1 and "joint[2].friction.model" in msg and "robot.toml" in msg, msg
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_torch_is_imported_only_for_a_learned_model(tmp_path):
+    """The inline-LuGre robot machines without torch; a saved LuGre model folder too (read from its
+    params.json); torch comes in only with a learned model's network.pt."""
+    import subprocess
+    import sys
+
+    code = f"""
+import sys
+from pathlib import Path
+from simulate.pipeline import MachiningJob, MachiningSettings, run_job
+from simulate.robot.friction import loop_friction
+from simulate.robot.model import load_robot
+from simulate.toolpath.placement import load_poses
+pl = load_poses(Path({str(SMALL / "small160.poses.json")!r}))[0]
+run_job(MachiningJob(program=Path({str(SMALL / "small160.nc")!r}), robot=Path({str(ROOT / "data/robots/max100.toml")!r}),
+                     placement=pl, settings=MachiningSettings(spacing=4e-3)))
+print("torch" in sys.modules)
+"""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "False"
