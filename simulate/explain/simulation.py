@@ -73,9 +73,11 @@ class PartSetup:
     def trajectory(self, robot: Robot):
         """Joint trajectory (IK + switching points); depends on the kinematics only, so it is cached."""
         if self._trajectory is None:
-            from simulate.toolpath.placement import joint_trajectory
+            from simulate.pipeline import MachiningJob, prepare
 
-            self._trajectory = joint_trajectory(robot, self.interp, self.placement, source=str(self.program))
+            job = MachiningJob(program=self.program_setup, robot=robot, placement=self.placement,
+                               settings=settings_of(self))
+            self._trajectory = prepare(job).trajectory
         return self._trajectory
 
     @property

@@ -38,13 +38,14 @@ def champions(tmp_path_factory):
                                     seed=1).frame, "champion-record")
     hyper = {"greybox": dict(epochs=5), "residual": dict(epochs=10, population=8, generations=3),
              "lstm": dict(epochs=2, batches=2)}
-    mlflow.set_tracking_uri(uri)
-    mlflow.set_registry_uri(uri)
+    # the client only: mlflow.set_tracking_uri would also set MLFLOW_TRACKING_URI for the whole session
     client = mlflow.MlflowClient(tracking_uri=uri, registry_uri=uri)
+    experiment = client.create_experiment("champions", artifact_location=(root / "artifacts").as_uri())
     for axis, kind in KINDS.items():
         folder = make_model(kind, **hyper[kind]).fit(rec).save(root / kind)
-        with mlflow.start_run() as run:
-            mlflow.log_artifacts(str(folder), artifact_path="model")
+        run = client.create_run(experiment)
+        client.log_artifacts(run.info.run_id, str(folder), artifact_path="model")
+        client.set_terminated(run.info.run_id)
         name = f"max100-axis{axis}-friction"
         client.create_registered_model(name)
         mv = client.create_model_version(name, f"runs:/{run.info.run_id}/model", run_id=run.info.run_id)
