@@ -1,24 +1,18 @@
 """Pose ranking (paper 3.8 and 4): simulate the program in every workpiece placement, measure the
 virtual part like a CMM, score the Table-2 deviations and rank the placements.
 
-Per pose (one worker process each, at most ``workers`` at a time):
-
-1. interpolation of the program (shared by all poses, computed once) and inverse kinematics for the
-   placement (:func:`simulate.toolpath.placement.joint_trajectory`), with switching points;
-2. servo tracking error ``p(q_act) - p(q_cmd)`` from the cascaded servo with LuGre friction and gear
-   backlash (:func:`simulate.robot.servo.simulate_servo`), turned into the workpiece frame;
-3. the coupled removal / force / deflection loop (:func:`simulate.machining.simulation.simulate_machining`)
-   with the translational compliance ``J K^-1 J^T`` in the workpiece frame and the cutter of the robot
-   file's ``[tool]`` (:func:`simulate.evaluation.cutter.robot_cutter`: the tool belongs to the robot
-   file, where ``explain`` calibrates its radius; the stock file only describes the blank);
-4. the virtual CMM (:mod:`simulate.evaluation.cmm`) and the ten rows (:mod:`simulate.evaluation.features`).
+Per pose (one worker process each, at most ``workers`` at a time) one run of the machining pipeline
+(:func:`simulate.pipeline.run_job`; the program is interpolated once for all poses): inverse kinematics
+for the placement with switching points, the coupled loop with the axis servos and each joint's friction
+model inside it, the translational compliance in the workpiece frame and the robot file's cutter, then
+the virtual CMM (:mod:`simulate.evaluation.cmm`) and the ten rows (:mod:`simulate.evaluation.features`).
 
 Score (lower is better): ``sum over rows of |deviation| / tolerance``; ties broken by more rows in
 tolerance, then by the pose name. Dimensionless, so a 15 um straightness tolerance weighs as much as
 a 20 um diameter tolerance, which is how the paper colours Table 2 (best to worst per row).
 
-Components (:class:`Components`): ``deflection`` (compliance x cutting force), ``friction`` (LuGre
-friction in the servo) and ``switching`` (the gear backlash, whose effect appears where an axis stops
+Components (:class:`Components`): ``deflection`` (compliance x cutting force), ``friction`` (each joint's
+friction model in the servo) and ``switching`` (the gear backlash, whose effect appears where an axis stops
 or reverses, i.e. at the switching points of paper 3.7; the paper's switching analysis only marks these
 points, the backlash model is what turns them into a path error). Switching one off and re-running
 gives that component's contribution ``deviation(all) - deviation(all but it)`` per row; its share is

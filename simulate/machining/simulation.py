@@ -21,10 +21,10 @@ computed for all steps in one vectorised call; only the translational 3x3 block 
 the tool axis rotation by the process wrench is neglected). The deflection follows ``C F`` with
 the lag of the arm's first structural mode (:data:`DEFLECTION_TIME_CONSTANT`), and the chip
 thickness comes from the servo-driven motion (command + tracking error): the quasi-static
-deflection moves where the cutter engages, not the feed per tooth. The tracking error is the
-servo simulation's ``p(q_act) - p(q_cmd)`` along the commanded joint trajectory, computed up-front
-(the process force is not fed back into the servo; see
-:func:`greybench.commands.machining.tracking_error`).
+deflection moves where the cutter engages, not the feed per tooth. The axis servos are stepped inside
+the loop every step (:data:`ServoLoop`, :func:`simulate.robot.servo.servo_step`) with each joint's
+friction model, loaded by the previous step's process force as ``tau_ext = -J^T F``; the tracking error
+is ``J (q_act - q_cmd)`` at the commanded joints (first order; docs/simulation-pipeline.md).
 """
 from __future__ import annotations
 
