@@ -7,15 +7,17 @@ issue 8 (:func:`simulate.evaluation.ranking.rank_poses` with that one placement)
 1. the program interpolated at the 2 ms cycle (:func:`simulate.toolpath.interpolation.interpolate`),
 2. the workpiece placed and the joint trajectory by inverse kinematics with switching points
    (:func:`simulate.toolpath.placement.joint_trajectory`),
-3. the axis servos with the chosen friction models (:func:`simulate.robot.servo.simulate_servo`:
-   tracking error, the friction's contribution to the path error),
-4. the coupled machining simulation and virtual CMM (``simulate.machining`` / ``simulate.evaluation``)
-   giving the feature deviations of the paper's Table 2 and the virtual workpiece (GLB),
+3. the coupled machining loop with the axis servos and each axis's chosen friction model inside it
+   (any model type: a registry alias or version per axis, or the robot file's; :mod:`simulate.pipeline`),
+4. the virtual CMM (``simulate.evaluation``) giving the feature deviations of the paper's Table 2 and
+   the virtual workpiece (GLB),
 
 then ranks the poses. Poses run one after another in the job's worker process, or as Ray tasks
 when a Ray address is configured (``RAY_ADDRESS``); the per-pose function :func:`simulate_pose` is
 the same in both cases and takes everything it needs by value (program text, robot name, friction
-model files as bytes), so the results are identical.
+model files as bytes), so the results are identical. A worker writes each model version once into a
+per-process folder and the simulation caches it loaded (:mod:`simulate.robot.friction`); the report
+names the registered version every axis used.
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ from identify.errors import InputError
 from service import schemas
 from service.jobs import JobKind
 from service.paths import DATA_DIR
+from simulate.defaults import DEXEL_SPACING, RANKING_DEXEL_SPACING
 
 Progress = Callable[[float, str], None]
 MM = 1e-3
@@ -85,6 +88,9 @@ class PoseTask:
     friction_files : dict
         Axis (1..6, as str) -> {relative path: bytes} of a saved friction model folder; axes not
         listed keep the robot file's friction.
+    friction_models : dict
+        Axis (1..6, as str) -> the registered version it came from (``name``, ``version``, ``ref``,
+        ``run_id``, ``uri``), for the report.
     options : dict
         ``spacing_mm``, ``deflection``, ``friction``, ``switching``, ``material`` (see the schema).
     """
@@ -97,6 +103,7 @@ class PoseTask:
     pose: dict
     friction_files: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
+    friction_models: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -109,25 +116,40 @@ class PoseOutcome:
     glb: bytes | None = None
 
 
-def _robot_file(task: PoseTask, scratch: Path) -> Path:
-    """The robot file of the task; with registry friction models, a copy referring to their folders."""
-    from simulate.robot.model import FrictionSpec, load_robot, save_robot
+#: Per-process folder of the friction models the tasks carry, one sub-folder per content hash, so a
+#: worker writes and loads (simulate.robot.friction caches by folder) each model version once.
+_MODEL_CACHE: Path | None = None
 
-    path = DATA_DIR / "robots" / f"{task.robot}.toml"
+
+def _model_folders(task: PoseTask) -> dict[int, str]:
+    """Joint -> local folder of each friction model the task carries (written once per process)."""
+    import hashlib
+
+    global _MODEL_CACHE
     if not task.friction_files:
-        return path
-    robot = load_robot(path)
-    specs = list(robot.friction)
+        return {}
+    if _MODEL_CACHE is None or not _MODEL_CACHE.exists():
+        _MODEL_CACHE = Path(tempfile.mkdtemp(prefix="greybench-models-"))
+    out = {}
     for axis, files in sorted(task.friction_files.items()):
-        folder = (scratch / "models" / f"axis{axis}").resolve()
-        for rel, data in files.items():
-            target = (folder / rel).resolve()
-            if folder not in target.parents:
-                raise InputError("model file outside its folder", field=f"friction[{axis}]")
-            target.parent.mkdir(parents=True, exist_ok=True)
-            target.write_bytes(data)
-        specs[int(axis) - 1] = FrictionSpec(model=str(folder))
-    return save_robot(robot.with_changes(friction=tuple(specs)), scratch / f"{task.robot}.toml")
+        digest = hashlib.sha256()
+        for rel in sorted(files):
+            digest.update(rel.encode() + b"\0" + files[rel] + b"\0")
+        folder = (_MODEL_CACHE / digest.hexdigest()[:32]).resolve()
+        if not folder.exists():
+            tmp = Path(tempfile.mkdtemp(prefix=".model-", dir=_MODEL_CACHE)).resolve()
+            for rel, data in files.items():
+                target = (tmp / rel).resolve()
+                if tmp not in target.parents:
+                    raise InputError("model file outside its folder", field=f"friction[axis {axis}]")
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_bytes(data)
+            try:
+                os.replace(tmp, folder)
+            except OSError:   # another thread wrote the same content first
+                shutil.rmtree(tmp, ignore_errors=True)
+        out[int(axis)] = str(folder)
+    return out
 
 
 def simulate_pose(task: PoseTask) -> PoseOutcome:
@@ -151,7 +173,7 @@ def simulate_pose(task: PoseTask) -> PoseOutcome:
     if not isinstance(stock, dict) or stock.get("size_mm") not in (160, 320):
         raise InputError("the ranking needs an ISO 10791-7 test-piece stock (size_mm 160 or 320)",
                          source=task.stock_source, field="size_mm")
-    settings = ranking_mod.RankSettings(spacing=float(opts.get("spacing_mm", 2.0)) * MM,
+    settings = ranking_mod.RankSettings(spacing=float(opts.get("spacing_mm", RANKING_DEXEL_SPACING / MM)) * MM,
                                         material=opts.get("material") or "Al7075", size=int(stock["size_mm"]))
     components = ranking_mod.Components(deflection=bool(opts.get("deflection", True)),
                                         friction=bool(opts.get("friction", True)),
@@ -161,11 +183,11 @@ def simulate_pose(task: PoseTask) -> PoseOutcome:
         program = scratch / "program.nc"
         program.write_text(task.program_text)
         (scratch / "program.stock.json").write_text(task.stock_text)  # rank_poses finds it next to the program
-        robot = _robot_file(task, scratch)
+        robot = DATA_DIR / "robots" / f"{task.robot}.toml"
         try:
             ranking = ranking_mod.rank_poses(program, robot, [placement], settings=settings, components=components,
                                              shares=bool(opts.get("shares", False)), out_dir=scratch / "out",
-                                             workers=1)
+                                             workers=1, friction=_model_folders(task))
         except InputError as exc:  # name the program as the client knows it, not the scratch copy
             if exc.source == str(program):
                 exc = InputError(exc.message, source=task.program_source, field=exc.field, row=exc.row,
@@ -189,9 +211,14 @@ def simulate_pose(task: PoseTask) -> PoseOutcome:
         "peak_force_n": float(steps.peak_force.max()),
         "peak_deflection_m": float(np.linalg.norm(steps.deflection, axis=1).max()),
         "max_tracking_error_m": float(np.linalg.norm(terr, axis=1).max()),
+        "rms_tracking_error_m": float(np.sqrt(np.mean(np.sum(terr ** 2, axis=1)))),
         "score": float(table.score),
         "in_tolerance": int(table.n_in_tolerance),
         "worst_feature": table.worst.name,
+        "friction": [{"joint": f["joint"], "kind": f["kind"],
+                      **({"model": task.friction_models[str(f["joint"])]} if str(f["joint"]) in task.friction_models
+                         else {"source": "robot-file" if f["source"] not in ("off", "no servo") else f["source"]})}
+                     for f in res.friction],
     }
     if shares is not None:
         summary["shares"] = shares
@@ -267,6 +294,7 @@ def pose_tasks(request: dict, job_dir: Path, progress: Progress) -> list[PoseTas
     program_text = (job_dir / "program.nc").read_text()
     stock_text = (job_dir / "stock.json").read_text()
     files: dict[str, dict[str, bytes]] = {}
+    pinned: dict[str, dict] = {}
     for entry in request.get("friction", []):
         if entry.get("source") != "registry":
             continue
@@ -274,9 +302,10 @@ def pose_tasks(request: dict, job_dir: Path, progress: Progress) -> list[PoseTas
         progress(0.02, f"fetching friction model {model.uri}")
         folder = registry.fetch(model, job_dir / "models" / f"axis{entry['axis']}", request.get("tracking_uri"))
         files[str(entry["axis"])] = _model_files(folder)
+        pinned[str(entry["axis"])] = model.to_dict()
     return [PoseTask(program_text=program_text, program_source=request["program_source"], stock_text=stock_text,
                      stock_source=request["stock_source"], robot=request["robot"],
-                     pose=pose, friction_files=files, options=request.get("options", {}))
+                     pose=pose, friction_files=files, options=request.get("options", {}), friction_models=pinned)
             for pose in request["poses"]]
 
 
@@ -307,7 +336,8 @@ def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address
     for o in outcomes:
         if o.glb is not None:
             _write_atomic(job_dir / "workpiece" / f"{o.pose}.glb", o.glb)
-    report = {"poses": [o.summary for o in outcomes], "features": features}
+    report = {"poses": [o.summary for o in outcomes], "features": features,
+              "friction": request.get("friction", [])}
     _write_atomic(job_dir / "report.json", json.dumps(report, indent=1))
     # the stored CSV is the one the API serves (unit-named columns, from report.json)
     _write_atomic(job_dir / "report.csv", schemas.report_csv(report))
@@ -348,7 +378,8 @@ def run_explain(request: dict, job_dir: Path, progress: Progress) -> dict:
     robot = load_robot(DATA_DIR / "robots" / f"{request['robot']}.toml")
     (job_dir / "pose.json").write_text(json.dumps({"poses": [request["pose"]]}))
     setup = load_setup(job_dir / "program.nc", job_dir / "pose.json", request["pose"]["name"],
-                       stock=job_dir / "program.stock.json", spacing=float(request.get("spacing_mm", 1.0)) * MM)
+                       stock=job_dir / "program.stock.json",
+                       spacing=float(request.get("spacing_mm", DEXEL_SPACING / MM)) * MM)
     measured = read_measured_scan(job_dir / "scan.csv", setup.piece)
     progress(0.05, "simulating the nominal part")
     setup.trajectory(robot)  # reachability errors before the long part

@@ -14,6 +14,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_valida
 
 from service.jobs import JobKind, JobState
 from service.paths import NAME_PATTERN
+from simulate.defaults import DEXEL_SPACING, RANKING_DEXEL_SPACING
 
 Name = Annotated[str, Field(pattern=NAME_PATTERN, min_length=1, max_length=64)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -98,11 +99,13 @@ class AxisFriction(Strict):
     axis: int = Field(ge=1, le=6, description="joint number 1..6")
     model: str = Field("champion", min_length=1, max_length=64,
                        description="registry alias (e.g. champion, challenger) or version number of "
-                                   "<robot>-axis<N>-friction; 'robot' keeps the robot file's friction")
+                                   "<robot>-axis<N>-friction, any model type (coulomb-viscous, stribeck, lugre, "
+                                   "lugre-extended, greybox, residual, lstm); 'robot' keeps the robot file's friction")
 
 
 class SimulationOptions(Strict):
-    spacing_mm: float = Field(2.0, gt=0.05, le=5.0, description="dexel spacing of the virtual workpiece [mm]")
+    spacing_mm: float = Field(RANKING_DEXEL_SPACING * 1e3, gt=0.05, le=5.0,
+                              description="dexel spacing of the virtual workpiece [mm] (default: simulate.defaults)")
     deflection: bool = Field(True, description="robot deflection under the cutting forces in the loop")
     friction: bool = Field(True, description="friction in the axis servos (tracking error) in the loop")
     switching: bool = Field(True, description="reversal effects at axis switching points (gear backlash)")
@@ -219,7 +222,8 @@ class FeatureRow(Strict):
 class Report(Strict):
     job: str
     poses: list[dict[str, Any]] = Field(description="per pose: steps, simulated_time_s [s], switching points, "
-                                                    "max_tracking_error_m [m], peak_force_n [N], peak_deflection_m [m]")
+                                                    "max_tracking_error_m [m], peak_force_n [N], peak_deflection_m [m], "
+                                                    "friction (per joint the model kind and registered version used)")
     features: list[FeatureRow]
 
     @classmethod
@@ -315,7 +319,8 @@ class ExplainRequest(Strict):
     robot: Name = Field("max100", description="nominal robot name in data/robots")
     pose_set: Name | None = Field(None, description="named pose file in data/poses; or give pose")
     pose: PoseIn | Name = Field(description="the pose (a placement, or a name in pose_set)")
-    spacing_mm: float = Field(1.0, gt=0.05, le=5.0, description="dexel spacing of the simulation [mm]")
+    spacing_mm: float = Field(DEXEL_SPACING * 1e3, gt=0.05, le=5.0,
+                              description="dexel spacing of the simulation [mm] (default: simulate.defaults)")
     max_sims: int = Field(3, ge=1, le=10, description="re-simulations for the calibration [-]")
 
     @model_validator(mode="after")

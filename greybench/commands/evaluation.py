@@ -10,6 +10,7 @@ from rich.table import Table
 
 from greybench.support import emit_json, err, guarded, out, progress, resolve_robot
 from identify.errors import InputError
+from simulate import defaults as DEFAULTS
 from simulate.evaluation.features import MM
 from simulate.evaluation.ranking import COMPONENTS, Components, Ranking, RankSettings, rank_poses
 
@@ -79,9 +80,11 @@ def rank_poses_cmd(
                                                     "[m, rad]."),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="Output folder: report.md, images/, per pose "
                                                                "scan.csv [m] and workpiece.npz."),
-    spacing: float = typer.Option(0.5, "--spacing", help="Dexel spacing [mm] (coarser grids make the cutting force, "
-                                                            "hence the deflection, jumpy)."),
-    probe_spacing: float = typer.Option(2.0, "--probe-spacing", help="Virtual CMM point distance [mm]."),
+    spacing: float = typer.Option(DEFAULTS.RANKING_DEXEL_SPACING * 1e3, "--spacing",
+                                  help="Dexel spacing [mm] (coarser grids make the cutting force, hence the "
+                                       "deflection, jumpy)."),
+    probe_spacing: float = typer.Option(DEFAULTS.PROBE_SPACING * 1e3, "--probe-spacing",
+                                        help="Virtual CMM point distance [mm]."),
     stiffness_scale: float = typer.Option(1.0, "--stiffness-scale", help="Joint stiffness multiplier [-]."),
     shares: bool = typer.Option(False, "--shares/--no-shares", help="Re-run each pose with deflection, friction "
                                                                      "and switching off in turn (4x the time)."),
@@ -174,8 +177,9 @@ def bench_ranking(
                                  "--program", help="G-code program."),
     poses: Path = typer.Option(Path(__file__).resolve().parents[2] / "data" / "poses" / "iso320.json", "--poses",
                                help="Pose file (JSON) [m, rad]."),
-    spacing: float = typer.Option(0.5, "--spacing", help="Dexel spacing [mm] (coarser grids make the cutting force, "
-                                                            "hence the deflection, jumpy)."),
+    spacing: float = typer.Option(DEFAULTS.RANKING_DEXEL_SPACING * 1e3, "--spacing",
+                                  help="Dexel spacing [mm] (coarser grids make the cutting force, hence the "
+                                       "deflection, jumpy)."),
 ) -> None:
     """Rank the poses with 2 and 1 worker processes, and with 2 plus the component re-runs (``--shares``, what
     ``make demo`` runs): wall times [s] and ratios, one run each."""

@@ -11,6 +11,7 @@ from rich.table import Table
 
 from greybench.support import DATA_DIR, emit_json, guarded, out, progress, resolve_robot
 from identify.errors import InputError
+from simulate import defaults as DEFAULTS
 
 
 def explain(
@@ -23,9 +24,10 @@ def explain(
     name: Optional[str] = typer.Option(None, "--name", help="Pose name in the pose file (default: the first)."),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="Output folder: report.md with PNGs, the calibrated "
                                                                "robot file robot_calibrated.toml, explain.json."),
-    spacing: float = typer.Option(0.25, "--spacing", help="Dexel spacing of the simulation [mm]; use the spacing "
-                                  "the scan was simulated at (greybench machine: 0.25): a coarser grid alone differs "
-                                  "by some micrometres, which explain would try to attribute to a cause."),
+    spacing: float = typer.Option(DEFAULTS.DEXEL_SPACING * 1e3, "--spacing",
+                                  help="Dexel spacing of the simulation [mm]; use the spacing the scan was simulated "
+                                       "at (greybench machine: the same default): a coarser grid alone differs by "
+                                       "some micrometres, which explain would try to attribute to a cause."),
     size: Optional[int] = typer.Option(None, "--size", help="Test piece size [mm] (160 or 320; default: size_mm of "
                                                             "the stock file)."),
     max_sims: int = typer.Option(3, "--max-sims", help="Re-simulations for the calibration [-] (>= 1)."),

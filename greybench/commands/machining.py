@@ -1,10 +1,8 @@
 """``greybench machine`` and ``greybench bench machining`` (paper 3.3-3.7, Figure 4)."""
 from __future__ import annotations
 
-import json
 import os
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
@@ -14,49 +12,13 @@ from rich.table import Table
 
 from greybench.support import DATA_DIR, emit_json, guarded, out, progress, print_summary, resolve_robot
 from identify.errors import InputError
-
-
-@dataclass
-class MachiningSetup:
-    """Everything the coupled loop needs, read from the command's files.
-
-    Attributes
-    ----------
-    program : simulate.toolpath.gcode.Program
-    placement : simulate.toolpath.placement.Placement
-        Workpiece pose in the robot base frame [m, rad].
-    robot : simulate.robot.model.Robot
-    joints : simulate.toolpath.placement.JointTrajectory
-        Commanded joints and tool tip (workpiece frame, m) every 2 ms.
-    workpiece : simulate.machining.dexel.TriDexel
-        The stock as a multi-dexel model [m].
-    stock : dict
-        The stock description JSON as read.
-    stock_path : Path
-    cutter : simulate.machining.tools.Cutter
-        From the robot file's ``[tool]`` (:func:`cutter_from_robot`).
-    """
-
-    program: object
-    placement: object
-    robot: object
-    joints: object
-    workpiece: object
-    stock: dict
-    stock_path: Path
-    cutter: object
+from simulate import defaults as DEFAULTS
 
 
 def cutter_from_robot(rob):
-    """The cutter the robot carries: its file's ``[tool]`` table (type, diameter, corner_radius,
-    flutes, helix, length; SI, helix in rad), via :func:`simulate.evaluation.cutter.robot_cutter`
-    (shared with ``rank-poses`` and ``explain``).
-
-    The robot file is the single source because the robot carries spindle and tool: the same
-    table gives the tool's mass for the dynamics and the TCP for the kinematics, so the cutting
-    model must use that tool too. (The stock JSON's ``tool`` entry records which tool the CAM
-    program was written for; it is not used for cutting.) ``machine`` has no cutter options to
-    override it. Bad values raise ``InputError`` naming the robot file and the ``tool.*`` key.
+    """The cutter the robot carries: its file's ``[tool]`` table, via
+    :func:`simulate.evaluation.cutter.robot_cutter` (the one source for ``machine``, ``rank-poses`` and
+    ``explain``). Bad values raise ``InputError`` naming the robot file and the ``tool.*`` key.
     """
     from simulate.evaluation.cutter import robot_cutter
 
@@ -67,135 +29,38 @@ def cutter_from_robot(rob):
         raise InputError(exc.message, source=rob.source or None, field=f"tool.{key}") from None
 
 
-def _prepare(program: Path, robot: str, pose: Path, name, spacing_mm: float, stock: Optional[Path]) -> MachiningSetup:
-    from simulate.machining.dexel import TriDexel
+def machining_job(program: Path, robot: str, pose: Path, name, *, ideal=False, spacing_mm=None,
+                  no_deflection=False, no_friction=False, no_switching=False, no_tracking=False, material=None,
+                  stock: Optional[Path] = None, spindle_rpm=None, stiffness_scale=1.0, size=None,
+                  probe_spacing_mm=None):
+    """The :class:`simulate.pipeline.MachiningJob` of ``greybench machine``'s options (mm -> m).
+
+    ``ideal`` switches off deflection, tracking error and backlash; ``no_friction`` runs the servo
+    without joint friction (its tracking error stays); ``no_tracking`` drops the tracking error
+    altogether; ``no_switching`` drops the gear backlash (the switching-point effect) and its bits.
+    Defaults: :mod:`simulate.defaults`.
+    """
+    from simulate import defaults
+    from simulate.pipeline import Components, MachiningJob, MachiningSettings
     from simulate.robot.model import load_robot
-    from simulate.toolpath.gcode import read_program
-    from simulate.toolpath.interpolation import interpolate
-    from simulate.toolpath.placement import joint_trajectory, load_poses, select_pose
+    from simulate.toolpath.placement import load_poses, select_pose
 
-    if not (spacing_mm > 0):
+    spacing_mm = defaults.DEXEL_SPACING * 1e3 if spacing_mm is None else spacing_mm
+    probe_spacing_mm = defaults.PROBE_SPACING * 1e3 if probe_spacing_mm is None else probe_spacing_mm
+    if not (spacing_mm > 0 and np.isfinite(spacing_mm)):
         raise InputError(f"dexel spacing must be > 0 mm, got {spacing_mm}", field="spacing")
-    prog = read_program(program)
-    stock = stock or program.with_suffix(".stock.json")
-    if not stock.exists():
-        raise InputError("stock description not found (give --stock)", source=str(stock))
-    placement = select_pose(load_poses(pose), name, source=str(pose))
-    rob = load_robot(resolve_robot(robot))
-    cutter = cutter_from_robot(rob)
-    ip = interpolate(prog)
-    jt = joint_trajectory(rob, ip, placement, source=str(program))
-    wp = TriDexel.from_stock_file(stock, spacing_mm * 1e-3)
-    doc = json.loads(stock.read_text())
-    return MachiningSetup(prog, placement, rob, jt, wp, doc if isinstance(doc, dict) else {}, stock, cutter)
-
-
-def cmm_piece_size(stock: dict, stock_path: Path, size: Optional[int]) -> Optional[int]:
-    """Size [mm] of the ISO 10791-7 test piece the stock is, for the virtual CMM; None: not a test piece.
-
-    ``size`` (``--size``) wins when given; it must agree with the stock's ``size_mm`` when that is
-    there. Otherwise the stock's ``size_mm`` (written by ``greybench toolpath testpiece``).
-    """
-    from simulate.toolpath.testpiece import SIZES
-
-    named = stock.get("size_mm")
-    if named is not None and (isinstance(named, bool) or not isinstance(named, (int, float)) or named not in SIZES):
-        raise InputError(f"size_mm must be one of {', '.join(map(str, SIZES))}, got {named!r}",
-                         source=str(stock_path), field="size_mm")
-    if size is not None:
-        if size not in SIZES:
-            raise InputError(f"test-piece size must be one of {', '.join(map(str, SIZES))} mm, got {size}",
-                             field="size")
-        if named is not None and int(named) != size:
-            raise InputError(f"--size {size} disagrees with the stock's size_mm {int(named)}",
-                             source=str(stock_path), field="size_mm")
-        return int(size)
-    return None if named is None else int(named)
-
-
-def tracking_error(rob, jt, placement, friction: bool):
-    """Servo tracking error along the joint trajectory, in the workpiece frame (N, 3) [m].
-
-    The axis servo (:func:`simulate.robot.servo.simulate_servo`) runs with or without joint
-    friction; without friction the error is still not zero (the position loop lags unless its
-    feed-forward is ideal). The process force is not fed into the servo as ``tau_ext = -J^T F``:
-    the force is only known inside the coupled loop, and the servo's velocity integrator rejects
-    such slowly varying loads, so their tracking error is small against the deflection ``C F``
-    (a second pass with ``tau_ext`` would double the run time for a second-order effect).
-    """
-    from simulate.robot.servo import simulate_servo
-
-    sr = simulate_servo(rob, jt.t, jt.q, friction=friction)
-    return sr.tcp_error(rob) @ placement.T[:3, :3]  # base -> workpiece: R^T e, row-wise
-
-
-@dataclass
-class MachiningRun:
-    """Outcome of :func:`run`.
-
-    Attributes
-    ----------
-    setup : MachiningSetup
-    workpiece : simulate.machining.dexel.TriDexel
-        The machined virtual workpiece [m].
-    result : simulate.machining.simulation.MachiningResult
-    scan : simulate.evaluation.cmm.Scan or None
-        The virtual CMM's probe points when the stock is a test piece, else None.
-    """
-
-    setup: MachiningSetup
-    workpiece: object
-    result: object
-    scan: object = None
-
-
-def run(program, robot, pose, name, out_dir, ideal, spacing, no_deflection, no_friction, no_switching, material,
-        stock, spindle_rpm, show_progress=True, stiffness_scale=1.0, no_tracking=False, size=None,
-        probe_spacing_mm=2.0) -> MachiningRun:
-    """Prepare and run the coupled loop, then probe the result with the virtual CMM when the stock
-    is a test piece (:func:`cmm_piece_size`).
-
-    ``ideal`` switches off deflection, tracking error and switching bits; ``no_friction`` runs the
-    servo without joint friction (its tracking error stays); ``no_tracking`` drops the tracking
-    error altogether. ``stiffness_scale`` multiplies the robot's joint stiffness. The cutter is the
-    robot file's ``[tool]`` (:func:`cutter_from_robot`). ``probe_spacing_mm`` is the CMM's probe
-    point distance [mm].
-    """
-    from simulate.machining.cutting import Spindle, load_material
-    from simulate.machining.simulation import simulate_machining, workpiece_compliance
-
     if not (probe_spacing_mm > 0 and np.isfinite(probe_spacing_mm)):
         raise InputError(f"probe spacing must be > 0 mm, got {probe_spacing_mm}", field="probe-spacing")
-    su = _prepare(program, robot, pose, name, spacing, stock)
-    piece_size = cmm_piece_size(su.stock, su.stock_path, size)
-    mat = load_material(material)
-    prog, placement, rob, jt, wp, cutter = su.program, su.placement, su.robot, su.joints, su.workpiece, su.cutter
-    # segments carry the S word in rev/s (simulate.toolpath.gcode); 12000 rev/min if never set
-    rpm = spindle_rpm or 60.0 * max((getattr(s, "spindle", 0.0) for s in prog.segments), default=0.0) or 12000.0
-    spindle = Spindle.from_rpm(rpm)
-    Rm = placement.T[:3, :3]
-    t_robot0 = time.perf_counter()
-    C = None if (ideal or no_deflection) else workpiece_compliance(rob, jt.q, Rm, stiffness_scale)
-    err = None if (ideal or no_tracking) else tracking_error(rob, jt, placement, friction=not no_friction)
-    t_robot_pre = time.perf_counter() - t_robot0
-    switch = None if (ideal or no_switching) else jt.switch
-    with progress("machining", total=len(jt.t), enabled=show_progress) as adv:
-        res = simulate_machining(wp, cutter, jt.t, jt.line, jt.xyz, mat, spindle, compliance=C,
-                                 tracking_error=err, switch=switch, advance=adv)
-    res.timings["robot (compliance + servo, up-front)"] = t_robot_pre
-    scan = None
-    if piece_size is not None:
-        from simulate.evaluation.cmm import probe
-        from simulate.toolpath.testpiece import iso_test_piece
-
-        try:
-            scan = probe(wp, iso_test_piece(piece_size), spacing=probe_spacing_mm * 1e-3,
-                         tool_diameter=cutter.diameter)
-        except InputError as exc:
-            # the stock's geometry does not hold the features: it is not that test piece
-            raise InputError(f"not the {piece_size} mm test piece for the virtual CMM: {exc.message}",
-                             source=str(su.stock_path), field="size") from None
-    return MachiningRun(su, wp, res, scan)
+    placement = select_pose(load_poses(pose), name, source=str(pose))
+    rob = load_robot(resolve_robot(robot))
+    cutter_from_robot(rob)  # tool errors name the robot file's key
+    comp = Components(deflection=not (ideal or no_deflection), friction=not no_friction,
+                      switching=not (ideal or no_switching), servo=not (ideal or no_tracking))
+    settings = MachiningSettings(spacing=spacing_mm * 1e-3, probe_spacing=probe_spacing_mm * 1e-3,
+                                 material=material or defaults.MATERIAL, spindle_rpm=spindle_rpm,
+                                 stiffness_scale=stiffness_scale, size=size)
+    return MachiningJob(program=program, robot=rob, placement=placement, components=comp, settings=settings,
+                        stock=stock)
 
 
 def write_outputs(wp, res, out_dir: Path, variable: str = "deflection", scan=None) -> list[Path]:
@@ -248,21 +113,23 @@ def machine(
     name: Optional[str] = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
     out_dir: Path = typer.Option(..., "--out",
                                  help="Output folder for the virtual workpiece (npz, m), PLY/GLB, PNG, scan.csv (m)."),
-    ideal: bool = typer.Option(False, "--ideal", help="No deflection, no tracking error, no switching bits."),
-    spacing: float = typer.Option(0.25, "--spacing", help="Dexel spacing [mm]."),
+    ideal: bool = typer.Option(False, "--ideal", help="No deflection, no tracking error, no backlash."),
+    spacing: float = typer.Option(DEFAULTS.DEXEL_SPACING * 1e3, "--spacing", help="Dexel spacing [mm]."),
     no_deflection: bool = typer.Option(False, "--no-deflection", help="Switch off the robot deflection."),
     no_friction: bool = typer.Option(False, "--no-friction",
                                      help="Servo without joint friction (its tracking error stays) [-]."),
     no_tracking: bool = typer.Option(False, "--no-tracking", help="Switch off the servo tracking error [-]."),
-    no_switching: bool = typer.Option(False, "--no-switching", help="Do not record the switching bits."),
-    material: str = typer.Option("Al7075", "--material", help="Material in data/materials.toml (coefficients N/mm^2, N/mm)."),
+    no_switching: bool = typer.Option(False, "--no-switching",
+                                      help="No gear backlash (the switching-point effect), no switching bits."),
+    material: str = typer.Option(DEFAULTS.MATERIAL, "--material", help="Material in data/materials.toml (coefficients N/mm^2, N/mm)."),
     stock: Optional[Path] = typer.Option(None, "--stock", help="Stock description JSON [m or mm] (default: <program>.stock.json)."),
     spindle_rpm: Optional[float] = typer.Option(None, "--spindle", help="Spindle speed [rev/min] (default: program S word)."),
     variable: str = typer.Option("deflection", "--color", help="Variable for the colour map (deflection [m], force [N], ...)."),
     size: Optional[int] = typer.Option(None, "--size",
                                        help="Test-piece size [mm] (160 or 320) for the virtual CMM's scan.csv "
                                             "(default: the stock JSON's size_mm; neither: no scan)."),
-    probe_spacing: float = typer.Option(2.0, "--probe-spacing", help="Virtual CMM probe point distance [mm]."),
+    probe_spacing: float = typer.Option(DEFAULTS.PROBE_SPACING * 1e3, "--probe-spacing",
+                                        help="Virtual CMM probe point distance [mm]."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (SI units)."),
 ) -> None:
     """Simulate machining with robot deflection and tracking error in the loop (paper Figure 4).
@@ -277,11 +144,17 @@ def machine(
         raise InputError(f"unknown variable '{variable}' (one of {', '.join(VARIABLES)})", field="color")
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("output path exists and is not a folder", source=str(out_dir), field="out")
-    mr = run(program, robot, pose, name, out_dir, ideal, spacing, no_deflection, no_friction, no_switching,
-             material, stock, spindle_rpm, show_progress=not as_json, no_tracking=no_tracking, size=size,
-             probe_spacing_mm=probe_spacing)
-    res = mr.result
-    write_outputs(mr.workpiece, res, out_dir, variable, scan=mr.scan)
+    from simulate.pipeline import prepare, run_job
+
+    job = machining_job(program, robot, pose, name, ideal=ideal, spacing_mm=spacing, no_deflection=no_deflection,
+                        no_friction=no_friction, no_switching=no_switching, no_tracking=no_tracking,
+                        material=material, stock=stock, spindle_rpm=spindle_rpm, size=size,
+                        probe_spacing_mm=probe_spacing)
+    pj = prepare(job)
+    with progress("machining", total=pj.steps, enabled=not as_json) as adv:
+        mo = run_job(job, prepared=pj, advance=adv)
+    res = mo.result
+    write_outputs(mo.workpiece, res, out_dir, variable, scan=mo.scan)
     info = summary(res)
     if as_json:
         emit_json(info)
@@ -297,8 +170,14 @@ def bench_machining(
     threads: int = typer.Option(1, "--threads", help="numba threads for the loop [-] (1: the one-core figure)."),
     reference_steps: int = typer.Option(3000, "--reference-steps",
                                         help="Steps for the per-step-call reference (0: skip) [-]."),
+    greybox: Optional[Path] = typer.Option(None, "--greybox",
+                                           help="Saved grey-box model folder for joints 1-3 (default: fit one with "
+                                                "5 epochs on a seeded synthetic 4 s record)."),
 ) -> None:
-    """Steps/s of the coupled loop on the 320 test-piece finishing program, one pose.
+    """Steps/s of the coupled loop (servo with friction inside) on the 320 test-piece program, one pose.
+
+    Coupled steps per CPU second on one thread with the robot file's conventional LuGre friction and
+    with a grey-box LuGre model on joints 1-3 beside it, and the servo's share of the loop time.
 
     Wall and CPU time of the loop (on a machine shared with other jobs the CPU figure is the
     speed the code has), memory, and the ratio against calling the same removal and force kernels
@@ -323,17 +202,28 @@ def bench_machining(
     program = DATA_DIR / "programs" / "iso320.nc"
     pose = DATA_DIR / "poses" / "iso320.json"
     t0 = time.perf_counter()
-    su = _prepare(program, "max100", pose, None, spacing, None)
-    placement, rob, jt, wp, cutter = su.placement, su.robot, su.joints, su.workpiece, su.cutter
+    from simulate.pipeline import prepare, stock_workpiece
+
+    job = machining_job(program, "max100", pose, None, spacing_mm=spacing)
+    pj = prepare(job)
+    placement, rob, jt, cutter = job.placement, pj.robot, pj.trajectory, cutter_from_robot(pj.robot)
+    wp = stock_workpiece(pj.program, job.settings)
     t_prep = time.perf_counter() - t0
     n = len(jt.t) if max_steps <= 0 else min(max_steps, len(jt.t))
     mat, spindle = load_material("Al7075"), Spindle.from_rpm(12000)
     t1, c1 = time.perf_counter(), time.process_time()
     Rm = placement.T[:3, :3]
     C = workpiece_compliance(rob, jt.q[:n], Rm)
-    from simulate.robot.servo import simulate_servo
-    err = simulate_servo(rob, jt.t[:n], jt.q[:n], friction=True).tcp_error(rob) @ Rm
+    from simulate.machining.simulation import loop_servo
+    from simulate.robot.friction import loop_friction
+
+    fp_lugre, _ = loop_friction(rob)   # max100: inline (conventional) LuGre on every joint
+
+    def servo_of(fp):
+        return loop_servo(rob, jt.q[:n], jt.t[:n], Rm, fp)
+
     t_robot, c_robot = time.perf_counter() - t1, time.process_time() - c1
+    fp_grey, grey_note = _bench_greybox(rob, greybox)
     # warm-up (compile or load the cache) on a small piece
     small = wp.__class__.box([0, 0, 0], [0.02, 0.02, 0.01], spacing * 1e-3)
     pts = np.linspace([-0.01, 0.01, 0.008], [0.03, 0.01, 0.008], 50)
@@ -379,7 +269,7 @@ def bench_machining(
         ref_loop = (time.perf_counter() - w0, time.process_time() - c0)
         del w0_
     res = simulate_machining(wp, cutter, jt.t[:n], jt.line[:n], jt.xyz[:n], mat, spindle, compliance=C,
-                             tracking_error=err, switch=jt.switch[:n])
+                             switch=jt.switch[:n], servo=servo_of(fp_lugre))
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     t_mesh0 = time.perf_counter()
     from simulate.machining.surface_mesh import surface_mesh
@@ -390,10 +280,16 @@ def bench_machining(
     n_tri, stride, dexel_mb = len(sm.faces), sm.stride, wp.nbytes / 1e6
     del sm
     # the time split: the same run again, fresh stock, clock-reading (uncached) copy of the loop
-    wp_prof = wp.__class__.from_stock_file(su.stock_path, spacing * 1e-3)
+    wp_prof = stock_workpiece(pj.program, job.settings)
     prof = simulate_machining(wp_prof, cutter, jt.t[:n], jt.line[:n], jt.xyz[:n], mat, spindle, compliance=C,
-                              tracking_error=err, switch=jt.switch[:n], profile=True)
+                              switch=jt.switch[:n], profile=True, servo=servo_of(fp_lugre))
     del wp_prof
+    # the same with grey-box LuGre friction on joints 1-3: cached loop, then the clock-reading copy
+    grey = simulate_machining(stock_workpiece(pj.program, job.settings), cutter, jt.t[:n], jt.line[:n], jt.xyz[:n],
+                              mat, spindle, compliance=C, switch=jt.switch[:n], servo=servo_of(fp_grey))
+    grey_prof = simulate_machining(stock_workpiece(pj.program, job.settings), cutter, jt.t[:n], jt.line[:n],
+                                   jt.xyz[:n], mat, spindle, compliance=C, switch=jt.switch[:n], profile=True,
+                                   servo=servo_of(fp_grey))
     table = Table(title=f"machining bench: iso320 finishing, pose {placement.name}, spacing {spacing} mm, "
                         f"{numba.get_num_threads()} numba thread(s), cutter {cutter.diameter * 1e3:g} mm "
                         f"{cutter.flutes} flutes (robot file), one run")
@@ -403,13 +299,29 @@ def bench_machining(
     table.add_column("target / note", justify="right")
     table.add_row(escape("steps"), f"{n}", "", "")
     table.add_row(escape("loop time [s]"), f"{wall:.2f}", f"{cpu:.2f}", "CPU: this process, all threads")
-    table.add_row(escape("steps/s"), f"{n / wall:,.0f}", f"{n / cpu:,.0f}", f">= 5000 ({n / cpu / 5000:.2f}x on CPU)")
+    table.add_row(escape("steps/s, conventional LuGre (robot file)"), f"{n / wall:,.0f}", f"{n / cpu:,.0f}",
+                  f">= 5000, goal 20000 ({n / cpu / 5000:.2f}x on CPU)")
+    table.add_row(escape(f"steps/s, grey-box LuGre joints 1-3 ({grey_note})"), f"{n / grey.wall_time:,.0f}",
+                  f"{n / grey.cpu_time:,.0f}", f"{grey.cpu_time / cpu:.2f}x the LuGre CPU time")
+    # the servo alone over the same steps (same step function and friction), CPU time: its share of
+    # the loop's CPU time, free of the wall-clock split's preemption on a shared machine
+    from simulate.robot.servo import simulate_servo
+
+    for label, fp, loop_cpu, pr in (("conventional LuGre", fp_lugre, cpu, prof),
+                                    ("grey-box joints 1-3", fp_grey, grey.cpu_time, grey_prof)):
+        simulate_servo(rob, jt.t[:50], jt.q[:50], loop_friction=fp)   # compiled / cache loaded
+        c0 = time.process_time()
+        simulate_servo(rob, jt.t[:n], jt.q[:n], loop_friction=fp)
+        c_sv = time.process_time() - c0
+        table.add_row(escape(f"servo share of the loop, {label}"), f"{pr.timings.get('servo', 0.0):.2f} s",
+                      f"{c_sv:.2f} s", f"{c_sv / max(loop_cpu, 1e-12) * 100:.1f} % of the loop's CPU time "
+                      f"(wall split: {pr.timings.get('servo', 0.0) / max(pr.wall_time, 1e-12) * 100:.1f} %)")
     table.add_row(escape("simulated / loop time"), f"{res.simulated_time / wall:.1f}", f"{res.simulated_time / cpu:.1f}",
                   ">= 10")
     pw = prof.wall_time
     table.add_row(escape("profiled run (clock-reading copy) [s]"), f"{pw:.2f}", f"{prof.cpu_time:.2f}",
                   f"{pw / wall:.2f}x the cached loop; split below")
-    parts = {k: v for k, v in prof.timings.items() if k in ("removal", "engagement", "forces", "robot")}
+    parts = {k: v for k, v in prof.timings.items() if k in ("removal", "engagement", "forces", "robot", "servo")}
     for k, v in parts.items():
         table.add_row(escape(f"  {k} [s]"), f"{v:.2f}", "", f"{v / pw * 100:.0f} % of the profiled loop")
     table.add_row(escape("    of removal: z-rays [s]"), f"{prof.timings.get('removal, z-rays', 0.0):.2f}", "", "")
@@ -421,7 +333,7 @@ def bench_machining(
                       f"{m / rc_:,.0f}", "same kernels, one call per step, no coupling")
         table.add_row(escape(f"one compiled loop, same steps [steps/s]"), f"{m / ref_loop[0]:,.0f}",
                       f"{m / ref_loop[1]:,.0f}", f"{(m / ref_loop[1]) / (m / rc_):.1f}x per CPU s")
-    table.add_row(escape("robot compliance + servo, up-front [s]"), f"{t_robot:.2f}", f"{c_robot:.2f}", "")
+    table.add_row(escape("robot compliance + servo setup, up-front [s]"), f"{t_robot:.2f}", f"{c_robot:.2f}", "")
     table.add_row(escape("setup (program, IK, stock) [s]"), f"{t_prep:.2f}", "", "")
     table.add_row(escape(f"surface mesh (stride {stride}, {n_tri:,} triangles) [s]"), f"{t_mesh:.2f}", "", "")
     table.add_row(escape("dexel memory [MB]"), f"{dexel_mb:.0f}", "", "")
@@ -430,6 +342,30 @@ def bench_machining(
     table.add_row(escape("peak force [N] / peak deflection [um]"), f"{res.steps.peak_force.max():.1f}",
                   f"{np.linalg.norm(res.steps.deflection, axis=1).max() * 1e6:.1f}", "")
     out.print(table)
+
+
+def _bench_greybox(rob, folder: Optional[Path]):
+    """Loop friction with a grey-box model on joints 1-3 (the given folder, or one fitted on the spot)."""
+    import tempfile
+    from dataclasses import replace
+
+    from simulate.robot.friction import loop_friction
+
+    note = "given"
+    if folder is None:
+        from identify.axis_limits import AxisLimits
+        from identify.models import make_model
+        from identify.plant import PlantConfig, synthesize
+        from identify.records import validate_frame
+        from identify.trajectories import universal_trajectory
+
+        tr = universal_trajectory(AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0), duration=4.0)
+        rec = validate_frame(synthesize(tr.t, tr.q, tr.qd, tr.qdd, config=replace(PlantConfig(), static_curve="hump"),
+                                        seed=1).frame, "bench")
+        folder = make_model("greybox", epochs=5).fit(rec).save(Path(tempfile.mkdtemp(prefix="greybench-bench-")) / "gb")
+        note = "fitted, 5 epochs"
+    fp, _ = loop_friction(rob, {1: str(folder), 2: str(folder), 3: str(folder)})
+    return fp, note
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:

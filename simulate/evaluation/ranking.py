@@ -1,24 +1,18 @@
 """Pose ranking (paper 3.8 and 4): simulate the program in every workpiece placement, measure the
 virtual part like a CMM, score the Table-2 deviations and rank the placements.
 
-Per pose (one worker process each, at most ``workers`` at a time):
-
-1. interpolation of the program (shared by all poses, computed once) and inverse kinematics for the
-   placement (:func:`simulate.toolpath.placement.joint_trajectory`), with switching points;
-2. servo tracking error ``p(q_act) - p(q_cmd)`` from the cascaded servo with LuGre friction and gear
-   backlash (:func:`simulate.robot.servo.simulate_servo`), turned into the workpiece frame;
-3. the coupled removal / force / deflection loop (:func:`simulate.machining.simulation.simulate_machining`)
-   with the translational compliance ``J K^-1 J^T`` in the workpiece frame and the cutter of the robot
-   file's ``[tool]`` (:func:`simulate.evaluation.cutter.robot_cutter`: the tool belongs to the robot
-   file, where ``explain`` calibrates its radius; the stock file only describes the blank);
-4. the virtual CMM (:mod:`simulate.evaluation.cmm`) and the ten rows (:mod:`simulate.evaluation.features`).
+Per pose (one worker process each, at most ``workers`` at a time) one run of the machining pipeline
+(:func:`simulate.pipeline.run_job`; the program is interpolated once for all poses): inverse kinematics
+for the placement with switching points, the coupled loop with the axis servos and each joint's friction
+model inside it, the translational compliance in the workpiece frame and the robot file's cutter, then
+the virtual CMM (:mod:`simulate.evaluation.cmm`) and the ten rows (:mod:`simulate.evaluation.features`).
 
 Score (lower is better): ``sum over rows of |deviation| / tolerance``; ties broken by more rows in
 tolerance, then by the pose name. Dimensionless, so a 15 um straightness tolerance weighs as much as
 a 20 um diameter tolerance, which is how the paper colours Table 2 (best to worst per row).
 
-Components (:class:`Components`): ``deflection`` (compliance x cutting force), ``friction`` (LuGre
-friction in the servo) and ``switching`` (the gear backlash, whose effect appears where an axis stops
+Components (:class:`Components`): ``deflection`` (compliance x cutting force), ``friction`` (each joint's
+friction model in the servo) and ``switching`` (the gear backlash, whose effect appears where an axis stops
 or reverses, i.e. at the switching points of paper 3.7; the paper's switching analysis only marks these
 points, the backlash model is what turns them into a path error). Switching one off and re-running
 gives that component's contribution ``deviation(all) - deviation(all but it)`` per row; its share is
@@ -41,24 +35,11 @@ from pathlib import Path
 import numpy as np
 
 from identify.errors import InputError
-from simulate.evaluation.cmm import Scan, probe, write_scan
-from simulate.evaluation.features import FeatureTable, evaluate_scan
+from simulate import defaults
+from simulate.evaluation.cmm import Scan, write_scan
+from simulate.evaluation.features import FeatureTable
+from simulate.pipeline import Components, MachiningJob, MachiningSettings, ProgramSetup, run_job
 from simulate.toolpath.placement import Placement
-from simulate.toolpath.testpiece import iso_test_piece
-
-
-@dataclass(frozen=True)
-class Components:
-    """Which error sources the simulation includes (module docstring)."""
-
-    deflection: bool = True
-    friction: bool = True
-    switching: bool = True
-    servo: bool = True  # False: no tracking error at all (an ideal drive)
-
-    def label(self) -> str:
-        off = [n for n in ("deflection", "friction", "switching", "servo") if not getattr(self, n)]
-        return "all" if not off else "no " + ", no ".join(off)
 
 
 #: The three component names whose share the report shows.
@@ -72,13 +53,8 @@ class RankSettings:
     Attributes
     ----------
     spacing : float
-        Dexel spacing, m (default 0.5 mm). Wall and face positions stay continuous at any spacing, but
-        the cutting force integrates over the dexels in the tool, so coarse grids make the force, and
-        with it the deflection, jump as whole dexels enter and leave the cutter. Measured on iso320 with
-        max100 (4 poses, deviations vs 0.25 mm): at 2 mm the slope straightness is 0.085 mm instead of
-        0.006 mm and the square sides are 0.1 mm off; at 0.5 mm every row is within 0.02 mm of the
-        0.25 mm value, the best pose is the same at 2, 1, 0.5 and 0.25 mm, and the ranking takes
-        about 20 s (0.25 mm: 55 s) on 2 cores.
+        Dexel spacing, m (default :data:`simulate.defaults.RANKING_DEXEL_SPACING`, 0.5 mm: why there).
+        On iso320 with max100 the 4-pose ranking takes about 20 s at 0.5 mm (0.25 mm: 55 s) on 2 cores.
     probe_spacing : float
         Virtual CMM point distance along a feature, m.
     material : str
@@ -91,20 +67,22 @@ class RankSettings:
         Test piece size, mm (160 or 320): which nominal geometry is measured.
     """
 
-    spacing: float = 0.5e-3
-    probe_spacing: float = 2e-3
-    material: str = "Al7075"
+    spacing: float = defaults.RANKING_DEXEL_SPACING
+    probe_spacing: float = defaults.PROBE_SPACING
+    material: str = defaults.MATERIAL
     spindle_rpm: float | None = None
     stiffness_scale: float = 1.0
     size: int = 320
 
+    def machining(self) -> MachiningSettings:
+        """The pipeline's settings: trimmed stock (:data:`simulate.defaults.STOCK_FLOOR`), features scored."""
+        return MachiningSettings(spacing=self.spacing, probe_spacing=self.probe_spacing, material=self.material,
+                                 spindle_rpm=self.spindle_rpm, require_spindle=True,
+                                 stiffness_scale=self.stiffness_scale, stock_floor=defaults.STOCK_FLOOR,
+                                 size=self.size, features=True)
+
     def validate(self) -> None:
-        for name in ("spacing", "probe_spacing", "stiffness_scale"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"must be > 0, got {v!r}", field=name.replace("_", "-"))
-        if self.spacing > 5e-3:
-            raise InputError("dexel spacing above 5 mm cannot resolve the 6 mm features", field="spacing")
+        self.machining().validate()
 
 
 @dataclass
@@ -139,6 +117,7 @@ class PoseResult:
     timings: dict = field(default_factory=dict)
     xyz: np.ndarray | None = None
     switch: np.ndarray | None = None
+    friction: list = field(default_factory=list)
 
     @property
     def score(self) -> float:
@@ -217,36 +196,21 @@ class Ranking:
 # ----------------------------------------------------------------------------- one pose
 
 
-def _stock_solids(stock_file: Path, floor: float):
-    from simulate.machining.dexel import raise_floor, read_stock_solids
-
-    return raise_floor(read_stock_solids(stock_file), floor)
-
-
 @dataclass(frozen=True)
 class _Job:
-    program: str
-    stock: str | None
+    program: ProgramSetup  # shared interpolation
     robot: str
     placement: Placement
     components: Components
     settings: RankSettings
-    interp: object  # Interpolation, shared
-    spindle_rpm: float
+    friction: tuple  # ((joint, model reference), ...) replacing the robot file's
     out_dir: str | None
     keep_steps: bool
 
 
 def _run_job(job: _Job) -> PoseResult:
-    """Simulate and measure one pose (runs in a worker process)."""
-    from simulate.machining.cutting import Spindle, load_material
-    from simulate.machining.dexel import TriDexel
-    from simulate.machining.simulation import simulate_machining, workpiece_compliance
-    from simulate.evaluation.cutter import robot_cutter
+    """Simulate and measure one pose (runs in a worker process): one :func:`simulate.pipeline.run_job`."""
     from simulate.machining.virtual_workpiece import VirtualWorkpiece
-    from simulate.robot.model import load_robot
-    from simulate.robot.servo import simulate_servo
-    from simulate.toolpath.placement import joint_trajectory
 
     try:  # one numba thread per worker: the workers already fill the cores
         import numba
@@ -254,66 +218,34 @@ def _run_job(job: _Job) -> PoseResult:
         numba.set_num_threads(1)
     except (ImportError, ValueError):
         pass
-    s, comp, pl = job.settings, job.components, job.placement
-    timings = {}
-    c0 = time.perf_counter()
-    robot = load_robot(job.robot)
-    ip = job.interp
-    jt = joint_trajectory(robot, ip, pl, source=job.program)
-    R = pl.T[:3, :3]
-    timings["kinematics"] = time.perf_counter() - c0
-    c0 = time.perf_counter()
-    err = None
-    if comp.servo:
-        sv = simulate_servo(robot, jt.t, jt.q, friction=comp.friction, backlash=comp.switching)
-        err = sv.tcp_error(robot) @ R  # base -> workpiece frame: R^T e, row-wise
-    C = workpiece_compliance(robot, jt.q, R, s.stiffness_scale) if comp.deflection else None
-    timings["servo+compliance"] = time.perf_counter() - c0
-    c0 = time.perf_counter()
-    floor = float(ip.xyz[:, 2].min()) - 2e-3
-    if job.stock is not None:
-        solids = _stock_solids(Path(job.stock), floor)
-        wp = TriDexel.from_solids(solids, s.spacing)
-    else:
-        raise InputError("no stock description next to the program (expected <program>.stock.json)",
-                         source=job.program)
-    cutter = robot_cutter(robot)
-    res = simulate_machining(wp, cutter, jt.t, jt.line, jt.xyz, load_material(s.material),
-                             Spindle.from_rpm(job.spindle_rpm), compliance=C, tracking_error=err,
-                             switch=jt.switch, forces=comp.deflection)
-    timings["machining"] = time.perf_counter() - c0
-    c0 = time.perf_counter()
-    piece = iso_test_piece(s.size)
-    scan = probe(wp, piece, spacing=s.probe_spacing, tool_diameter=float(robot.tool.diameter))
-    table = evaluate_scan(scan, piece)
-    timings["cmm+fits"] = time.perf_counter() - c0
+    comp, pl = job.components, job.placement
+    mo = run_job(MachiningJob(program=job.program, robot=job.robot, placement=pl, friction=dict(job.friction),
+                              components=comp, settings=job.settings.machining()))
+    res, scan, table = mo.result, mo.scan, mo.table
     wfile = None
     if job.out_dir is not None:
         d = Path(job.out_dir) / pl.name
         d.mkdir(parents=True, exist_ok=True)
         write_scan(scan, d / "scan.csv")
-        wfile = VirtualWorkpiece(wp, res.steps).save(d / "workpiece.npz")
-        meta = {"program": str(Path(job.program).resolve()), "robot": str(job.robot), "pose": pl.name,
-                "xyz": pl.xyz.tolist(), "rpy": pl.rpy.tolist(), "spacing_m": s.spacing,
-                "components": comp.label(), "units": "m, workpiece frame"}
+        wfile = VirtualWorkpiece(mo.workpiece, res.steps).save(d / "workpiece.npz")
+        meta = {"program": str(Path(job.program.program).resolve()), "robot": str(job.robot), "pose": pl.name,
+                "xyz": pl.xyz.tolist(), "rpy": pl.rpy.tolist(), "spacing_m": job.settings.spacing,
+                "components": comp.label(), "friction": mo.friction, "units": "m, workpiece frame"}
         tmp = d / ".meta.json.tmp"
         tmp.write_text(json.dumps(meta, indent=1))
         os.replace(tmp, d / "meta.json")
     keep = job.keep_steps
+    jt = mo.trajectory
     return PoseResult(pose=pl.name, components=comp, table=table, scan=scan,
-                      steps=res.steps if keep else None, tcp_error=err if keep else None, workpiece_file=wfile,
-                      timings=timings, xyz=jt.xyz if keep else None, switch=jt.switch if keep else None)
-
-
-def _program_spindle(program) -> float:
-    speeds = [seg.spindle for seg in program.segments if seg.spindle > 0]
-    return float(max(speeds)) * 60.0 if speeds else 0.0
+                      steps=res.steps if keep else None, tcp_error=mo.tracking_error if keep else None,
+                      workpiece_file=wfile, timings=mo.timings, xyz=jt.xyz if keep else None,
+                      switch=jt.switch if keep else None, friction=mo.friction)
 
 
 def rank_poses(program: str | Path, robot: str | Path, placements: list[Placement], *,
                settings: RankSettings | None = None, components: Components | None = None,
                shares: bool = False, out_dir: str | Path | None = None, workers: int = 2,
-               advance=None) -> Ranking:
+               advance=None, friction: dict | None = None) -> Ranking:
     """Simulate, measure and rank every placement (module docstring).
 
     Parameters
@@ -334,31 +266,29 @@ def rank_poses(program: str | Path, robot: str | Path, placements: list[Placemen
         Parallel processes (at most 2 on the shared machine).
     advance : callable(n), optional
         Called once per finished simulation.
+    friction : dict of int to str, optional
+        Per joint (1..6) a friction model reference (saved folder, ``runs:/``, ``models:/``) replacing the
+        robot file's (:class:`simulate.pipeline.MachiningJob`).
     """
-    from simulate.toolpath.gcode import read_program
-    from simulate.toolpath.interpolation import PathLimits, interpolate
+    from simulate.pipeline import load_program
 
     settings = settings or RankSettings()
     settings.validate()
     components = components or Components()
     program = Path(program)
-    prog = read_program(program)
     stock = program.with_name(program.stem + ".stock.json")
-    rpm = settings.spindle_rpm or _program_spindle(prog)
-    if not rpm > 0:
-        raise InputError("the program never switches the spindle on (no S word with M3/M4); give --spindle",
+    if not stock.exists():
+        raise InputError("no stock description next to the program (expected <program>.stock.json)",
                          source=str(program))
-    ip = interpolate(prog, PathLimits())
+    prog = load_program(program, stock=stock, spindle_rpm=settings.spindle_rpm, require_spindle=True)
+    fr = tuple(sorted((int(j), str(m)) for j, m in (friction or {}).items()))
     t0 = time.perf_counter()
-    jobs = []
-    for pl in placements:
-        jobs.append(_Job(str(program), str(stock) if stock.exists() else None, str(robot), pl, components,
-                         settings, ip, rpm, None if out_dir is None else str(out_dir), True))
+    out = None if out_dir is None else str(out_dir)
+    jobs = [_Job(prog, str(robot), pl, components, settings, fr, out, True) for pl in placements]
     if shares:
         for pl in placements:
             for c in COMPONENTS:
-                jobs.append(_Job(str(program), str(stock) if stock.exists() else None, str(robot), pl,
-                                 replace(components, **{c: False}), settings, ip, rpm, None, False))
+                jobs.append(_Job(prog, str(robot), pl, replace(components, **{c: False}), settings, fr, None, False))
     results: list[PoseResult] = []
     workers = max(1, min(int(workers), 2, len(jobs)))
     if workers == 1:

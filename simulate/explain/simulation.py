@@ -2,17 +2,17 @@
 
 Everything that does not depend on the robot's stiffness, play, friction or tool is computed once per
 :class:`PartSetup` (interpolation, inverse kinematics, switching points); :func:`simulate_part` then
-runs the servo (tracking error, with LuGre friction and gear play), the translational compliance
-``J K^-1 J^T`` in the workpiece frame and the coupled removal/force/deflection loop
-(:func:`simulate.machining.simulation.simulate_machining`).
+runs the machining pipeline (:func:`simulate.pipeline.run_job`: servo with each joint's friction model
+and gear play inside the coupled removal/force/deflection loop, compliance ``J K^-1 J^T`` in the
+workpiece frame) with that robot file.
 
 Choices stated:
 
 - The cutter is the robot file's ``[tool]`` (type, diameter, corner radius, flutes, helix, flute
   length): the tool radius is a calibratable parameter of the robot file, so the simulation must take
   it from there, as ``rank-poses`` does (:func:`simulate.evaluation.cutter.robot_cutter`).
-- The stock below 2 mm under the lowest programmed cutting height is left out of the dexel grid (no
-  tool reaches it; the same choice as the pose ranking).
+- The stock below :data:`simulate.defaults.STOCK_FLOOR` under the lowest programmed cutting height is
+  left out of the dexel grid (no tool reaches it; the same choice as the pose ranking).
 - ``extra_offset`` (N, 3) [m, workpiece frame] is added to the tool path like a tracking error: the
   thermal drift candidate is simulated this way (the robot file has no thermal parameter).
 """
@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from identify.errors import InputError
+from simulate import defaults
 from simulate.robot.model import Robot
 from simulate.toolpath.placement import Placement
 from simulate.toolpath.testpiece import TestPiece
@@ -54,6 +55,8 @@ class PartSetup:
         rev/min.
     interp : object
         :class:`simulate.toolpath.interpolation.Interpolation` of the program (robot independent).
+    program_setup : simulate.pipeline.ProgramSetup
+        The pipeline's pose-independent stage (program, interpolation, stock, spindle).
     """
 
     program: Path
@@ -64,14 +67,17 @@ class PartSetup:
     material: str
     spindle_rpm: float
     interp: object
+    program_setup: object = None
     _trajectory: object = field(default=None, repr=False)
 
     def trajectory(self, robot: Robot):
         """Joint trajectory (IK + switching points); depends on the kinematics only, so it is cached."""
         if self._trajectory is None:
-            from simulate.toolpath.placement import joint_trajectory
+            from simulate.pipeline import MachiningJob, prepare
 
-            self._trajectory = joint_trajectory(robot, self.interp, self.placement, source=str(self.program))
+            job = MachiningJob(program=self.program_setup, robot=robot, placement=self.placement,
+                               settings=settings_of(self))
+            self._trajectory = prepare(job).trajectory
         return self._trajectory
 
     @property
@@ -81,7 +87,8 @@ class PartSetup:
 
 
 def load_setup(program: str | Path, pose_file: str | Path, pose_name: str | None, *, stock: str | Path | None = None,
-               spacing: float = 1e-3, material: str = "Al7075", spindle_rpm: float | None = None,
+               spacing: float = defaults.DEXEL_SPACING, material: str = defaults.MATERIAL,
+               spindle_rpm: float | None = None,
                size: int | None = None) -> PartSetup:
     """Read program, stock and pose; interpolate the program (paper 3.1).
 
@@ -93,46 +100,30 @@ def load_setup(program: str | Path, pose_file: str | Path, pose_name: str | None
     stock : path, optional
         Default ``<program stem>.stock.json``.
     spacing : float
-        Dexel spacing, m (> 0, at most 5 mm).
+        Dexel spacing, m (> 0, at most 5 mm; default :data:`simulate.defaults.DEXEL_SPACING`).
     material : str
     spindle_rpm : float, optional
         rev/min; default the program's S word.
     size : int, optional
         Test piece size, mm (160 or 320); default ``size_mm`` of the stock file.
     """
-    from simulate.toolpath.gcode import read_program
-    from simulate.toolpath.interpolation import PathLimits, interpolate
+    from simulate.pipeline import load_program
     from simulate.toolpath.placement import load_poses, select_pose
     from simulate.toolpath.testpiece import iso_test_piece
 
-    if not (isinstance(spacing, (int, float)) and math.isfinite(spacing) and 0 < spacing <= 5e-3):
-        raise InputError(f"dexel spacing must be in (0, 5] mm, got {spacing * 1e3:g} mm", field="spacing")
-    program = Path(program)
-    prog = read_program(program)
-    stock = Path(stock) if stock is not None else program.with_name(program.stem + ".stock.json")
-    if not stock.exists():
-        raise InputError("stock description not found (give --stock)", source=str(stock))
-    try:
-        doc = json.loads(stock.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"invalid JSON: {exc.msg}", source=str(stock), line=exc.lineno, column=exc.colno) from None
+    if not (isinstance(spacing, (int, float)) and math.isfinite(spacing) and 0 < spacing <= defaults.MAX_DEXEL_SPACING):
+        raise InputError(f"dexel spacing must be in (0, {defaults.MAX_DEXEL_SPACING * 1e3:g}] mm, "
+                         f"got {spacing * 1e3:g} mm", field="spacing")
+    ps = load_program(program, stock=stock, spindle_rpm=spindle_rpm, require_spindle=True)
     if size is None:
-        size = doc.get("size_mm") if isinstance(doc, dict) else None
+        size = ps.stock_doc.get("size_mm")
         if size is None:
-            raise InputError("stock file has no size_mm; give the test piece size (--size)", source=str(stock),
+            raise InputError("stock file has no size_mm; give the test piece size (--size)", source=str(ps.stock),
                              field="size_mm")
     piece = iso_test_piece(int(size))
     placement = select_pose(load_poses(pose_file), pose_name, source=str(pose_file))
-    rpm = spindle_rpm
-    if rpm is None:
-        speeds = [seg.spindle for seg in prog.segments if getattr(seg, "spindle", 0) > 0]
-        rpm = float(max(speeds)) * 60.0 if speeds else 0.0  # segment spindle speed is rev/s
-    if not rpm > 0:
-        raise InputError("the program never switches the spindle on (no S word with M3/M4); give --spindle",
-                         source=str(program))
-    ip = interpolate(prog, PathLimits())
-    return PartSetup(program=program, stock=stock, placement=placement, piece=piece, spacing=float(spacing),
-                     material=material, spindle_rpm=float(rpm), interp=ip)
+    return PartSetup(program=ps.program, stock=ps.stock, placement=placement, piece=piece, spacing=float(spacing),
+                     material=material, spindle_rpm=ps.spindle_rpm, interp=ps.interp, program_setup=ps)
 
 
 @dataclass
@@ -163,14 +154,20 @@ class PartSimulation:
     wall_time: float = 0.0
 
 
-def stock_workpiece(setup: PartSetup):
-    """The stock as a tri-dexel model, trimmed 2 mm under the lowest cutting height (module docstring)."""
-    from simulate.machining.dexel import TriDexel, raise_floor, read_stock_solids
+def settings_of(setup: PartSetup):
+    """The pipeline's settings of a part: trimmed stock with extra ray capacity (slightly different tool
+    paths leave thin slivers that split rays many times), no scan (``explain`` probes itself)."""
+    from simulate.pipeline import MachiningSettings
 
-    floor = float(setup.interp.xyz[:, 2].min()) - 2e-3
-    solids = raise_floor(read_stock_solids(setup.stock), floor)
-    # extra ray capacity: slightly different tool paths leave thin slivers that split rays many times
-    return TriDexel.from_solids(solids, setup.spacing, capacity=(32, 32, 16))
+    return MachiningSettings(spacing=setup.spacing, material=setup.material, spindle_rpm=setup.spindle_rpm,
+                             require_spindle=True, stock_floor=defaults.STOCK_FLOOR, capacity=(32, 32, 16), size=0)
+
+
+def stock_workpiece(setup: PartSetup):
+    """The stock as a tri-dexel model, trimmed under the lowest cutting height (module docstring)."""
+    from simulate.pipeline import stock_workpiece as pipeline_stock
+
+    return pipeline_stock(setup.program_setup, settings_of(setup))
 
 
 def cutter_of(robot: Robot):
@@ -182,7 +179,9 @@ def cutter_of(robot: Robot):
 
 
 def servo_error(robot: Robot, setup: PartSetup) -> np.ndarray:
-    """Servo tracking error ``p(q_act) - p(q_cmd)`` (N, 3), workpiece frame, m (friction and play on)."""
+    """Servo tracking error ``p(q_act) - p(q_cmd)`` (N, 3), workpiece frame, m, of the servo alone on the
+    commanded path (friction and play on, no process force): for sensitivities of the servo's
+    parameters (:mod:`simulate.explain.causes`)."""
     from simulate.robot.servo import simulate_servo
 
     jt = setup.trajectory(robot)
@@ -190,8 +189,7 @@ def servo_error(robot: Robot, setup: PartSetup) -> np.ndarray:
     return sv.tcp_error(robot) @ setup.rotation  # base -> workpiece: R^T e, row-wise
 
 
-def simulate_part(robot: Robot, setup: PartSetup, *, extra_offset: np.ndarray | None = None,
-                  tracking_error: np.ndarray | None = None) -> PartSimulation:
+def simulate_part(robot: Robot, setup: PartSetup, *, extra_offset: np.ndarray | None = None) -> PartSimulation:
     """Machine the part with ``robot`` (module docstring).
 
     Parameters
@@ -200,21 +198,13 @@ def simulate_part(robot: Robot, setup: PartSetup, *, extra_offset: np.ndarray | 
     setup : PartSetup
     extra_offset : numpy.ndarray (N, 3), optional
         Added tool offset, workpiece frame, m.
-    tracking_error : numpy.ndarray (N, 3), optional
-        Precomputed :func:`servo_error` for this robot (saves the servo run).
     """
-    from simulate.machining.cutting import Spindle, load_material
-    from simulate.machining.simulation import simulate_machining, workpiece_compliance
+    from simulate.pipeline import MachiningJob, PreparedJob, run_job
 
     t0 = time.perf_counter()
     jt = setup.trajectory(robot)
-    err = servo_error(robot, setup) if tracking_error is None else np.asarray(tracking_error, float)
-    if extra_offset is not None:
-        err = err + np.asarray(extra_offset, float)
-    C = workpiece_compliance(robot, jt.q, setup.rotation)
-    wp = stock_workpiece(setup)
-    res = simulate_machining(wp, cutter_of(robot), jt.t, jt.line, jt.xyz, load_material(setup.material),
-                             Spindle.from_rpm(setup.spindle_rpm), compliance=C, tracking_error=err,
-                             switch=jt.switch)
-    return PartSimulation(robot=robot, workpiece=wp, steps=res.steps, q=jt.q, tracking_error=err,
-                          wall_time=time.perf_counter() - t0)
+    job = MachiningJob(program=setup.program_setup, robot=robot, placement=setup.placement,
+                       settings=settings_of(setup), offset=extra_offset)
+    mo = run_job(job, prepared=PreparedJob(setup.program_setup, robot, jt, None))
+    return PartSimulation(robot=robot, workpiece=mo.workpiece, steps=mo.result.steps, q=jt.q,
+                          tracking_error=mo.tracking_error, wall_time=time.perf_counter() - t0)

@@ -21,16 +21,17 @@ computed for all steps in one vectorised call; only the translational 3x3 block 
 the tool axis rotation by the process wrench is neglected). The deflection follows ``C F`` with
 the lag of the arm's first structural mode (:data:`DEFLECTION_TIME_CONSTANT`), and the chip
 thickness comes from the servo-driven motion (command + tracking error): the quasi-static
-deflection moves where the cutter engages, not the feed per tooth. The tracking error is the
-servo simulation's ``p(q_act) - p(q_cmd)`` along the commanded joint trajectory, computed up-front
-(the process force is not fed back into the servo; see
-:func:`greybench.commands.machining.tracking_error`).
+deflection moves where the cutter engages, not the feed per tooth. The axis servos are stepped inside
+the loop every step (:data:`ServoLoop`, :func:`simulate.robot.servo.servo_step`) with each joint's
+friction model, loaded by the previous step's process force as ``tau_ext = -J^T F``; the tracking error
+is ``J (q_act - q_cmd)`` at the commanded joints (first order; docs/simulation-pipeline.md).
 """
 from __future__ import annotations
 
 import math
 import time
 import types as pytypes
+from collections import namedtuple
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,6 +40,8 @@ import numba
 from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
+
+from simulate.robot.servo import SV_LINK, SV_TF, servo_step
 
 from .cutting import Material, Spindle, step_forces_sorted, substeps
 from .engagement import sort_layers
@@ -88,6 +91,8 @@ class MachiningResult:
         coupling (deflection), from the CPU's time-stamp counter inside the compiled loop; only
         filled with ``simulate_machining(..., profile=True)`` (callers may add their own entries)
     cpu_time : float  s, CPU time of this process during the loop (all threads)
+    joint_error : (N, 6) rad or None, servo joint error ``q_cmd - q_link`` per step (servo in the loop)
+    joint_friction : (N, 6) Nm or None, each joint's friction torque at the end of each step
     """
 
     steps: StepTable
@@ -95,6 +100,8 @@ class MachiningResult:
     wall_time: float
     timings: dict = field(default_factory=dict)
     cpu_time: float = 0.0
+    joint_error: np.ndarray | None = None
+    joint_friction: np.ndarray | None = None
 
     @property
     def simulated_time(self) -> float:
@@ -150,11 +157,28 @@ CAPACITY_STEP = 4
 STATUS_OK, STATUS_OVERFLOW, STATUS_LAYERS, STATUS_FULL = 0, 1, 2, 3
 
 
+#: The axis servos inside the coupled loop (:func:`loop_servo`), a named tuple of:
+ServoLoop = namedtuple("ServoLoop", [
+    "on",        # bool: step the servos (False: the tracking error is the given offset only)
+    "params",    # simulate.robot.servo.ServoParams
+    "friction",  # simulate.robot.loop_friction.LoopFriction
+    "sst",       # (6, N_SERVO_STATE) servo state, updated
+    "fst",       # (6, S) friction state, updated
+    "q",         # (N, 6) commanded joints [rad]
+    "v",         # (N, 6) commanded joint velocities [rad/s]
+    "jac",       # (N, 3, 6) translational Jacobian at the commanded joints, workpiece frame [m/rad]
+    "load",      # (N, 6) gravity torque along the path [Nm] (the gearbox load without the process)
+    "scratch",   # (2, 6): the step's tau_ext [Nm] and gearbox load [Nm]
+    "dq",        # (N, 6) out: joint error q_cmd - q_link [rad]
+    "tf",        # (N, 6) out: friction torque at the end of the step [Nm]
+])
+
+
 @njit(cache=True)
 def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, zlo, zhi, zls, zhs, zcnt,
                   lower, s, nx, ny, nz, xyz, err, t, C, use_compliance, R, rc, L, N, tan_helix, omega, phase,
                   kc, ke, n_sub, forces, time_constant, parallel_work, samp_ang, samp_eng, samp_cnt, layer_removed, colx, coly,
-                  pair_ray, pair_w, sorted_ang, perm, state, force, peak, deflection, ticks):
+                  pair_ray, pair_w, sorted_ang, perm, state, force, peak, deflection, ticks, servo):
     """Steps ``k_from .. k_to - 1`` of the coupled loop (paper Figure 4) in one compiled call.
 
     Per step k: tool tip ``p1 = xyz[k] + deflection(k-1) + err[k]``; removal of the cutter swept
@@ -166,8 +190,10 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
     allocated per step.
 
     ``state`` (7,) carries ``[p0 (3), deflection (3), removed z-ray volume [m^3]]`` between calls;
-    ``ticks`` (5,) accumulates clock ticks of removal, engagement, forces, robot, and the z-ray
-    part of the removal: always 0 here (cached kernel, no clock); the copy from
+    ``servo`` (:data:`ServoLoop`) steps the six axis servos with their friction models first, giving
+    the step's tracking error (added to ``err``, which enters holding the given offset).
+    ``ticks`` (6,) accumulates clock ticks of removal, engagement, forces, robot (deflection), the
+    z-ray part of the removal and the servo: always 0 here (cached kernel, no clock); the copy from
     :func:`profiling_kernel` fills them from the CPU's time-stamp counter.
     Returns ``(status, step, mask)``: status 0 (``step = k_to``); 1 (ray capacity exceeded) / 2
     (more layers than the buffers) at ``step``; 3: after completing ``step - 1`` a ray of the
@@ -186,6 +212,29 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
     removed = state[6]
     par_ok = parallel_work > 0
     for k in range(k_from, k_to):
+        if servo.on:
+            cs = _clock()
+            # the servos over the cycle k-1 -> k; the process force of step k-1 loads the joints,
+            # tau_ext = -J^T F (held over the cycle: the same one-step lag as the deflection)
+            te = servo.scratch[0]
+            ld = servo.scratch[1]
+            for jj in range(6):
+                te[jj] = -(servo.jac[k - 1, 0, jj] * force[k - 1, 0] + servo.jac[k - 1, 1, jj] * force[k - 1, 1]
+                           + servo.jac[k - 1, 2, jj] * force[k - 1, 2])
+                ld[jj] = servo.load[k - 1, jj] + te[jj]
+            servo_step(servo.params, servo.friction, servo.sst, servo.fst, t[k] - t[k - 1], servo.q[k - 1],
+                       servo.q[k], servo.v[k - 1], servo.v[k], te, te, ld)
+            for jj in range(6):
+                servo.dq[k, jj] = servo.q[k, jj] - servo.sst[jj, SV_LINK]
+                servo.tf[k, jj] = servo.sst[jj, SV_TF]
+            # tracking error p(q_act) - p(q_cmd) = J (q_act - q_cmd) to first order (errors of ~1e-5 rad:
+            # the second-order term is below 1e-9 m), added to the given offset
+            for a in range(3):
+                e = 0.0
+                for jj in range(6):
+                    e -= servo.jac[k, a, jj] * servo.dq[k, jj]
+                err[k, a] += e
+            ticks[5] += _clock() - cs
         for a in range(3):
             p1[a] = xyz[k, a] + defl[a] + err[k, a]
         c0 = _clock()
@@ -313,7 +362,7 @@ def profiling_kernel():
 def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Material, spindle: Spindle, *,
                        compliance=None, tracking_error=None, switch=None, forces: bool = True,
                        advance=None, time_constant: float = DEFLECTION_TIME_CONSTANT,
-                       parallel_work: int = PARALLEL_WORK, profile: bool = False) -> MachiningResult:
+                       parallel_work: int = PARALLEL_WORK, profile: bool = False, servo=None) -> MachiningResult:
     """Run the coupled loop over a commanded cutter path (modifies ``workpiece``).
 
     Parameters
@@ -328,7 +377,8 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     compliance : (N, 3, 3) m/N, optional
         Translational compliance in the workpiece frame per step; None: no deflection.
     tracking_error : (N, 3) m, optional
-        Servo tracking error in the workpiece frame per step; None: none.
+        Tool offset in the workpiece frame per step (a precomputed tracking error, a thermal drift);
+        the in-loop servo's error is added to it. None: none.
     switch : (N,) int, optional
         Switching bits per step (paper 3.7).
     forces : bool
@@ -341,8 +391,10 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         Ray visits per step above which a step's removal runs in parallel (see :data:`PARALLEL_WORK`).
     profile : bool
         Run the uncached clock-reading copy of the loop (:func:`profiling_kernel`) and fill
-        ``MachiningResult.timings`` with the split removal / engagement / forces / robot; False
+        ``MachiningResult.timings`` with the split removal / engagement / forces / robot / servo; False
         (default): the cached loop, ``timings`` empty.
+    servo : ServoLoop, optional
+        The axis servos stepped inside the loop (:func:`loop_servo`); None: none.
 
     Raises
     ------
@@ -359,7 +411,7 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     st.line[:] = np.asarray(line)
     if switch is not None:
         st.switch[:] = np.asarray(switch)
-    err = np.zeros((n, 3)) if tracking_error is None else np.ascontiguousarray(tracking_error, dtype=float)
+    err = np.zeros((n, 3)) if tracking_error is None else np.array(tracking_error, dtype=float, order="C")
     st.tracking_error[:] = err
     if n < 2:
         return MachiningResult(st, 0.0, 0.0)
@@ -375,7 +427,10 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         else np.zeros((1, 3, 3))
     state = np.zeros(7)
     state[:3] = xyz[0] + err[0]
-    ticks = np.zeros(5, np.int64)
+    ticks = np.zeros(6, np.int64)
+    sv = servo if servo is not None else _no_servo()
+    if sv.on and (sv.q.shape[0] != n or sv.jac.shape[0] != n):
+        raise ValueError("the servo's command must have one row per step")
     par_work = int(parallel_work) if numba.get_num_threads() > 1 else 0
     chunk = max(1, n // 200)
     kernel = coupled_steps
@@ -400,7 +455,7 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
                                  nsub, bool(forces), float(time_constant), par_work, buf.samp_ang,
                                  buf.samp_eng, buf.samp_cnt, buf.layer_removed, buf.colx, buf.coly,
                                  buf.pair_ray, buf.pair_w, buf.sorted_ang, buf.perm, state, st.force,
-                                 st.peak_force, st.deflection, ticks)
+                                 st.peak_force, st.deflection, ticks, sv)
         if status == STATUS_OVERFLOW:
             raise RuntimeError(f"dexel ray capacity exceeded at step {k}; use a larger capacity")
         if status == STATUS_LAYERS:
@@ -421,9 +476,12 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         # ticks -> seconds with the loop's own wall time (the counter's rate is not known up-front)
         sec = wall / total_ticks
         timings = {"removal": ticks[0] * sec, "engagement": ticks[1] * sec, "forces": ticks[2] * sec,
-                   "robot": ticks[3] * sec, "removal, z-rays": ticks[4] * sec}
+                   "robot": ticks[3] * sec, "removal, z-rays": ticks[4] * sec, "servo": ticks[5] * sec}
         timings = {k: float(v) for k, v in timings.items()}
-    return MachiningResult(st, float(state[6]), wall, timings, cpu)
+    st.tracking_error[:] = err
+    joint_error = sv.dq if sv.on else None
+    joint_friction = sv.tf if sv.on else None
+    return MachiningResult(st, float(state[6]), wall, timings, cpu, joint_error, joint_friction)
 
 
 @njit(cache=False)   # the intrinsic cannot be cached
@@ -443,3 +501,47 @@ def workpiece_compliance(robot, q, placement_rotation, stiffness_scale: float = 
     Cb = cartesian_compliance(robot, np.atleast_2d(q))[:, :3, :3] / stiffness_scale
     Rm = np.asarray(placement_rotation, float)
     return np.einsum("ji,njk,kl->nil", Rm, Cb, Rm)
+
+
+def _no_servo():
+    """A switched-off :data:`ServoLoop` (same types, so the loop compiles once)."""
+    from simulate.robot.loop_friction import assemble, new_state
+    from simulate.robot.servo import N_SERVO_STATE, ServoParams
+
+    z6 = np.zeros(6)
+    fp = assemble([None] * 6)
+    sp = ServoParams(J=np.ones(6), kv=z6, kp=z6, ki=z6, ffv=z6, fft=z6, play=z6, substeps=1, ff_ext=False,
+                     friction=False)
+    z = np.zeros((1, 6))
+    return ServoLoop(False, sp, fp, np.zeros((6, N_SERVO_STATE)), new_state(fp), z, z, np.zeros((1, 3, 6)), z,
+                     np.zeros((2, 6)), z, z)
+
+
+def loop_servo(robot, q, t, placement_rotation, friction, *, backlash: bool = True, with_friction: bool = True,
+               substeps: int | None = None) -> ServoLoop:
+    """The axis servos for the coupled loop along the commanded joints ``q`` (N, 6) [rad] at ``t`` (N,) [s].
+
+    ``friction`` is the joints' :data:`~simulate.robot.loop_friction.LoopFriction`
+    (:func:`simulate.robot.friction.loop_friction`); ``placement_rotation`` the workpiece-to-base
+    rotation (3, 3). The Jacobian (tracking error and ``tau_ext = -J^T F``) and the gravity torque
+    (the gearbox load the friction models see, plus the process torque) are taken at the commanded
+    joints, computed once for all steps. The process force is an unmeasured disturbance for the
+    controller (not fed forward; its velocity integrator rejects it).
+    """
+    from simulate import defaults
+    from simulate.robot.dynamics import gravity_torque
+    from simulate.robot.kinematics import jacobian
+    from simulate.robot.loop_friction import new_state
+    from simulate.robot.servo import command_velocity, servo_params, servo_state
+
+    q = np.ascontiguousarray(q, dtype=float)
+    t = np.ascontiguousarray(t, dtype=float)
+    Rm = np.asarray(placement_rotation, float)
+    jac = np.ascontiguousarray(np.einsum("ji,njk->nik", Rm, jacobian(robot, q)[:, :3, :]))
+    v = np.ascontiguousarray(command_velocity(t, q)) if len(t) > 1 else np.zeros_like(q)
+    sp = servo_params(robot, q[0], friction=with_friction, backlash=backlash,
+                      substeps=substeps or defaults.SERVO_SUBSTEPS, ff_ext=False)
+    n = len(t)
+    return ServoLoop(True, sp, friction, servo_state(q[0], v[0]), new_state(friction), q, v, jac,
+                     np.ascontiguousarray(gravity_torque(robot, q)), np.zeros((2, 6)), np.zeros((n, 6)),
+                     np.zeros((n, 6)))

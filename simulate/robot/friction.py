@@ -1,63 +1,133 @@
-"""Joint friction for the servo: every joint's friction as a LuGre table (paper 2.2, 3.6).
+"""Each joint's friction model for the servo: a robot file's ``[joint.friction]`` or a job's choice.
 
-A robot file's ``[joint.friction]`` is either inline LuGre parameters or a reference to a fitted
-model (``model = "<dir>"``, relative paths taken from the robot file's folder). Both become an
-``identify.models.LuGreTable`` (``s0, s1, nu``, and the static level ``g(v)`` on a velocity grid),
-the one form the servo kernel integrates (exact bristle update, domain notes 2).
+A robot file's ``[joint.friction]`` is either inline LuGre parameters or a reference to a fitted model
+(``model = "<dir>"``, relative paths taken from the robot file's folder; ``runs:/<id>/model``;
+``models:/<name>@<alias>`` or ``models:/<name>/<version>``). A job may replace any joint's with another
+reference. Every saved model type (coulomb-viscous, stribeck, lugre, lugre-extended, greybox, residual,
+lstm) becomes that joint's compiled loop friction (:mod:`simulate.robot.loop_friction`).
+
+Loaded models are cached per process (by folder and modification time, or by MLflow URI), so the
+poses of a ranking or the jobs of a service worker read each model once.
+
+Bad references raise ``InputError`` with one line naming the robot file key
+(``joint[N].friction.model``) or the job field (``friction[axis N]``).
 """
 from __future__ import annotations
 
+import re
+import shutil
+import tempfile
 from pathlib import Path
 
-
 from identify.errors import InputError
-from identify.models.lugre import LuGreTable, velocity_grid
-from identify.models.static_curves import stribeck
+from simulate import defaults
+from simulate.robot.loop_friction import LoopFriction, assemble, describe, joint_from_folder, joint_from_lugre
 from simulate.robot.model import FrictionSpec, Robot
 
-#: Grid points of the friction tables [-].
-TABLE_POINTS = 1025
+_CACHE: dict = {}
+_AXIS = re.compile(r"-axis([0-9]+)-")
 
 
 def _resolve(ref: str, robot: Robot) -> str:
-    if "://" in ref or Path(ref).is_absolute() or not robot.source:
+    if "://" in ref or ref.startswith(("runs:/", "models:/")) or Path(ref).is_absolute() or not robot.source:
         return ref
     return str(Path(robot.source).parent / ref)
 
 
-def friction_table(robot: Robot, joint: int, v_max: float) -> LuGreTable:
-    """The friction of ``joint`` (0-based) as a LuGre table on [-v_max, v_max] rad/s.
+def _download(uri: str) -> Path:
+    """An MLflow model URI's artifacts in a local folder holding ``params.json``."""
+    import mlflow
+    from mlflow.exceptions import MlflowException
 
-    Raises
-    ------
-    InputError
-        The referenced model cannot be loaded or has no LuGre form (``as_lugre_table``).
+    from identify.tracking import tracking_uri
+
+    mlflow.set_tracking_uri(tracking_uri())
+    mlflow.set_registry_uri(tracking_uri())
+    dst = Path(tempfile.mkdtemp(prefix="greybench-loop-model-"))
+    try:
+        local = Path(mlflow.artifacts.download_artifacts(artifact_uri=uri, dst_path=str(dst)))
+    except MlflowException as exc:
+        shutil.rmtree(dst, ignore_errors=True)
+        raise InputError(f"cannot resolve MLflow model: {exc.message.splitlines()[0]}") from None
+    found = sorted(local.rglob("params.json"), key=lambda p: len(p.parts))
+    if not found:
+        raise InputError(f"MLflow model {uri} holds no saved friction model (params.json)")
+    return found[0].parent
+
+
+def model_row(ref: str, joint: int, *, sample_period: float = defaults.LEARNED_SAMPLE_PERIOD) -> dict:
+    """The loop-friction row of a model reference for ``joint`` (1-based), cached per process.
+
+    Raises ``InputError`` (without a field: the caller names it) for a missing folder, an unknown
+    URI, a file that is not a saved model, or a registered model of another axis.
     """
-    spec: FrictionSpec = robot.friction[joint]
-    if spec.lugre is not None:
-        p = spec.lugre
-        v = velocity_grid(v_max, TABLE_POINTS)
-        return LuGreTable(s0=p.s0, s1=p.s1, nu=p.nu, v=v, g=stribeck(v, p.fc, p.fs, p.vs, p.delta))
-    field = f"joint[{joint + 1}].friction.model"
-    ref = _resolve(spec.model, robot)
-    try:
-        from identify.models import load_model
-        model = load_model(ref)
-    except InputError as exc:
-        raise InputError(f"cannot load friction model '{spec.model}': {exc.message}", source=robot.source or None,
-                         field=field) from None
-    except (OSError, ValueError, KeyError) as exc:
-        raise InputError(f"cannot load friction model '{spec.model}': {exc}", source=robot.source or None,
-                         field=field) from None
-    if not hasattr(model, "as_lugre_table"):
-        raise InputError(f"friction model '{spec.model}' ({type(model).__name__}) has no LuGre form for the servo",
-                         source=robot.source or None, field=field)
-    try:
-        return model.as_lugre_table(v_max, n=TABLE_POINTS)
-    except TypeError:
-        return model.as_lugre_table(v_max)
+    m = _AXIS.search(ref) if ref.startswith("models:/") else None
+    if m and int(m.group(1)) != joint:
+        raise InputError(f"'{ref}' is registered for axis {m.group(1)}, not joint {joint}")
+    if ref.startswith(("runs:/", "models:/")):
+        key = (ref, sample_period)
+        if key not in _CACHE:
+            _CACHE[key] = joint_from_folder(_download(ref), sample_period=sample_period)
+        return _CACHE[key]
+    folder = Path(ref)
+    pj = folder / "params.json"
+    if not folder.is_dir():
+        raise InputError(f"model folder '{ref}' does not exist")
+    if not pj.exists():
+        raise InputError(f"'{ref}' is not a saved friction model folder (no params.json)")
+    stamp = max(p.stat().st_mtime_ns for p in folder.rglob("*") if p.is_file())
+    key = (str(folder.resolve()), stamp, sample_period)
+    if key not in _CACHE:
+        _CACHE[key] = joint_from_folder(folder, sample_period=sample_period)
+    return _CACHE[key]
 
 
-def friction_tables(robot: Robot, v_max: float | None = None) -> list[LuGreTable]:
-    """Tables of all six joints; ``v_max`` defaults to 1.5 x each joint's velocity limit [rad/s]."""
-    return [friction_table(robot, j, float(v_max if v_max is not None else 1.5 * robot.vmax[j])) for j in range(6)]
+def joint_rows(robot: Robot, overrides: dict | None = None, *,
+               sample_period: float = defaults.LEARNED_SAMPLE_PERIOD) -> tuple[list[dict], list[dict]]:
+    """Loop-friction rows of the six joints and where each came from.
+
+    Parameters
+    ----------
+    robot : Robot
+    overrides : dict of int to str, optional
+        Joint (1..6) -> model reference replacing the robot file's friction.
+
+    Returns
+    -------
+    rows : list of dict
+    sources : list of dict
+        Per joint ``{"joint", "kind", "source"}``: ``source`` is ``"inline"`` or the reference.
+    """
+    overrides = dict(overrides or {})
+    for j in overrides:
+        if not (isinstance(j, int) and 1 <= j <= 6):
+            raise InputError(f"joint must be 1..6, got {j!r}", field="friction")
+    rows, sources = [], []
+    for j in range(1, 7):
+        spec: FrictionSpec = robot.friction[j - 1]
+        if j in overrides:
+            ref, field, src = str(overrides[j]), f"friction[axis {j}]", None
+        elif spec.lugre is not None:
+            rows.append(joint_from_lugre(spec.lugre))
+            sources.append({"joint": j, "source": "inline"})
+            continue
+        else:
+            ref, field, src = _resolve(spec.model, robot), f"joint[{j}].friction.model", robot.source or None
+        try:
+            rows.append(model_row(ref, j, sample_period=sample_period))
+        except InputError as exc:
+            shown = overrides.get(j, spec.model)
+            raise InputError(f"friction model '{shown}': {exc.message}", source=src, field=field) from None
+        sources.append({"joint": j, "source": str(overrides.get(j, spec.model))})
+    for s, kind in zip(sources, describe(rows)):
+        s["kind"] = kind
+    return rows, sources
+
+
+def loop_friction(robot: Robot, overrides: dict | None = None, *, enabled: bool = True,
+                  sample_period: float = defaults.LEARNED_SAMPLE_PERIOD) -> tuple[LoopFriction, list[dict]]:
+    """The six joints' compiled loop friction (:func:`joint_rows`); ``enabled=False``: none."""
+    if not enabled:
+        return assemble([None] * 6), [{"joint": j, "kind": "none", "source": "off"} for j in range(1, 7)]
+    rows, sources = joint_rows(robot, overrides, sample_period=sample_period)
+    return assemble(rows), sources

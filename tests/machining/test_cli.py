@@ -122,18 +122,18 @@ def test_cutter_comes_from_the_robot_file(small_job, tmp_path):
     flutes: the old default was 4) is not used; a changed robot file changes the cutter."""
     import math
 
-    from greybench.commands.machining import _prepare
+    from greybench.commands.machining import cutter_from_robot
     from greybench.support import resolve_robot
     from simulate.robot.model import load_robot
 
     prog, pose = small_job
     tool = load_robot(resolve_robot("max100")).tool
     assert tool.flutes == 3 and tool.diameter == 0.010
-    c = _prepare(prog, "max100", pose, None, 0.5, None).cutter
+    c = cutter_from_robot(load_robot(resolve_robot("max100")))
     assert (c.flutes, c.diameter, c.length) == (3, 0.010, 0.050)
     assert math.isclose(c.helix, math.radians(30.0))
     rob = _robot_with_tool(tmp_path, flutes=2, diameter=0.012, helix=0.7)
-    c = _prepare(prog, str(rob), pose, None, 0.5, None).cutter
+    c = cutter_from_robot(load_robot(rob))
     assert (c.flutes, c.diameter, c.helix) == (2, 0.012, 0.7)
 
 

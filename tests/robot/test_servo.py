@@ -86,3 +86,28 @@ def test_bad_inputs(robot):
         simulate_servo(robot, t, np.zeros((len(t), 5)))
     with pytest.raises(ValueError):
         simulate_servo(robot, t[::-1], np.zeros((len(t), 6)))
+
+
+def test_a_process_force_makes_the_tool_yield_and_the_integrator_recovers(robot):
+    """tau_ext = -J^T F as the loop applies it (not fed forward): the tool first yields along F (the
+    work of F on the error is positive), then the velocity integrator brings it back (a constant load
+    leaves no steady-state error)."""
+    from simulate.robot.kinematics import jacobian
+    from simulate.robot.loop_friction import assemble, new_state
+    from simulate.robot.servo import SV_LINK, servo_params, servo_state, servo_step
+
+    q0 = np.array([0.1, 0.4, 0.3, 0.0, 0.6, 0.0])
+    J = jacobian(robot, q0)[:3, :]
+    F = np.array([300.0, -200.0, 100.0])            # N on the tool, base frame
+    te = -J.T @ F
+    sp = servo_params(robot, q0, friction=False, backlash=False, ff_ext=False)
+    fp = assemble([None] * 6)
+    sst, fst, z = servo_state(q0, np.zeros(6)), new_state(fp), np.zeros(6)
+    errs = []
+    for _ in range(1500):   # 3 s
+        servo_step(sp, fp, sst, fst, CYCLE, q0, q0, z, z, te, te, z)
+        errs.append(J @ (sst[:, SV_LINK] - q0))
+    errs = np.array(errs)
+    yield_along_f = errs @ F / np.linalg.norm(F)
+    assert yield_along_f[:50].max() > 1e-7                    # it yields along the force
+    assert abs(yield_along_f[-1]) < 0.01 * yield_along_f.max()  # and recovers

@@ -1,0 +1,47 @@
+"""The machining pipeline's defaults, in one place (SI units).
+
+Every caller of the machining pipeline (:mod:`simulate.pipeline`) -- ``greybench machine``,
+``rank-poses``, ``explain``, ``bench``, and the service's simulation and explain jobs -- reads its
+defaults here, so a default changed here changes it everywhere. Each value says what it is for and
+why it has this value.
+
+Dexel spacing, one value per purpose:
+
+- :data:`DEXEL_SPACING` (0.25 mm) for *one part* whose geometry is the result (``machine``,
+  ``explain``, the service's explain jobs). At 1 mm the grid alone differed by 9 um RMS from a
+  0.25 mm scan of the same part and was blamed on the tool radius by ``explain``; at 0.25 mm a
+  machine-made scan explained with the same robot file names no cause.
+- :data:`RANKING_DEXEL_SPACING` (0.5 mm) for *ranking placements* (``rank-poses``, the service's
+  simulation jobs): measured on iso320 with max100 (4 poses, deviations against 0.25 mm), every
+  Table-2 row is within 0.02 mm of the 0.25 mm value and the best pose is the same at 2, 1, 0.5
+  and 0.25 mm; at 2 mm the slope straightness is 0.085 mm instead of 0.006 mm. The cutting force
+  integrates over the dexels inside the tool, so coarse grids make force and deflection jump as
+  whole dexels enter and leave the cutter.
+"""
+from __future__ import annotations
+
+#: Dexel spacing [m] for simulating one part (module docstring).
+DEXEL_SPACING = 0.25e-3
+#: Dexel spacing [m] for ranking workpiece placements (module docstring).
+RANKING_DEXEL_SPACING = 0.5e-3
+#: Largest accepted dexel spacing [m]: coarser grids cannot resolve the 6 mm test-piece features.
+MAX_DEXEL_SPACING = 5e-3
+#: Virtual CMM probe point distance along a feature [m].
+PROBE_SPACING = 2e-3
+#: Workpiece material, a name in ``data/materials.toml``.
+MATERIAL = "Al7075"
+#: Spindle speed [rev/min] when the program never sets an S word (``machine`` only; the ranking
+#: refuses such a program, since its cutting forces would rest on a guess).
+SPINDLE_RPM = 12000.0
+#: Interpolation cycle [s] (paper 3.1): one coupled-loop step.
+CYCLE = 0.002
+#: Servo substeps per cycle [-]: 8 -> 4 kHz, the rate of a current/velocity loop of an industrial drive.
+SERVO_SUBSTEPS = 8
+#: Stock left out below the lowest programmed cutting height [m] (ranking, explain): no tool reaches
+#: it and it would only multiply the horizontal rays. ``machine`` keeps the whole stock (its
+#: virtual workpiece is the whole part).
+STOCK_FLOOR = 2e-3
+#: Sample interval [s] of the axis records learned sequence models (LSTM) are trained on
+#: (``greybench trajectory`` samples at 1 kHz). A black-box recurrent net has no time constant of
+#: its own: it is stepped in the loop at the rate it was trained at (:mod:`simulate.robot.loop_friction`).
+LEARNED_SAMPLE_PERIOD = 1e-3

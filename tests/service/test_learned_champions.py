@@ -1,0 +1,105 @@
+"""Grey-box, residual and LSTM champions in the registry drive a simulation job's coupled loop.
+
+Each model is fitted (a few epochs) on a synthetic axis record, registered as the champion of one axis
+in an MLflow store of this test's own, and a job with that axis = champion must succeed, name the
+registered version it used, and predict a different part (Table-2 deviations, RMS tracking error) than the
+same job with the robot file's friction, which repeats exactly.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DATA = Path(__file__).resolve().parents[2] / "data"
+
+ROBOT = [{"axis": a, "model": "robot"} for a in range(1, 7)]
+KINDS = {1: "greybox", 2: "residual", 3: "lstm"}
+
+
+@pytest.fixture(scope="module")
+def champions(tmp_path_factory):
+    """max100-axis{1,2,3}-friction@champion = grey-box, residual, LSTM (version 1 each) in a fresh store."""
+    import mlflow
+
+    from identify.axis_limits import AxisLimits
+    from identify.models import make_model
+    from identify.plant import PlantConfig, synthesize
+    from identify.records import validate_frame
+    from identify.trajectories import universal_trajectory
+
+    root = tmp_path_factory.mktemp("champions")
+    uri = f"sqlite:///{root}/mlruns.db"
+    tr = universal_trajectory(AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0), duration=4.0)
+    rec = validate_frame(synthesize(tr.t, tr.q, tr.qd, tr.qdd, config=replace(PlantConfig(), static_curve="hump"),
+                                    seed=1).frame, "champion-record")
+    hyper = {"greybox": dict(epochs=5), "residual": dict(epochs=10, population=8, generations=3),
+             "lstm": dict(epochs=2, batches=2)}
+    # the client only: mlflow.set_tracking_uri would also set MLFLOW_TRACKING_URI for the whole session
+    client = mlflow.MlflowClient(tracking_uri=uri, registry_uri=uri)
+    experiment = client.create_experiment("champions", artifact_location=(root / "artifacts").as_uri())
+    for axis, kind in KINDS.items():
+        folder = make_model(kind, **hyper[kind]).fit(rec).save(root / kind)
+        run = client.create_run(experiment)
+        client.log_artifacts(run.info.run_id, str(folder), artifact_path="model")
+        client.set_terminated(run.info.run_id)
+        name = f"max100-axis{axis}-friction"
+        client.create_registered_model(name)
+        mv = client.create_model_version(name, f"runs:/{run.info.run_id}/model", run_id=run.info.run_id)
+        client.set_registered_model_alias(name, "champion", mv.version)
+    return uri
+
+
+def short_program() -> str:
+    """The 160 test piece's header and its last finishing pass (the slope's inner wall): a short real cut."""
+    lines = (DATA / "programs" / "iso160.nc").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("(slope inner wall"))
+    return "\n".join(lines[:7] + lines[start:]) + "\n"
+
+
+def wait_for(client, job: str, states: tuple[str, ...], timeout: float) -> dict:
+    deadline = time.time() + timeout
+    while True:
+        st = client.get(f"/jobs/{job}").json()
+        if st["state"] in states:
+            return st
+        if time.time() > deadline:
+            raise AssertionError(f"job {job} still {st['state']} after {timeout} s: {st}")
+        time.sleep(0.2)
+
+
+def _run(c, friction) -> dict:
+    body = {"gcode": short_program(), "stock": "iso160", "pose_set": "iso160", "select": ["near"],
+            "friction": friction, "options": {"spacing_mm": 2.0}}
+    r = c.post("/simulations", json=body)
+    assert r.status_code == 202, r.text
+    st = wait_for(c, r.json()["id"], ("succeeded", "failed"), timeout=600)
+    assert st["state"] == "succeeded", st
+    return c.get(f"/simulations/{r.json()['id']}/report").json()
+
+
+def _deviations(report) -> np.ndarray:
+    return np.array([row["deviation"]["near"] for row in report["features"]])   # mm
+
+
+def test_learned_champions_succeed_and_change_the_part(make_server, champions):
+    srv = make_server(MLFLOW_TRACKING_URI=champions)
+    with srv.client() as c:
+        base = _run(c, ROBOT)
+        again = _run(c, ROBOT)
+        assert np.array_equal(_deviations(base), _deviations(again))   # a repeated job: identical
+        for axis, kind in KINDS.items():
+            rep = _run(c, [{"axis": axis, "model": "champion"}] + [f for f in ROBOT if f["axis"] != axis])
+            used = rep["poses"][0]["friction"][axis - 1]
+            assert used["kind"] == kind and used["model"]["version"] == 1 and used["model"]["ref"] == "champion"
+            assert all(f.get("source") == "robot-file" for f in rep["poses"][0]["friction"] if f["joint"] != axis)
+            change = np.max(np.abs(_deviations(rep) - _deviations(base)))
+            terr = abs(rep["poses"][0]["rms_tracking_error_m"] - base["poses"][0]["rms_tracking_error_m"])
+            print(f"{kind}: max feature deviation change {change * 1e3:.4g} um, rms tracking error change "
+                  f"{terr * 1e6:.4g} um")
+            # the robot file's axis friction is tens of Nm, these models' a few Nm: the path changes, where a
+            # repeated job changes nothing at all
+            assert change > 0.0 and terr > 1e-8, (kind, change, terr)
