@@ -88,6 +88,9 @@ class CompensationSettings:
         Shortest piece [m] (a line is not split below twice this).
     max_correction : float
         Cap on the correction's magnitude [m] (below the 1 mm contract).
+    ramp : float
+        Shortest piece [m] within this distance of where the original program changes speed
+        (:func:`plan_pieces`).
     """
 
     iterations: int = 4
@@ -99,6 +102,7 @@ class CompensationSettings:
     max_piece: float = 20e-3
     min_piece: float = 0.25e-3
     max_correction: float = 0.5e-3
+    ramp: float = 1e-3
 
     def validate(self) -> None:
         """Raise ``InputError`` naming the setting (as the CLI option) that is out of range."""
@@ -106,7 +110,8 @@ class CompensationSettings:
             raise InputError(f"must be an integer in 1..20, got {self.iterations!r}", field="iterations")
         if not (math.isfinite(self.gain) and 0 < self.gain <= 1.5):
             raise InputError(f"must be in (0, 1.5], got {self.gain!r}", field="gain")
-        for name in ("smoothing", "sensitivity_window", "fit_tolerance", "max_piece", "min_piece", "max_correction"):
+        for name in ("smoothing", "sensitivity_window", "fit_tolerance", "max_piece", "min_piece", "max_correction",
+                     "ramp"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"must be > 0, got {v!r}", field=name.replace("_", "-"))
@@ -200,6 +205,25 @@ class NominalPath:
     @property
     def segments(self):
         return self.setup.parsed.segments
+
+    def frame(self, run: int, sigma: np.ndarray):
+        """Path frame at arc lengths [m] of a feed run: unit tangent, sideways normal (horizontal
+        where the path is not vertical) and upward normal, each (G, 3)."""
+        idx = np.flatnonzero(self.run == run)
+        starts = self.sigma0[idx]
+        k = idx[np.clip(np.searchsorted(starts, sigma, side="right") - 1, 0, len(idx) - 1)]
+        t = np.empty((len(sigma), 3))
+        for i in np.unique(k):
+            m = k == i
+            L = self.segments[i].length
+            t[m] = _seg_tangent(self.segments[i], np.clip((sigma[m] - self.sigma0[i]) / L, 0.0, 1.0))
+        h = np.cross(np.array([0.0, 0.0, 1.0]), t)
+        n = np.linalg.norm(h, axis=1)
+        vertical = n < 0.1   # a plunge: any horizontal pair will do
+        h[vertical] = np.cross(t[vertical], np.array([1.0, 0.0, 0.0]))
+        h /= np.linalg.norm(h, axis=1, keepdims=True)
+        v = np.cross(t, h)
+        return t, h, v
 
     def cycles(self):
         """Per nominal cycle: (segment index, fraction of the segment, arc length [m])."""
@@ -374,17 +398,18 @@ def _piece_tangents(segs, seg_i: np.ndarray, a: np.ndarray, b: np.ndarray):
 
 
 def plan_pieces(path: NominalPath, correction: Correction, s: CompensationSettings,
-                limits: PathLimits | None = None, shortest: float = 0.05e-3, ramp: float = 2e-3) -> dict:
+                limits: PathLimits | None = None, shortest: float = 0.05e-3) -> dict:
     """Pieces (start, end fraction) of every feed segment: split until within ``fit_tolerance``, then
     further where the correction turns the path at a junction by more than the interpolator passes at
     the original program's speed there (:func:`_junction_limit`), down to ``shortest`` [m]: a polyline
     through a curved correction turns by about its curvature times the piece length.
 
-    Within ``ramp`` [m] of where the original program changes speed (below 95 % of the feed), pieces
+    Within ``s.ramp`` [m] of where the original program changes speed (below 95 % of the feed), pieces
     stay at least ``ramp`` long: the interpolator holds the acceleration at zero at every junction, so a chain of short
     pieces could only change speed slowly and the program would take longer.
     """
     lim = limits or PathLimits()
+    ramp = s.ramp
     segs = path.segments
     it = path.setup.interp
     s_nom, v_nom = np.asarray(it.s, float), np.asarray(it.v, float)
@@ -657,8 +682,13 @@ def deviation_field(path: NominalPath, written: WrittenProgram | None, run: Simu
         order = np.argsort(sigma[m], kind="stable")
         sg, dv = sigma[m][order], dev[m][order]
         vals = np.stack([np.interp(g, sg, dv[:, k]) for k in range(3)], axis=1)
-        # two box passes: a triangular kernel, which also suppresses the force ripple of the dexel grid
-        grid.values[r] = _box(_box(vals, smoothing), smoothing)
+        # smoothed in the path's own frame (sideways, upwards), so that a deviation that turns with
+        # the path round a corner is not shortened by averaging directions; two box passes: a
+        # triangular kernel, which also suppresses the force ripple of the dexel grid
+        _, h, v = path.frame(r, g)
+        side = _box(_box(np.sum(vals * h, axis=1), smoothing), smoothing)
+        up = _box(_box(np.sum(vals * v, axis=1), smoothing), smoothing)
+        grid.values[r] = side[:, None] * h + up[:, None] * v
     return grid
 
 

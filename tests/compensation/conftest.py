@@ -28,7 +28,8 @@ def small(tmp_path):
     prog = tmp_path / "small.nc"
     prog.write_text(SMALL)
     (tmp_path / "small.stock.json").write_text(json.dumps(
-        {"units": "mm", "box": {"min": [0, 0, -6], "max": [20, 20, 0]}, "tool": {"type": "flat", "diameter": 0.01}}))
+        {"units": "mm", "base": {"name": "block", "kind": "polygon", "vertices": [[0, 0], [20, 0], [20, 20], [0, 20]],
+                                 "z_bottom": -6, "top": {"z0": 0}}, "blanks": []}))
     pose = tmp_path / "poses.json"
     pose.write_text(json.dumps({"poses": [{"name": "near", "xyz": [1.45, 0.0, -0.1], "rpy": [0.0, 0.0, 0.0]},
                                           {"name": "away", "xyz": [6.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}]}))
