@@ -22,11 +22,14 @@ import shutil
 import tempfile
 from dataclasses import replace
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import pandas as pd
 
+from identify.errors import InputError
 from identify.records import write_table
+from simulate import defaults as DEFAULTS
 from simulate.compensation import MAX_OFFSET, TIME_RATIO, CompensationResult, table_sum
 
 UM = 1e-6
@@ -209,3 +212,65 @@ def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement
         return info
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def compensation_job(program: Path, robot: str, pose: Path, name: Optional[str], *, spacing_mm: float,
+                     probe_spacing_mm: float, size: Optional[int], friction: dict):
+    """The loaded program, the :class:`simulate.pipeline.MachiningJob` (ranking settings: trimmed stock,
+    Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates) and the placement."""
+    from simulate.evaluation.ranking import RankSettings
+    from simulate.pipeline import MachiningJob, load_program, piece_size
+    from simulate.robot.model import Robot, load_robot
+    from simulate.toolpath.placement import load_poses, select_pose
+
+    program = Path(program)
+    if not program.exists():
+        raise InputError("program not found", source=str(program))
+    placement = select_pose(load_poses(pose), name, source=str(pose))
+    rob = robot if isinstance(robot, Robot) else load_robot(robot)
+    setup = load_program(program, require_spindle=True)
+    sz = piece_size(setup, size)
+    rs = RankSettings(spacing=spacing_mm * 1e-3, probe_spacing=probe_spacing_mm * 1e-3, size=sz or 0)
+    settings = rs.machining()
+    if sz is None:
+        from dataclasses import replace
+
+        settings = replace(settings, size=0, features=False)
+    settings.validate()
+    job = MachiningJob(program=setup, robot=rob, placement=placement, friction=friction, settings=settings)
+    return setup, job, placement, rob
+
+
+def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_dir: Path, *,
+                     iterations: int = 4, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
+                     spacing_mm: float = DEFAULTS.RANKING_DEXEL_SPACING * 1e3,
+                     probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: Optional[int] = None,
+                     friction: Optional[dict] = None, advance=None) -> dict:
+    """Compensate, evaluate and write every output (``greybench compensate``'s work; the service's
+    compensation jobs call it too). ``robot``: robot TOML path or a loaded robot; ``advance(n)``:
+    progress in simulated 2 ms steps.
+
+    ``stiffness_scale`` [-]: the robot the *evaluation* simulates is that much stiffer than the model
+    the compensation iterates with (both programs); ``check_scales`` add more such evaluations.
+    Returns the summary (:func:`simulate.compensation_report.summary`) with the files.
+    """
+    from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError("output path exists and is not a folder", source=str(out_dir), field="out")
+    for v, opt in [(stiffness_scale, "stiffness-scale")] + [(c, "check-scale") for c in check_scales]:
+        if isinstance(v, bool) or not (isinstance(v, (int, float)) and v == v and 0 < v < float("inf")):
+            raise InputError(f"must be > 0, got {v!r}", field=opt)
+    cs = CompensationSettings(iterations=iterations, gain=gain)
+    cs.validate()
+    setup, job, placement, rob = compensation_job(program, robot, pose, name, spacing_mm=spacing_mm,
+                                                  probe_spacing_mm=probe_spacing_mm, size=size,
+                                                  friction=friction or {})
+    scales = sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
+    sim = pipeline_simulator(job, advance=advance)
+    res = compensate(setup, sim, cs, checks=scales, require_spindle=True,
+                     header=f"compensated by greybench for robot {rob.name}, pose {placement.name}")
+    title = f"{program.name}, robot {rob.name}, pose {placement.name}"
+    return write_outputs(res, out_dir, robot=rob, placement=placement, components=job.components,
+                         substeps=job.settings.substeps, title=title, scale=float(stiffness_scale))

@@ -27,68 +27,6 @@ def _friction(specs: list[str]) -> dict:
     return fr
 
 
-def compensation_job(program: Path, robot: str, pose: Path, name: Optional[str], *, spacing_mm: float,
-                     probe_spacing_mm: float, size: Optional[int], friction: dict):
-    """The loaded program, the :class:`simulate.pipeline.MachiningJob` (ranking settings: trimmed stock,
-    Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates) and the placement."""
-    from simulate.evaluation.ranking import RankSettings
-    from simulate.pipeline import MachiningJob, load_program, piece_size
-    from simulate.robot.model import load_robot
-    from simulate.toolpath.placement import load_poses, select_pose
-
-    if not program.exists():
-        raise InputError("program not found", source=str(program))
-    placement = select_pose(load_poses(pose), name, source=str(pose))
-    rob = load_robot(resolve_robot(robot))
-    setup = load_program(program, require_spindle=True)
-    sz = piece_size(setup, size)
-    rs = RankSettings(spacing=spacing_mm * 1e-3, probe_spacing=probe_spacing_mm * 1e-3, size=sz or 0)
-    settings = rs.machining()
-    if sz is None:
-        from dataclasses import replace
-
-        settings = replace(settings, size=0, features=False)
-    settings.validate()
-    job = MachiningJob(program=setup, robot=rob, placement=placement, friction=friction, settings=settings)
-    return setup, job, placement, rob
-
-
-def run_compensation(program: Path, robot: str, pose: Path, name: Optional[str], out_dir: Path, *,
-                     iterations: int = 4, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
-                     spacing_mm: float = DEFAULTS.RANKING_DEXEL_SPACING * 1e3,
-                     probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: Optional[int] = None,
-                     friction: Optional[dict] = None, show_progress: bool = True) -> dict:
-    """Compensate, evaluate and write every output (the command's work; the service calls it too).
-
-    ``stiffness_scale`` [-]: the robot the *evaluation* simulates is that much stiffer than the model
-    the compensation iterates with (both programs); ``check_scales`` add more such evaluations.
-    Returns the summary (:func:`simulate.compensation_report.summary`) with the files.
-    """
-    from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
-    from simulate.compensation_report import write_outputs
-
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError("output path exists and is not a folder", source=str(out_dir), field="out")
-    for v, opt in [(stiffness_scale, "stiffness-scale")] + [(c, "check-scale") for c in check_scales]:
-        if isinstance(v, bool) or not (isinstance(v, (int, float)) and v == v and 0 < v < float("inf")):
-            raise InputError(f"must be > 0, got {v!r}", field=opt)
-    cs = CompensationSettings(iterations=iterations, gain=gain)
-    cs.validate()
-    setup, job, placement, rob = compensation_job(program, robot, pose, name, spacing_mm=spacing_mm,
-                                                  probe_spacing_mm=probe_spacing_mm, size=size,
-                                                  friction=friction or {})
-    scales = sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
-    n_steps = len(setup.interp.t)
-    total = n_steps * (iterations + 1 + 2 * len(scales))
-    with progress("compensating", total=total, enabled=show_progress) as adv:
-        sim = pipeline_simulator(job, advance=adv)
-        res = compensate(setup, sim, cs, checks=scales, require_spindle=True,
-                         header=f"compensated by greybench for robot {rob.name or robot}, pose {placement.name}")
-    title = f"{program.name}, robot {rob.name or robot}, pose {placement.name}"
-    return write_outputs(res, out_dir, robot=rob, placement=placement, components=job.components,
-                         substeps=job.settings.substeps, title=title, scale=float(stiffness_scale))
-
-
 def print_info(info: dict) -> None:
     ev = info.get("evaluation")
     if ev is not None:
@@ -144,10 +82,19 @@ def compensate_cmd(
 ) -> None:
     """Pre-compensate a program from the simulation: correct the commanded path against the predicted
     tool deviation (deflection, tracking error with friction and backlash) and iterate."""
-    info = run_compensation(program, robot, pose, name, out_dir, iterations=iterations,
-                            stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
-                            spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
-                            friction=_friction(friction), show_progress=not as_json)
+    from simulate.compensation_report import run_compensation
+    from simulate.pipeline import load_program
+
+    if not program.exists():
+        raise InputError("program not found", source=str(program))
+    # progress in simulated 2 ms steps: the original, the iterations, two runs per extra stiffness
+    n = len(load_program(program, require_spindle=True).interp.t)
+    scales = {float(stiffness_scale), *map(float, check_scale or ())} - {1.0}
+    with progress("compensating", total=n * (iterations + 1 + 2 * len(scales)), enabled=not as_json) as adv:
+        info = run_compensation(program, resolve_robot(robot), pose, name, out_dir, iterations=iterations,
+                                stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
+                                spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
+                                friction=_friction(friction), advance=adv)
     if as_json:
         emit_json(info)
         return
@@ -161,10 +108,11 @@ def bench_compensate(
 ) -> None:
     """Time per iteration and the reduction of the Table-2 sum on the 160 test piece, one pose."""
     from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
+    from simulate.compensation_report import compensation_job
 
     program = DATA_DIR / "programs" / "iso160.nc"
     poses = DATA_DIR / "poses" / "iso160.json"
-    setup, job, placement, _ = compensation_job(program, "max100", poses, pose_name, spacing_mm=spacing,
+    setup, job, placement, _ = compensation_job(program, resolve_robot("max100"), poses, pose_name, spacing_mm=spacing,
                                                 probe_spacing_mm=DEFAULTS.PROBE_SPACING * 1e3, size=160,
                                                 friction={})
     rows = []
