@@ -55,6 +55,7 @@ class JobKind(str, Enum):
     simulation = "simulation"
     diagnose = "diagnose"
     explain = "explain"
+    compensation = "compensation"
 
 
 class QueueFull(RuntimeError):
