@@ -105,3 +105,14 @@ def test_written_program_keeps_feed_words_and_stays_on_the_corrected_path(small)
         target = _seg_point(nominal, np.array([ub]))[0] + corr.at(int(path.run[i]),
                                                                   np.array([path.sigma0[i] + ub * nominal.length]))[0]
         assert np.linalg.norm(seg.end - target) < 2e-9
+
+
+def test_the_update_starts_from_the_realised_correction_so_nothing_winds_up(small):
+    """A run starts at the uncorrected end of a rapid: the first piece cannot realise the correction
+    there. Updating from the intended correction would add the same residual every iteration."""
+    prog, _ = small
+    setup = load_program(prog)
+    seen = []
+    compensate(setup, _constant, CompensationSettings(iterations=3, secant=False), on_iteration=seen.append)
+    assert len(seen) >= 3
+    assert max(it.max_offset for it in seen) < 1.05 * np.linalg.norm(D)
