@@ -34,6 +34,8 @@ Choices where the method is vague (stated so they can be replaced):
   all other lines are copied unchanged, so the program stays the same program with the same feeds.
   Short pieces of nearly the same direction keep the feed through the interpolator's look-ahead
   (its junction speed limit depends on the direction change, :mod:`simulate.toolpath.interpolation`).
+- **Corners.** On an arc whose radius is at most the tool radius (the tool turning round a convex
+  corner of the part) the correction is blended between its neighbours' (:func:`blend_corners`).
 - **Stopping.** Iterate at most ``iterations`` times; stop at the first iteration that does not
   improve the objective (sum of |Table-2 deviation| when the stock is a test piece, else the RMS
   normal path deviation); the best program is the result.
@@ -712,6 +714,37 @@ def update_correction(corr: Correction, dev: Correction, prev: tuple | None,
     return Correction(corr.grids, out)
 
 
+def blend_corners(path: NominalPath, corr: Correction, tool_radius: float) -> Correction:
+    """On arcs of radius at most ``tool_radius`` [m], replace the correction by a blend, linear along
+    the arc in the path frame (sideways, upwards), from the correction where the arc starts to where
+    it ends.
+
+    Such an arc turns the tool round a convex corner of the part: its flank only touches the corner
+    point, so the deviation there is no surface of its own, while correcting it moves the tool into
+    the ends of both adjacent walls (a tool pushed in by ``rho`` cuts a wall within ``sqrt(2 R rho)``
+    of the corner). Blending keeps each wall's own correction up to the corner.
+    """
+    out = [v.copy() for v in corr.values]
+    for i, seg in enumerate(path.segments):
+        r = int(path.run[i])
+        if r < 0 or not isinstance(seg, Arc) or seg.radius > tool_radius * (1 + 1e-3):
+            continue
+        g = corr.grids[r]
+        a, b = path.sigma0[i], path.sigma0[i] + seg.length
+        m = (g >= a) & (g <= b)
+        if m.sum() < 2:
+            continue
+        ends = np.array([a, b])
+        _, h, v = path.frame(r, g[m])
+        _, he, ve = path.frame(r, ends)
+        ce = corr.at(r, ends)
+        w = (g[m] - a) / (b - a)
+        side = (1 - w) * np.sum(ce[0] * he[0]) + w * np.sum(ce[1] * he[1])
+        up = (1 - w) * np.sum(ce[0] * ve[0]) + w * np.sum(ce[1] * ve[1])
+        out[r][m] = side[:, None] * h + up[:, None] * v
+    return Correction(corr.grids, out)
+
+
 # ----------------------------------------------------------------------------- the iteration
 
 
@@ -818,7 +851,7 @@ def _load(path_file: Path, nominal: NominalPath, spindle_rpm: float | None, requ
 
 def compensate(nominal: ProgramSetup, simulate: Simulator, settings: CompensationSettings | None = None, *,
                checks=(), header: str = "", on_iteration=None, spindle_rpm: float | None = None,
-               require_spindle: bool = False) -> CompensationResult:
+               require_spindle: bool = False, tool_radius: float | None = None) -> CompensationResult:
     """Iterate the mirror compensation of ``nominal`` (module docstring).
 
     Parameters
@@ -837,6 +870,9 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
         Called after every simulation (progress).
     spindle_rpm, require_spindle
         As for :func:`simulate.pipeline.load_program` of the corrected programs.
+    tool_radius : float, optional
+        Cutter radius [m]: arcs of at most this radius get the correction blended between their
+        neighbours' (:func:`blend_corners`).
     """
     s = settings or CompensationSettings()
     s.validate()
@@ -864,7 +900,7 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
         for k in range(1, s.iterations + 1):
             new = update_correction(real, dev, prev, s)
             prev = (real, dev)
-            corr = new
+            corr = blend_corners(path, new, tool_radius) if tool_radius else new
             wp = write_program(path, corr, s, header=f"{header} iteration {k}".strip())
             f = Path(tmp) / f"iteration{k}.nc"
             f.write_text(wp.text, encoding="utf-8")

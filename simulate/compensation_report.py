@@ -268,8 +268,10 @@ def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_
                                                   probe_spacing_mm=probe_spacing_mm, size=size,
                                                   friction=friction or {})
     scales = sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
+    from simulate.evaluation.cutter import robot_cutter
+
     sim = pipeline_simulator(job, advance=advance)
-    res = compensate(setup, sim, cs, checks=scales, require_spindle=True,
+    res = compensate(setup, sim, cs, checks=scales, require_spindle=True, tool_radius=robot_cutter(rob).radius,
                      header=f"compensated by greybench for robot {rob.name}, pose {placement.name}")
     title = f"{program.name}, robot {rob.name}, pose {placement.name}"
     return write_outputs(res, out_dir, robot=rob, placement=placement, components=job.components,

@@ -116,3 +116,32 @@ def test_the_update_starts_from_the_realised_correction_so_nothing_winds_up(smal
     compensate(setup, _constant, CompensationSettings(iterations=3, secant=False), on_iteration=seen.append)
     assert len(seen) >= 3
     assert max(it.max_offset for it in seen) < 1.05 * np.linalg.norm(D)
+
+
+def test_corner_arc_correction_is_blended_between_the_walls(small):
+    """The small program turns round the block's corner on an arc of 4.5 mm (below the 5 mm tool
+    radius): there the sideways correction goes linearly from the first wall's to the second's."""
+    from simulate.compensation import blend_corners
+    from simulate.toolpath.gcode import Arc
+
+    prog, _ = small
+    path = NominalPath.of(load_program(prog))
+    i = next(k for k, s in enumerate(path.segments) if isinstance(s, Arc))
+    r = int(path.run[i])
+    corr = Correction.zero(path)
+    g = corr.grids[r]
+    _, h, v = path.frame(r, g)
+    a, b = path.sigma0[i], path.sigma0[i] + path.segments[i].length
+    bump = 50e-6 * np.sin(np.pi * np.clip((g - a) / (b - a), 0, 1))   # the arc's own deviation
+    side = np.where(g < 0.5 * (a + b), 100e-6, 200e-6) + bump
+    corr.values[r] = side[:, None] * h + 20e-6 * v
+    out = blend_corners(path, corr, tool_radius=5e-3)
+    mid = np.array([a + 0.25 * (b - a), a + 0.5 * (b - a)])
+    _, hm, vm = path.frame(r, mid)
+    got = np.sum(out.at(r, mid) * hm, axis=1)
+    np.testing.assert_allclose(got, [125e-6, 150e-6], atol=1.5e-6)   # grid of 0.1 mm
+    np.testing.assert_allclose(np.sum(out.at(r, mid) * vm, axis=1), 20e-6, atol=1e-9)
+    # outside the arc nothing changes; with a smaller tool the arc is a surface of its own
+    far = (g < a - 1e-4) | (g > b + 1e-4)
+    np.testing.assert_array_equal(out.values[r][far], corr.values[r][far])
+    np.testing.assert_array_equal(blend_corners(path, corr, tool_radius=4e-3).values[r], corr.values[r])
