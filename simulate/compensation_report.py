@@ -164,7 +164,7 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
                          f"| {c['ratio']:.3f} | {', '.join(c['rows_worse']) or 'none'} |")
         lines.append("")
     lines += ["## Iterations (model stiffness)", "",
-              "| iteration | sum |dev| [µm] | score | path RMS [µm] | path max [µm] | max offset [µm] | time ratio "
+              "| iteration | sum of abs. deviation [µm] | score | path RMS [µm] | path max [µm] | max offset [µm] | time ratio "
               "| peak speed ratio | pieces | wall [s] |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for it in info["iterations"]:
         s = "-" if it["table_sum_mm"] is None else f"{it['table_sum_mm'] * 1e3:.1f}"

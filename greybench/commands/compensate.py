@@ -126,7 +126,7 @@ def bench_compensate(
                          on_iteration=seen, require_spindle=True)
     wall = time.perf_counter() - t0
     t = Table(title=f"compensate iso160, pose {placement.name}, dexel spacing {spacing:g} mm")
-    for c in ("iteration", "simulation [s]", "sum |dev| [µm]", "ratio to original", "path RMS [µm]", "time ratio",
+    for c in ("iteration", "simulation [s]", "sum of abs. deviation [µm]", "ratio to original", "path RMS [µm]", "time ratio",
               "pieces"):
         t.add_column(c, justify="right")
     s0 = rows[0].table_sum
