@@ -192,8 +192,8 @@ def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement
     """Write every file (module docstring) into ``out_dir``: staged in a temporary folder and moved
     in only when all succeeded. Returns the summary (:func:`summary`) with the file paths."""
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".compensate-"))
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.compensate-"))
     try:
         info = summary(result, scale)
         (tmp / "compensated.nc").write_text(result.program.text, encoding="utf-8")
@@ -203,6 +203,7 @@ def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement
         plot(result, tmp / "deviation.png")
         (tmp / "report.md").write_text(report_text(result, info, title, scale), encoding="utf-8")
         (tmp / "summary.json").write_text(json.dumps(info, indent=1), encoding="utf-8")
+        out_dir.mkdir(exist_ok=True)
         files = []
         for f in sorted(tmp.iterdir()):
             dest = out_dir / f.name
