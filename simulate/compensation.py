@@ -454,8 +454,11 @@ def plan_pieces(path: NominalPath, correction: Correction, s: CompensationSettin
             feed = np.array([segs[i].feed for i in seg_i])
             sa = path.sigma0[seg_i] + ua * lengths
             sb = path.sigma0[seg_i] + ub * lengths
-            a = np.concatenate([_seg_point(segs[i], np.array([u])) for i, u in zip(seg_i, ua)]) + correction.at(r, sa)
-            b = np.concatenate([_seg_point(segs[i], np.array([u])) for i, u in zip(seg_i, ub)]) + correction.at(r, sb)
+            a, b = correction.at(r, sa), correction.at(r, sb)
+            for i in np.unique(seg_i):   # one call per segment: points of all its pieces
+                m = seg_i == i
+                a[m] += _seg_point(segs[i], ua[m])
+                b[m] += _seg_point(segs[i], ub[m])
             a[0] = segs[seg_i[0]].start   # the run starts at the rapid's uncorrected end
             ta, tb = _piece_tangents(segs, seg_i, a, b)
             turn = np.linalg.norm(ta[1:] - tb[:-1], axis=1)
