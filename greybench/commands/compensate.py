@@ -135,10 +135,12 @@ def bench_compensate(
                   f"{it.table_sum * 1e6:.1f}", f"{it.table_sum / s0:.3f}", f"{it.path_rms * 1e6:.1f}",
                   f"{it.time_ratio:.3f}", str(it.pieces))
     out.print(t)
-    per = sum(it.wall_time for it in rows[1:]) / max(1, len(rows) - 1)
-    out.print(f"total {wall:.1f} s; {per:.1f} s per iteration (simulation of a corrected program); "
-              f"{wall - sum(it.wall_time for it in rows):.1f} s writing and interpolating the programs; "
-              f"reduction reached: {rows[res.best].table_sum / s0:.3f} of the original sum (* chosen)")
+    n_it = max(1, len(rows) - 1)
+    per_sim = sum(it.wall_time for it in rows[1:]) / n_it
+    per_it = (wall - rows[0].wall_time) / n_it
+    out.print(f"total {wall:.1f} s; per iteration {per_it:.1f} s, of which {per_sim:.1f} s simulating the corrected "
+              f"program and {per_it - per_sim:.1f} s updating, writing and interpolating it; reduction reached: "
+              f"{rows[res.best].table_sum / s0:.3f} of the original sum (* chosen)")
 
 
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
