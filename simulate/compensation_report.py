@@ -238,7 +238,16 @@ def compensation_job(program: Path, robot: str, pose: Path, name: Optional[str],
 
         settings = replace(settings, size=0, features=False)
     settings.validate()
-    job = MachiningJob(program=setup, robot=rob, placement=placement, friction=friction, settings=settings)
+    if friction:
+        # the chosen models go into the robot, so that the simulation and the feed-forward table
+        # (the servo's friction torque) both use them
+        from simulate.robot.model import FrictionSpec
+
+        specs = list(rob.friction)
+        for joint, ref in sorted(friction.items()):
+            specs[int(joint) - 1] = FrictionSpec(model=ref if ":/" in ref else str(Path(ref).resolve()))
+        rob = rob.with_changes(friction=tuple(specs))
+    job = MachiningJob(program=setup, robot=rob, placement=placement, settings=settings)
     return setup, job, placement, rob
 
 

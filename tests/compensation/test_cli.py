@@ -70,7 +70,7 @@ def test_outputs_keep_the_contract(small, tmp_path):
     assert "Iterations" in (out / "report.md").read_text()
 
 
-@pytest.mark.parametrize("case", ["name", "reach", "gcode", "scale"])
+@pytest.mark.parametrize("case", ["name", "reach", "gcode", "scale", "friction"])
 def test_bad_input_exits_2_with_one_line_and_writes_nothing(small, tmp_path, case):
     prog, pose = small
     out = tmp_path / "out"
@@ -88,6 +88,8 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(small, tmp_path, cas
         expect = ["small.nc", f"line {bad.splitlines().index('G1 X24.5 Y-8 Z-2 Q1') + 1}"]
     elif case == "scale":
         extra, expect = ["--check-scale", "-1"], ["check-scale"]
+    elif case == "friction":
+        extra, expect = ["--friction", "7=models:/x@champion"], ["friction", "7=models"]
     r = runner.invoke(app, args + extra)
     assert r.exit_code == 2, r.output
     lines = [ln for ln in r.output.splitlines() if ln.strip()]
