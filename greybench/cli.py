@@ -15,7 +15,8 @@ bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Bench
 app.add_typer(bench_app, name="bench")
 
 # Areas, in the order of the workflow. Each module defines register(app, bench_app).
-_AREAS = ["friction", "diagnose", "robot", "toolpath", "machining", "evaluation", "circle", "explain", "serve"]
+_AREAS = ["friction", "diagnose", "robot", "toolpath", "machining", "evaluation", "circle", "compensate",
+          "explain", "serve"]
 for _name in _AREAS:
     try:
         _mod = importlib.import_module(f"greybench.commands.{_name}")

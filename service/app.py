@@ -584,6 +584,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         _job(request, job_id)
         return _status(request.app.state.manager.cancel(job_id))
 
+    from service.compensation import add_routes as add_compensation_routes
+    add_compensation_routes(app, settings, keyed)
     return app
 
 

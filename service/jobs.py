@@ -72,6 +72,7 @@ class JobKind(str, Enum):
     simulation = "simulation"
     diagnose = "diagnose"
     explain = "explain"
+    compensation = "compensation"
 
 
 class QueueFull(RuntimeError):

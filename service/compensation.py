@@ -1,0 +1,179 @@
+"""Compensation jobs of the service: ``POST /compensations``, poll, download the corrected program and
+the tables (:mod:`simulate.compensation`, the same work as ``greybench compensate``).
+
+Routes (all need ``X-API-Key``):
+
+- ``POST /compensations`` — a program (named or inline G-code with a named stock), a robot, one
+  pose (a name in a pose set, or inline), the per-axis friction choice of the simulation jobs and
+  options (dexel spacing [mm], iterations, stiffness scales); 202 with the job status, 422 naming
+  the program line / field, 404 for unknown names;
+- ``GET /compensations/{id}`` — the job status (its ``result``: Table-2 sums [mm] before/after and
+  their ratio, the iterations, the contract figures);
+- ``GET /compensations/{id}/files/{name}`` — ``compensated.nc``, ``compensated.stock.json``,
+  ``offsets.csv``, ``feedforward.csv``, ``report.md``, ``summary.json``, ``deviation.png``.
+
+:func:`add_routes` is called by :func:`service.app.create_app`; :func:`run` is the job body, called
+by :func:`service.pipeline.run_job` in a worker process.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+from fastapi import FastAPI, Path as PathParam, Request
+from fastapi.responses import FileResponse, JSONResponse
+from pydantic import Field, model_validator
+
+from identify.errors import InputError
+from service.schemas import AxisFriction, ErrorBody, JobStatus, Name, PoseIn, Strict
+from simulate.defaults import RANKING_DEXEL_SPACING
+
+#: Files a finished job serves, with their media types.
+FILES = {"compensated.nc": "text/plain", "compensated.stock.json": "application/json", "offsets.csv": "text/csv",
+         "feedforward.csv": "text/csv", "report.md": "text/markdown", "summary.json": "application/json",
+         "deviation.png": "image/png"}
+
+
+class CompensationOptions(Strict):
+    spacing_mm: float = Field(RANKING_DEXEL_SPACING * 1e3, gt=0.05, le=5.0,
+                              description="dexel spacing of the virtual workpiece [mm] (default: the ranking's)")
+    iterations: int = Field(4, ge=1, le=8, description="largest number of corrected programs simulated")
+    stiffness_scale: float = Field(1.0, gt=0, le=100, description="joint stiffness multiplier [-] of the robot "
+                                                                  "the before/after evaluation simulates")
+    check_scales: list[float] = Field(default_factory=list, max_length=4,
+                                      description="further stiffness multipliers [-] to evaluate both programs with")
+
+
+class CompensationRequest(Strict):
+    program: Name | None = Field(None, description="named program in data/programs (e.g. iso160); or give gcode")
+    gcode: str | None = Field(None, max_length=2_000_000, description="G-code text (mm, as in the program)")
+    stock: Name | None = Field(None, description="stock description data/programs/<stock>.stock.json; default: the "
+                                                 "named program's")
+    robot: Name = Field("max100", description="robot name in data/robots")
+    pose_set: Name | None = Field(None, description="named pose file in data/poses (with 'pose' a name)")
+    pose: Name | PoseIn = Field(description="pose name in pose_set, or an inline pose")
+    friction: list[AxisFriction] = Field(default_factory=list, max_length=6,
+                                         description="friction model per axis; axes not listed use 'champion' "
+                                                     "when registered, else the robot file's friction")
+    options: CompensationOptions = Field(default_factory=CompensationOptions)
+
+    @model_validator(mode="after")
+    def _one_of_each(self) -> "CompensationRequest":
+        if (self.program is None) == (self.gcode is None):
+            raise ValueError("give exactly one of 'program' (a name) and 'gcode' (text)")
+        if isinstance(self.pose, str) and self.pose_set is None:
+            raise ValueError("a pose given by name needs 'pose_set'")
+        axes = [f.axis for f in self.friction]
+        if len(set(axes)) != len(axes):
+            raise ValueError("each axis at most once in 'friction'")
+        if any(not (0 < s <= 100) for s in self.options.check_scales):
+            raise ValueError("check_scales must be in (0, 100]")
+        return self
+
+
+def add_routes(app: FastAPI, settings, keyed: list) -> None:
+    """Register the compensation routes on the service app (helpers of :mod:`service.app`)."""
+    from service import app as svc
+    from service.jobs import JobKind
+    from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, inside, named_file
+
+    job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
+    not_found = {404: {"model": ErrorBody}}
+
+    @app.post("/compensations", status_code=202, response_model=JobStatus, dependencies=keyed,
+              tags=["compensations"], responses={**not_found, 429: {"model": ErrorBody}})
+    def submit_compensation(body: CompensationRequest, request: Request) -> JSONResponse:
+        from simulate.toolpath.placement import parse_poses
+
+        text, source = svc._program(body)
+        stock_text, stock_source = svc._stock(body)
+        robot = svc._robot(body.robot)
+        if isinstance(body.pose, str):
+            path = named_file("poses", body.pose_set, ".json", "pose_set")
+            placements = {p.name: p for p in parse_poses(json.loads(path.read_text()), source=path.name)}
+            if body.pose not in placements:
+                raise InputError(f"no pose '{body.pose}' in {path.name} (has: {', '.join(placements)})",
+                                 source=path.name, field="pose")
+            p = placements[body.pose]
+            pose = {"name": p.name, "xyz": p.xyz.tolist(), "rpy": p.rpy.tolist(), "description": p.description}
+        else:
+            parse_poses({"poses": [body.pose.model_dump()]}, source="pose")
+            pose = body.pose.model_dump()
+        friction = svc._friction(body, robot, settings.mlflow_tracking_uri)
+        job = {"program_source": source, "stock_source": stock_source, "robot": robot, "pose": pose,
+               "friction": friction, "options": body.options.model_dump(), "tracking_uri": settings.mlflow_tracking_uri}
+
+        def prepare(d: Path) -> None:
+            (d / "program.nc").write_text(text)
+            (d / "stock.json").write_text(stock_text)
+
+        rec = request.app.state.manager.submit(JobKind.compensation, job, prepare=prepare)
+        return JSONResponse(status_code=202, content=svc._status(rec).model_dump(mode="json"),
+                            headers={"Location": f"/compensations/{rec.id}"})
+
+    @app.get("/compensations/{job_id}", response_model=JobStatus, dependencies=keyed, tags=["compensations"],
+             responses=not_found)
+    def compensation_status(request: Request, job_id: str = job_id_param) -> JobStatus:
+        return svc._status(svc._job(request, job_id, JobKind.compensation))
+
+    @app.get("/compensations/{job_id}/files/{name}", dependencies=keyed, tags=["compensations"],
+             response_class=FileResponse, responses={**not_found, 409: {"model": ErrorBody}})
+    def compensation_file(request: Request, job_id: str = job_id_param,
+                          name: str = PathParam(pattern=NAME_PATTERN, description="file name (see the list)")):
+        rec = svc._job(request, job_id, JobKind.compensation)
+        svc._succeeded(rec)
+        if name not in FILES:
+            raise NotFound(f"no file '{name}' (known: {', '.join(FILES)})")
+        path = inside(request.app.state.manager.job_dir(job_id) / "out", name)
+        if not path.is_file():
+            raise NotFound(f"no file '{name}' in job {job_id}")
+        return FileResponse(path, media_type=FILES[name], filename=name)
+
+
+def run(request: dict, job_dir: Path, progress) -> dict:
+    """The job body: fetch the friction models, compensate, write the files into ``<job>/out``."""
+    from service.pipeline import PoseTask, _robot_file, pose_tasks
+    from simulate.compensation_report import run_compensation
+
+    req = dict(request, poses=[request["pose"]])
+    task: PoseTask = pose_tasks(req, job_dir, progress)[0]
+    opts = request.get("options", {})
+    scratch = Path(tempfile.mkdtemp(prefix="greybench-compensate-"))
+    try:
+        program = scratch / "program.nc"
+        program.write_text(task.program_text)
+        (scratch / "program.stock.json").write_text(task.stock_text)
+        poses = scratch / "poses.json"
+        poses.write_text(json.dumps({"poses": [task.pose]}))
+        robot = _robot_file(task, scratch)
+        done = [0]
+        progress(0.05, "simulating the original program")
+
+        def advance(n=1):
+            done[0] += n
+            progress(min(0.95, 0.05 + 0.9 * done[0] / max(1, total[0])), "compensating")
+
+        from simulate.pipeline import load_program
+
+        n = len(load_program(program, require_spindle=True, source=task.program_source).interp.t)
+        scales = {float(opts.get("stiffness_scale", 1.0)), *map(float, opts.get("check_scales", []))} - {1.0}
+        total = [n * (int(opts.get("iterations", 4)) + 1 + 2 * len(scales))]
+        try:
+            info = run_compensation(program, robot, poses, task.pose["name"], job_dir / "out",
+                                    iterations=int(opts.get("iterations", 4)),
+                                    stiffness_scale=float(opts.get("stiffness_scale", 1.0)),
+                                    check_scales=tuple(opts.get("check_scales", [])),
+                                    spacing_mm=float(opts.get("spacing_mm", RANKING_DEXEL_SPACING * 1e3)),
+                                    advance=advance)
+        except InputError as exc:   # name the program as the client knows it
+            if exc.source == str(program):
+                exc = InputError(exc.message, source=task.program_source, field=exc.field, row=exc.row,
+                                 line=exc.line, column=exc.column)
+            raise exc from None
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    info["files"] = sorted(FILES)
+    info["friction"] = request.get("friction", [])
+    return info

@@ -1,0 +1,938 @@
+"""Pre-compensation of a program from the machining simulation (mirror compensation, iterated).
+
+The tool tip the coupled loop predicts is the command plus the robot's deflection plus the servo
+tracking error (friction, backlash), per 2 ms interpolation cycle in the workpiece frame
+(:class:`simulate.pipeline.MachiningOutcome`). Mirror compensation moves the command against the
+predicted deviation from the nominal path,
+
+    x_cmd(k+1) = x_cmd(k) - (x_sim(k) - x_des),
+
+and repeats until the ISO 10791-7 (Table-2) deviations stop improving (Reinl et al., IEEE/ASME AIM
+2011; Carriere et al., Int. J. Adv. Manuf. Technol. 110:2361-2375, 2020; ``docs/compensation.md``).
+
+Choices where the method is vague (stated so they can be replaced):
+
+- **Normal deviation only.** The component of the deviation along the nominal path tangent is
+  dropped: a shift along the tool's own path changes when a point is cut, not the cut surface, and
+  correcting it would re-time the program (the correction must keep the program's feed and time).
+- **Correction as a function of the nominal path.** The correction lives on the nominal arc length
+  of each feed run (the feed moves between two rapids), on a 0.1 mm grid, smoothed over
+  ``smoothing`` (the tool averages shorter detail; coarse dexel grids make the force jumpy). A
+  simulated cycle of a corrected program is mapped back to the nominal arc length through the
+  piece of the nominal segment it executes (same fraction of the piece).
+- **Damped secant (Newton-like) update.** The deflection grows as the tool is moved into the
+  wall (deeper cut, larger force), so the plain fixed point contracts only by the factor ``s/(1+s)``
+  of that growth. From the second iteration on, the local sensitivity of the deviation to the
+  correction, ``g = <de, dc> / <dc, dc>`` over a window of the path, is measured from the last two
+  iterations and the step is ``-gain * e / g`` (``g`` clipped to ``[0.25, 1.5]``; ``g = 1`` where
+  the correction did not change). With ``g = 1`` this is the mirror update.
+- **The corrected path as G-code.** Every feed line of the original program is kept and split into
+  pieces of the same kind (G1 lines stay lines, G2/G3 arcs become shorter arcs of the same
+  direction with the centre moved onto the bisector of the corrected end points), whose end points
+  carry the correction; a line is split until the piecewise path is within ``fit_tolerance`` of the
+  corrected samples. F, S, T and M words are kept (F on the first piece, as programmed), rapids and
+  all other lines are copied unchanged, so the program stays the same program with the same feeds.
+  Short pieces of nearly the same direction keep the feed through the interpolator's look-ahead
+  (its junction speed limit depends on the direction change, :mod:`simulate.toolpath.interpolation`).
+- **Corners.** On an arc whose radius is at most the tool radius (the tool turning round a convex
+  corner of the part) the correction is blended between its neighbours' (:func:`blend_corners`).
+- **Stopping.** Iterate at most ``iterations`` times; stop at the first iteration that does not
+  improve the objective (sum of |Table-2 deviation| when the stock is a test piece, else the RMS
+  normal path deviation); the best program is the result.
+"""
+from __future__ import annotations
+
+import math
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from identify.errors import InputError
+from simulate.pipeline import MachiningJob, ProgramSetup, load_program, run_job
+from simulate.toolpath.gcode import Arc, Linear, _words
+from simulate.toolpath.interpolation import PathLimits, interpolate
+
+#: Grid of the correction along the nominal path [m].
+GRID = 1e-4
+#: The contract of a correction (not another program).
+MAX_OFFSET = 1e-3          # m from the nominal path
+TIME_RATIO = (0.8, 1.25)   # compensated / nominal program time [-]
+
+
+@dataclass(frozen=True)
+class CompensationSettings:
+    """How the compensation iterates and writes the corrected program (SI).
+
+    Attributes
+    ----------
+    iterations : int
+        Largest number of corrected programs simulated [-].
+    gain : float
+        Damping of the update (1: full mirror / secant step) [-], in (0, 1.5].
+    secant : bool
+        Use the measured sensitivity from the second iteration on (module docstring).
+    smoothing : float
+        Box window of the deviation along the path [m], applied twice (a triangular kernel of twice
+        the width): the tool (10 mm) averages shorter detail, and coarse dexel grids make the force,
+        hence the deflection, ripple at the dexel spacing.
+    sensitivity_window : float
+        Window of the sensitivity estimate along the path [m].
+    fit_tolerance : float
+        Largest distance of the written pieces from the corrected samples [m].
+    max_piece : float
+        Longest piece a line or arc is split into [m].
+    min_piece : float
+        Shortest piece [m] (a line is not split below twice this).
+    max_correction : float
+        Cap on the correction's magnitude [m] (below the 1 mm contract).
+    ramp : float
+        Shortest piece [m] within this distance of where the original program changes speed
+        (:func:`plan_pieces`).
+    """
+
+    iterations: int = 4
+    gain: float = 1.0
+    secant: bool = True
+    smoothing: float = 2e-3
+    sensitivity_window: float = 10e-3
+    fit_tolerance: float = 0.5e-6
+    max_piece: float = 20e-3
+    min_piece: float = 0.25e-3
+    max_correction: float = 0.5e-3
+    ramp: float = 1e-3
+
+    def validate(self) -> None:
+        """Raise ``InputError`` naming the setting (as the CLI option) that is out of range."""
+        if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or not 1 <= self.iterations <= 20:
+            raise InputError(f"must be an integer in 1..20, got {self.iterations!r}", field="iterations")
+        if not (math.isfinite(self.gain) and 0 < self.gain <= 1.5):
+            raise InputError(f"must be in (0, 1.5], got {self.gain!r}", field="gain")
+        for name in ("smoothing", "sensitivity_window", "fit_tolerance", "max_piece", "min_piece", "max_correction",
+                     "ramp"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"must be > 0, got {v!r}", field=name.replace("_", "-"))
+        if self.max_correction >= MAX_OFFSET:
+            raise InputError(f"must stay below {MAX_OFFSET * 1e3:g} mm, got {self.max_correction * 1e3:g} mm",
+                             field="max-correction")
+
+
+# ----------------------------------------------------------------------------- nominal path
+
+
+def _first_index(segs) -> int:
+    """Segments the interpolator skips: the opening rapid (see ``interpolate``)."""
+    return 1 if len(segs) > 1 and isinstance(segs[0], Linear) and segs[0].rapid else 0
+
+
+def _is_feed(seg) -> bool:
+    return isinstance(seg, Arc) or not seg.rapid
+
+
+def _seg_point(seg, u: np.ndarray) -> np.ndarray:
+    u = np.atleast_1d(np.asarray(u, float))
+    if isinstance(seg, Arc):
+        return seg.point_at(u)
+    return seg.start[None, :] + u[:, None] * (seg.end - seg.start)[None, :]
+
+
+def _seg_tangent(seg, u: np.ndarray) -> np.ndarray:
+    """Unit tangent (N, 3) at fractions u."""
+    u = np.atleast_1d(np.asarray(u, float))
+    if isinstance(seg, Linear):
+        d = (seg.end - seg.start) / seg.length
+        return np.repeat(d[None, :], len(u), axis=0)
+    ax = seg.start - seg.center
+    ax = ax - np.dot(ax, seg.normal) * seg.normal
+    ax /= np.linalg.norm(ax)
+    w = np.cross(seg.normal, ax)
+    phi = seg.sweep * u
+    t = (seg.radius * seg.sweep * (-np.sin(phi)[:, None] * ax + np.cos(phi)[:, None] * w)
+         + seg.rise * seg.normal[None, :])
+    return t / np.linalg.norm(t, axis=1, keepdims=True)
+
+
+@dataclass
+class NominalPath:
+    """The original program as a path: segments, arc length, feed runs.
+
+    Attributes
+    ----------
+    setup : ProgramSetup
+    text : str
+        The program text.
+    sigma0 : ndarray (M,)
+        Nominal arc length [m] at the start of each segment (interpolator coordinates).
+    run : ndarray of int (M,)
+        Feed run of each segment (contiguous feed moves), -1 for rapids.
+    runs : list of (float, float)
+        Arc length range [m] of each run.
+    """
+
+    setup: ProgramSetup
+    text: str
+    sigma0: np.ndarray
+    run: np.ndarray
+    runs: list
+
+    @classmethod
+    def of(cls, setup: ProgramSetup) -> "NominalPath":
+        segs = setup.parsed.segments
+        first = _first_index(segs)
+        sigma0 = np.zeros(len(segs))
+        acc = 0.0
+        for i, s in enumerate(segs):
+            sigma0[i] = acc
+            if i >= first:
+                acc += s.length
+        run = np.full(len(segs), -1, np.int64)
+        runs: list = []
+        for i, s in enumerate(segs):
+            if i < first or not _is_feed(s):
+                continue
+            if i > 0 and run[i - 1] >= 0:
+                run[i] = run[i - 1]
+                runs[-1] = (runs[-1][0], sigma0[i] + s.length)
+            else:
+                run[i] = len(runs)
+                runs.append((sigma0[i], sigma0[i] + s.length))
+        text = Path(setup.program).read_text(encoding="utf-8")
+        return cls(setup, text, sigma0, run, runs)
+
+    @property
+    def segments(self):
+        return self.setup.parsed.segments
+
+    def frame(self, run: int, sigma: np.ndarray):
+        """Path frame at arc lengths [m] of a feed run: unit tangent, sideways normal (horizontal
+        where the path is not vertical) and upward normal, each (G, 3)."""
+        idx = np.flatnonzero(self.run == run)
+        starts = self.sigma0[idx]
+        k = idx[np.clip(np.searchsorted(starts, sigma, side="right") - 1, 0, len(idx) - 1)]
+        t = np.empty((len(sigma), 3))
+        for i in np.unique(k):
+            m = k == i
+            L = self.segments[i].length
+            t[m] = _seg_tangent(self.segments[i], np.clip((sigma[m] - self.sigma0[i]) / L, 0.0, 1.0))
+        h = np.cross(np.array([0.0, 0.0, 1.0]), t)
+        n = np.linalg.norm(h, axis=1)
+        vertical = n < 0.1   # a plunge: any horizontal pair will do
+        h[vertical] = np.cross(t[vertical], np.array([1.0, 0.0, 0.0]))
+        h /= np.linalg.norm(h, axis=1, keepdims=True)
+        v = np.cross(t, h)
+        return t, h, v
+
+    def cycles(self):
+        """Per nominal cycle: (segment index, fraction of the segment, arc length [m])."""
+        it = self.setup.interp
+        seg = np.asarray(it.segment, np.int64)
+        lengths = np.array([s.length for s in self.segments])
+        u = np.clip((it.s - self.sigma0[seg]) / lengths[seg], 0.0, 1.0)
+        return seg, u, np.asarray(it.s, float)
+
+
+@dataclass
+class Correction:
+    """A correction along the nominal path: per feed run a grid of arc lengths and offsets.
+
+    Attributes
+    ----------
+    grids : list of ndarray (G,)
+        Arc length [m] per run.
+    values : list of ndarray (G, 3)
+        Offset of the command [m, workpiece frame] per run.
+    """
+
+    grids: list
+    values: list
+
+    @classmethod
+    def zero(cls, path: NominalPath) -> "Correction":
+        grids = [np.linspace(a, b, max(2, int(math.ceil((b - a) / GRID)) + 1)) for a, b in path.runs]
+        return cls(grids, [np.zeros((len(g), 3)) for g in grids])
+
+    def at(self, run: int, sigma: np.ndarray) -> np.ndarray:
+        g, v = self.grids[run], self.values[run]
+        return np.stack([np.interp(sigma, g, v[:, k]) for k in range(3)], axis=1)
+
+    def on_cycles(self, path: NominalPath) -> np.ndarray:
+        """The offset at every nominal cycle (N, 3) [m] (zero on rapids)."""
+        seg, _, sig = path.cycles()
+        out = np.zeros((len(seg), 3))
+        runs = path.run[seg]
+        for r in range(len(self.grids)):
+            m = runs == r
+            if m.any():
+                out[m] = self.at(r, sig[m])
+        return out
+
+    def max_norm(self) -> float:
+        return max((float(np.linalg.norm(v, axis=1).max()) for v in self.values), default=0.0)
+
+
+# ----------------------------------------------------------------------------- writing the program
+
+
+@dataclass
+class WrittenProgram:
+    """A corrected program and where its pieces lie on the nominal path.
+
+    Attributes
+    ----------
+    text : str
+    pieces : dict of int to (int, float, float)
+        Output line (1-based) -> (nominal segment, start fraction, end fraction).
+    n_pieces : int
+    """
+
+    text: str
+    pieces: dict
+    n_pieces: int
+
+
+def _fmt(v: float) -> str:
+    s = f"{v:.6f}".rstrip("0").rstrip(".")
+    return "0" if s in ("-0", "") else s
+
+
+_PLANE_OF = {2: (17, (0, 1)), 1: (18, (2, 0)), 0: (19, (1, 2))}   # normal axis -> (G code, in-plane axes)
+
+
+def _arc_piece(seg: Arc, a: np.ndarray, b: np.ndarray):
+    """Centre (3,) [m] of the sub-arc from a to b: the nominal centre moved onto the chord's bisector."""
+    n_ax = int(np.argmax(np.abs(seg.normal)))
+    _, (i, j) = _PLANE_OF[n_ax]
+    pa, pb, c = a[[i, j]], b[[i, j]], seg.center[[i, j]]
+    chord = pb - pa
+    d = float(np.linalg.norm(chord))
+    mid = 0.5 * (pa + pb)
+    if d > 0:
+        u = chord / d
+        c = c - np.dot(c - mid, u) * u
+    centre = a.copy()
+    centre[i], centre[j] = c
+    return centre, (i, j)
+
+
+def _piece_error(seg, a, b, pts, frac) -> float:
+    """Largest distance [m] of target points from the piece a -> b of the kind of ``seg``."""
+    if len(pts) == 0:
+        return 0.0
+    if isinstance(seg, Linear):
+        d = b - a
+        L = float(np.linalg.norm(d))
+        rel = pts - a
+        if L == 0:
+            return float(np.linalg.norm(rel, axis=1).max())
+        d = d / L
+        perp = rel - (rel @ d)[:, None] * d
+        return float(np.linalg.norm(perp, axis=1).max())
+    centre, (i, j) = _arc_piece(seg, a, b)
+    n = seg.normal
+    r = float(np.linalg.norm(a[[i, j]] - centre[[i, j]]))
+    v = pts[:, [i, j]] - centre[[i, j]]
+    radial = np.abs(np.linalg.norm(v, axis=1) - r)
+    axial = np.abs((pts - (a + frac[:, None] * (b - a))) @ n)   # rise linear in the arc fraction
+    return float(np.sqrt(radial ** 2 + axial ** 2).max())
+
+
+def _split(seg, target: Callable, ua: float, ub: float, s: CompensationSettings, out: list,
+           shortest: Callable) -> None:
+    """Split [ua, ub] of a nominal segment until the piece is within ``fit_tolerance`` of the target
+    (not below ``shortest(ua, ub)`` [m])."""
+    L = seg.length * (ub - ua)
+    long = L > s.max_piece or (isinstance(seg, Arc) and abs(seg.sweep) * (ub - ua) > math.pi / 4)
+    if L >= 2 * shortest(ua, ub) or long:
+        n = max(3, int(math.ceil(L / GRID)))
+        uu = np.linspace(ua, ub, n + 1)[1:-1]
+        a, b = target(np.array([ua]))[0], target(np.array([ub]))[0]
+        err = _piece_error(seg, a, b, target(uu), (uu - ua) / (ub - ua))
+        if long or err > s.fit_tolerance:
+            um = 0.5 * (ua + ub)
+            _split(seg, target, ua, um, s, out, shortest)
+            _split(seg, target, um, ub, s, out, shortest)
+            return
+    out.append((ua, ub))
+
+
+def _junction_limit(feed: float, limits: PathLimits) -> float:
+    """Largest direction change [rad] at a junction the interpolator passes at ``feed`` [m/s] (90 % of its
+    junction rule ``v dt / T^2 <= beta J``, :mod:`simulate.toolpath.interpolation`)."""
+    v = max(min(feed, limits.max_speed), 1e-6)
+    return 0.9 * limits.junction_jerk_share * limits.jerk * limits.cycle ** 2 / v
+
+
+def _piece_tangents(segs, seg_i: np.ndarray, a: np.ndarray, b: np.ndarray):
+    """Unit tangents (K, 3) at the start and the end of pieces a -> b of the kinds of ``segs[seg_i]``
+    (sub-arcs: centre on the bisector, as written)."""
+    d = b - a
+    ta = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-15)
+    tb = ta.copy()
+    arc = np.array([isinstance(segs[i], Arc) for i in seg_i])
+    if arc.any():
+        k = np.flatnonzero(arc)
+        n = np.array([segs[i].normal for i in seg_i[k]])
+        sign = np.sign([segs[i].sweep for i in seg_i[k]])[:, None]
+        cn = np.array([segs[i].center for i in seg_i[k]])
+
+        def plane(x):
+            return x - np.sum(x * n, axis=1, keepdims=True) * n
+
+        ap, bp, cp = plane(a[k]), plane(b[k]), plane(cn)
+        ch = bp - ap
+        u = ch / np.maximum(np.linalg.norm(ch, axis=1, keepdims=True), 1e-15)
+        mid = 0.5 * (ap + bp)
+        c = cp - np.sum((cp - mid) * u, axis=1, keepdims=True) * u
+        ra, rb = ap - c, bp - c
+        r = np.linalg.norm(ra, axis=1, keepdims=True)
+        ang = np.abs(np.arctan2(np.linalg.norm(np.cross(ra, rb), axis=1), np.sum(ra * rb, axis=1)))[:, None]
+        rise = np.sum(d[k] * n, axis=1, keepdims=True)
+        for t, rv in ((ta, ra), (tb, rb)):
+            tin = sign * np.cross(n, rv) / np.maximum(r, 1e-15)
+            v = tin * r * ang + n * rise
+            t[k] = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-15)
+    return ta, tb
+
+
+def plan_pieces(path: NominalPath, correction: Correction, s: CompensationSettings,
+                limits: PathLimits | None = None, shortest: float = 0.05e-3) -> dict:
+    """Pieces (start, end fraction) of every feed segment: split until within ``fit_tolerance``, then
+    further where the correction turns the path at a junction by more than the interpolator passes at
+    the original program's speed there (:func:`_junction_limit`), down to ``shortest`` [m]: a polyline
+    through a curved correction turns by about its curvature times the piece length.
+
+    Within ``s.ramp`` [m] of where the original program changes speed (below 95 % of the feed), pieces
+    stay at least ``ramp`` long: the interpolator holds the acceleration at zero at every junction, so a chain of short
+    pieces could only change speed slowly and the program would take longer.
+    """
+    lim = limits or PathLimits()
+    ramp = s.ramp
+    segs = path.segments
+    it = path.setup.interp
+    s_nom, v_nom = np.asarray(it.s, float), np.asarray(it.v, float)
+
+    def speed(sig):
+        return np.interp(sig, s_nom, v_nom)
+
+    # arc lengths where the original runs below 95 % of its feed (speeding up or slowing down)
+    feed_c = np.array([min(seg.feed, lim.max_speed) for seg in segs])[np.asarray(it.segment)]
+    slow_s = np.sort(s_nom[(v_nom < 0.95 * feed_c) & (path.run[np.asarray(it.segment)] >= 0)])
+
+    def cruising(sa, sb, feed=None):
+        """No speed change of the original within ``ramp`` of [sa, sb]."""
+        lo = np.searchsorted(slow_s, np.asarray(sa) - ramp, side="left")
+        hi = np.searchsorted(slow_s, np.asarray(sb) + ramp, side="right")
+        return hi == lo
+
+    plan: dict = {}
+    for i, seg in enumerate(segs):
+        if path.run[i] < 0:
+            continue
+        r, s0, L = int(path.run[i]), path.sigma0[i], seg.length
+
+        def target(u, seg=seg, r=r, s0=s0, L=L):
+            return _seg_point(seg, u) + correction.at(r, s0 + np.asarray(u) * L)
+
+        def short(ua, ub, s0=s0, L=L, feed=seg.feed):
+            return s.min_piece if cruising(s0 + ua * L, s0 + ub * L, feed) else max(ramp, s.min_piece)
+
+        spans: list = []
+        _split(seg, target, 0.0, 1.0, s, spans, short)
+        plan[i] = spans
+    for r in range(len(path.runs)):
+        idx = [i for i in plan if path.run[i] == r]
+        for _ in range(30):
+            seg_i = np.array([i for i in idx for _ in plan[i]])
+            ua = np.array([a for i in idx for a, _ in plan[i]])
+            ub = np.array([b for i in idx for _, b in plan[i]])
+            lengths = np.array([segs[i].length for i in seg_i])
+            feed = np.array([segs[i].feed for i in seg_i])
+            sa = path.sigma0[seg_i] + ua * lengths
+            sb = path.sigma0[seg_i] + ub * lengths
+            a, b = correction.at(r, sa), correction.at(r, sb)
+            for i in np.unique(seg_i):   # one call per segment: points of all its pieces
+                m = seg_i == i
+                a[m] += _seg_point(segs[i], ua[m])
+                b[m] += _seg_point(segs[i], ub[m])
+            a[0] = segs[seg_i[0]].start   # the run starts at the rapid's uncorrected end
+            ta, tb = _piece_tangents(segs, seg_i, a, b)
+            turn = np.linalg.norm(ta[1:] - tb[:-1], axis=1)
+            # the original's own direction changes between its segments are not the correction's
+            edge = seg_i[1:] != seg_i[:-1]
+            for k in np.flatnonzero(edge):
+                t1 = _seg_tangent(segs[seg_i[k]], np.array([1.0]))[0]
+                t2 = _seg_tangent(segs[seg_i[k + 1]], np.array([0.0]))[0]
+                turn[k] = max(0.0, turn[k] - float(np.linalg.norm(t2 - t1)))
+            v_j = np.minimum(speed(sb[:-1]), np.minimum(feed[:-1], feed[1:]))
+            lim_turn = np.array([_junction_limit(v, lim) for v in v_j])
+            least = np.where(cruising(sa, sb, feed), shortest, max(ramp, shortest))
+            long = (sb - sa) > 2 * least
+            mark = np.zeros(len(seg_i), bool)
+            bad = turn > lim_turn
+            mark[:-1] |= bad & long[:-1]
+            mark[1:] |= bad & long[1:]
+            if not mark.any():
+                break
+            new: dict = {i: [] for i in idx}
+            for k in range(len(seg_i)):
+                i = int(seg_i[k])
+                if mark[k]:
+                    m = 0.5 * (ua[k] + ub[k])
+                    new[i] += [(ua[k], m), (m, ub[k])]
+                else:
+                    new[i].append((ua[k], ub[k]))
+            plan.update(new)
+    return plan
+
+
+def write_program(path: NominalPath, correction: Correction, settings: CompensationSettings,
+                  header: str = "") -> WrittenProgram:
+    """The corrected program's text (module docstring): feed lines split into corrected pieces.
+
+    Raises ``InputError`` for a program in incremental coordinates (G91): its later lines would
+    inherit the correction.
+    """
+    segs = path.segments
+    by_line = {s.line: i for i, s in enumerate(segs) if path.run[i] >= 0}
+    plan = plan_pieces(path, correction, settings)
+    unit = 1e-3
+    out_lines: list[str] = []
+    pieces: dict = {}
+    n_pieces = 0
+    src = str(path.setup.program)
+    lines = path.text.splitlines()
+    header_done = not header
+    for lineno, raw in enumerate(lines, start=1):
+        words = _words(raw, src, lineno) if raw.strip() != "%" else []
+        for letter, value, wtext, col in words:
+            if letter == "G" and int(value) in (20, 21):
+                unit = 0.0254 if int(value) == 20 else 1e-3
+            if letter == "G" and int(value) == 91:
+                raise InputError("incremental coordinates (G91) cannot be compensated: program in G90",
+                                 source=src, line=lineno, column=col)
+        if not header_done and raw.strip() and raw.strip() != "%":
+            out_lines.append(f"({header})")
+            header_done = True
+        i = by_line.get(lineno)
+        if i is None:
+            out_lines.append(raw)
+            continue
+        seg = segs[i]
+        r = int(path.run[i])
+        s0, L = path.sigma0[i], seg.length
+
+        def target(u, seg=seg, r=r, s0=s0, L=L):
+            return _seg_point(seg, u) + correction.at(r, s0 + np.asarray(u) * L)
+
+        spans = plan[i]
+        keep_g = [w for w in words if w[0] == "G" and int(w[1]) not in (0, 1, 2, 3)]
+        first_words = [w[2] for w in words if w[0] == "N"] + [w[2] for w in keep_g]
+        tail = [w[2] for w in words if w[0] in "FST"]
+        m_first = [w[2] for w in words if w[0] == "M" and int(w[1]) not in (2, 5, 30)]
+        m_last = [w[2] for w in words if w[0] == "M" and int(w[1]) in (2, 5, 30)]
+        motion = "G1" if isinstance(seg, Linear) else ("G3" if seg.sweep > 0 else "G2")
+        def rounded(v, unit=unit):
+            return np.round(v / unit, 6) * unit   # as printed: the controller starts the next piece there
+
+        a = rounded(target(np.array([0.0]))[0])
+        if i == 0 or path.run[i - 1] != r:
+            a = seg.start   # a run starts where the rapid before it ended, uncorrected
+        for k, (ua, ub) in enumerate(spans):
+            b = rounded(target(np.array([ub]))[0])
+            parts = list(first_words) if k == 0 else []
+            parts.append(motion)
+            parts += [f"{ax}{_fmt(b[m] / unit)}" for m, ax in enumerate("XYZ")]
+            if isinstance(seg, Arc):
+                centre, (pi, pj) = _arc_piece(seg, a, b)
+                letters = {0: "I", 1: "J", 2: "K"}
+                parts += [f"{letters[m]}{_fmt((centre[m] - a[m]) / unit)}" for m in (pi, pj)]
+            if k == 0:
+                parts += tail + m_first
+            if k == len(spans) - 1:
+                parts += m_last
+            out_lines.append(" ".join(parts))
+            pieces[len(out_lines)] = (i, ua, ub)
+            n_pieces += 1
+            a = b
+    return WrittenProgram("\n".join(out_lines) + "\n", pieces, n_pieces)
+
+
+
+# ----------------------------------------------------------------------------- simulating and measuring
+
+
+@dataclass
+class SimulationRun:
+    """One simulated program.
+
+    Attributes
+    ----------
+    setup : ProgramSetup
+        The program simulated (its interpolation).
+    tip : ndarray (N, 3)
+        Predicted tool tip per 2 ms cycle [m, workpiece frame]: command + deflection + tracking error.
+    table : simulate.evaluation.features.FeatureTable or None
+        Table-2 deviations (test-piece stock).
+    trajectory : simulate.toolpath.placement.JointTrajectory or None
+        Commanded joints [rad] per cycle.
+    wall_time : float
+        [s].
+    friction : list of dict
+        The friction model used per joint (``{"joint", "kind", "source"}``) when the pipeline says.
+    """
+
+    setup: ProgramSetup
+    tip: np.ndarray
+    table: object = None
+    trajectory: object = None
+    wall_time: float = 0.0
+    friction: list = field(default_factory=list)
+
+
+#: ``simulate(setup, stiffness_scale) -> SimulationRun``; ``stiffness_scale`` multiplies the model's.
+Simulator = Callable[[ProgramSetup, float], SimulationRun]
+
+
+def pipeline_simulator(job: MachiningJob, advance=None) -> Simulator:
+    """The machining pipeline (:func:`simulate.pipeline.run_job`) with ``job``'s robot, placement,
+    friction, components and settings, for any program (same stock)."""
+    from simulate.pipeline import _robot
+
+    robot = _robot(job.robot)
+
+    def simulate(setup: ProgramSetup, scale: float = 1.0) -> SimulationRun:
+        c0 = time.perf_counter()
+        settings = replace(job.settings, stiffness_scale=job.settings.stiffness_scale * scale)
+        mo = run_job(replace(job, program=setup, robot=robot, settings=settings), advance=advance)
+        st = mo.steps
+        tip = np.asarray(mo.trajectory.xyz) + st.deflection + st.tracking_error
+        return SimulationRun(setup, tip, mo.table, mo.trajectory, time.perf_counter() - c0, list(mo.friction))
+
+    simulate.robot = robot
+    return simulate
+
+
+def table_sum(table) -> float:
+    """Sum of |deviation| over the Table-2 rows [m]."""
+    return float(sum(abs(r.deviation) for r in table.rows))
+
+
+def path_deviation(path: NominalPath, written: WrittenProgram | None, run: SimulationRun, points=None):
+    """Deviation of the predicted tip from the nominal path, normal to it, per cycle of ``run``.
+
+    Returns (run index (N,) int, -1 off the feed runs; nominal arc length (N,) [m]; normal
+    deviation (N, 3) [m]). A cycle of a corrected program is mapped to the nominal path through the
+    fraction of the piece it executes. ``points`` (N, 3) [m] replaces the predicted tip (the
+    command gives the correction the written program realises).
+    """
+    tip = run.tip if points is None else np.asarray(points, float)
+    segs = run.setup.parsed.segments
+    it = run.setup.interp
+    seg = np.asarray(it.segment, np.int64)
+    first = _first_index(segs)
+    lengths = np.array([s.length for s in segs])
+    cum = np.concatenate(([0.0], np.cumsum(lengths[first:])))
+    s0 = np.zeros(len(segs))
+    s0[first:] = cum[:-1]
+    u = np.clip((np.asarray(it.s) - s0[seg]) / np.maximum(lengths[seg], 1e-15), 0.0, 1.0)
+    n = len(seg)
+    if written is None:
+        nseg, unom = seg, u
+    else:
+        nseg = np.full(n, -1, np.int64)
+        unom = np.zeros(n)
+        for j in np.unique(seg):
+            p = written.pieces.get(segs[j].line)
+            if p is None:
+                continue
+            m = seg == j
+            nseg[m] = p[0]
+            unom[m] = p[1] + u[m] * (p[2] - p[1])
+    runs = np.where(nseg >= 0, path.run[np.maximum(nseg, 0)], -1)
+    sigma = np.zeros(n)
+    dev = np.zeros((n, 3))
+    nom = path.segments
+    for i in np.unique(nseg[runs >= 0]):
+        m = nseg == i
+        x = _seg_point(nom[i], unom[m])
+        t = _seg_tangent(nom[i], unom[m])
+        d = tip[m] - x
+        dev[m] = d - np.sum(d * t, axis=1, keepdims=True) * t
+        sigma[m] = path.sigma0[i] + unom[m] * nom[i].length
+    return runs, sigma, dev
+
+
+def _box(x: np.ndarray, width: float) -> np.ndarray:
+    from scipy.ndimage import uniform_filter1d
+
+    k = max(1, int(round(width / GRID)))
+    return uniform_filter1d(x, size=k, axis=0, mode="nearest") if k > 1 else x
+
+
+def deviation_field(path: NominalPath, written: WrittenProgram | None, run: SimulationRun,
+                    smoothing: float, points=None) -> Correction:
+    """The normal deviation of ``run`` (or of ``points``) on the correction grid of every feed run,
+    smoothed [m]."""
+    runs, sigma, dev = path_deviation(path, written, run, points)
+    grid = Correction.zero(path)
+    for r, g in enumerate(grid.grids):
+        m = runs == r
+        if m.sum() < 2:
+            continue
+        order = np.argsort(sigma[m], kind="stable")
+        sg, dv = sigma[m][order], dev[m][order]
+        vals = np.stack([np.interp(g, sg, dv[:, k]) for k in range(3)], axis=1)
+        # smoothed in the path's own frame (sideways, upwards), so that a deviation that turns with
+        # the path round a corner is not shortened by averaging directions; two box passes: a
+        # triangular kernel, which also suppresses the force ripple of the dexel grid
+        _, h, v = path.frame(r, g)
+        side = _box(_box(np.sum(vals * h, axis=1), smoothing), smoothing)
+        up = _box(_box(np.sum(vals * v, axis=1), smoothing), smoothing)
+        grid.values[r] = side[:, None] * h + up[:, None] * v
+    return grid
+
+
+def update_correction(corr: Correction, dev: Correction, prev: tuple | None,
+                      s: CompensationSettings) -> Correction:
+    """One damped mirror / secant step (module docstring): ``c - gain * e / g``, capped."""
+    out = []
+    for r in range(len(corr.grids)):
+        c, e = corr.values[r], dev.values[r]
+        g = np.ones(len(c))
+        if s.secant and prev is not None:
+            dc = c - prev[0].values[r]
+            de = e - prev[1].values[r]
+            num = _box(np.sum(dc * de, axis=1), s.sensitivity_window)
+            den = _box(np.sum(dc * dc, axis=1), s.sensitivity_window)
+            ok = den > (0.5e-6) ** 2
+            g[ok] = np.clip(num[ok] / den[ok], 0.25, 1.5)
+        new = c - s.gain * e / g[:, None]
+        norm = np.linalg.norm(new, axis=1, keepdims=True)
+        out.append(new * np.minimum(1.0, s.max_correction / np.maximum(norm, 1e-300)))
+    return Correction(corr.grids, out)
+
+
+def blend_corners(path: NominalPath, corr: Correction, tool_radius: float) -> Correction:
+    """On arcs of radius at most ``tool_radius`` [m], replace the correction by a blend, linear along
+    the arc in the path frame (sideways, upwards), from the correction where the arc starts to where
+    it ends.
+
+    Such an arc turns the tool round a convex corner of the part: its flank only touches the corner
+    point, so the deviation there is no surface of its own, while correcting it moves the tool into
+    the ends of both adjacent walls (a tool pushed in by ``rho`` cuts a wall within ``sqrt(2 R rho)``
+    of the corner). Blending keeps each wall's own correction up to the corner.
+    """
+    out = [v.copy() for v in corr.values]
+    for i, seg in enumerate(path.segments):
+        r = int(path.run[i])
+        if r < 0 or not isinstance(seg, Arc) or seg.radius > tool_radius * (1 + 1e-3):
+            continue
+        g = corr.grids[r]
+        a, b = path.sigma0[i], path.sigma0[i] + seg.length
+        m = (g >= a) & (g <= b)
+        if m.sum() < 2:
+            continue
+        ends = np.array([a, b])
+        _, h, v = path.frame(r, g[m])
+        _, he, ve = path.frame(r, ends)
+        ce = corr.at(r, ends)
+        w = (g[m] - a) / (b - a)
+        side = (1 - w) * np.sum(ce[0] * he[0]) + w * np.sum(ce[1] * he[1])
+        up = (1 - w) * np.sum(ce[0] * ve[0]) + w * np.sum(ce[1] * ve[1])
+        out[r][m] = side[:, None] * h + up[:, None] * v
+    return Correction(corr.grids, out)
+
+
+# ----------------------------------------------------------------------------- the iteration
+
+
+@dataclass(frozen=True)
+class Iteration:
+    """One simulated program of the iteration (0: the original).
+
+    Attributes
+    ----------
+    index : int
+    table_sum : float or None
+        Sum of |Table-2 deviation| [m].
+    score : float or None
+        Ranking score, sum of |deviation| / tolerance [-].
+    path_rms : float
+        RMS normal deviation of the tip from the nominal path over the feed runs [m].
+    path_max : float
+        Largest normal deviation [m].
+    max_offset : float
+        Largest correction [m].
+    time_ratio : float
+        Program time / original program time [-].
+    speed_ratio : float
+        Peak path speed on the feed moves / the original's [-] (:func:`feed_peak_speed`).
+    pieces : int
+        Feed pieces written.
+    wall_time : float
+        [s] of the simulation.
+    """
+
+    index: int
+    table_sum: float | None
+    score: float | None
+    path_rms: float
+    path_max: float
+    max_offset: float
+    time_ratio: float
+    speed_ratio: float
+    pieces: int
+    wall_time: float
+
+    @property
+    def within_contract(self) -> bool:
+        return (self.max_offset <= MAX_OFFSET and TIME_RATIO[0] <= self.time_ratio <= TIME_RATIO[1]
+                and self.speed_ratio <= 1.0 + 1e-6)
+
+    def objective(self) -> float:
+        return self.table_sum if self.table_sum is not None else self.path_rms
+
+
+@dataclass
+class CompensationResult:
+    """What :func:`compensate` gives.
+
+    Attributes
+    ----------
+    path : NominalPath
+    program : WrittenProgram
+        The best corrected program.
+    correction : Correction
+        Its correction [m].
+    before, after : SimulationRun
+        The original and the best corrected program, simulated with the model.
+    iterations : list of Iteration
+    best : int
+        Index of the best iteration (0: no improvement found; the program is then the original's
+        pieces with a zero correction).
+    deviation_before, deviation_after : Correction
+        Normal deviation fields [m] (unsmoothed grid values) for the figure.
+    checks : dict of float to (SimulationRun, SimulationRun)
+        Stiffness scale [-] -> (original, corrected) simulated with the robot that much stiffer.
+    """
+
+    path: NominalPath
+    program: WrittenProgram
+    correction: Correction
+    before: SimulationRun
+    after: SimulationRun
+    iterations: list
+    best: int
+    deviation_before: Correction
+    deviation_after: Correction
+    checks: dict = field(default_factory=dict)
+
+
+def feed_peak_speed(setup: ProgramSetup) -> float:
+    """Largest path speed [m/s] on the feed moves (G1/G2/G3) of an interpolated program. Rapids are
+    left out: the corrected program moves them by micrometres, which changes the top speed of a short
+    rapid that never reaches its cap."""
+    segs = setup.parsed.segments
+    feed = np.array([_is_feed(sg) for sg in segs])[np.asarray(setup.interp.segment)]
+    return float(np.max(setup.interp.v[feed])) if feed.any() else 0.0
+
+
+def _path_stats(dev: Correction) -> tuple[float, float]:
+    v = np.concatenate([np.linalg.norm(x, axis=1) for x in dev.values]) if dev.values else np.zeros(1)
+    return float(np.sqrt(np.mean(v ** 2))), float(v.max())
+
+
+def _load(path_file: Path, nominal: NominalPath, spindle_rpm: float | None, require_spindle: bool) -> ProgramSetup:
+    return load_program(path_file, stock=nominal.setup.stock, spindle_rpm=spindle_rpm, require_spindle=require_spindle,
+                        source=str(path_file))
+
+
+def compensate(nominal: ProgramSetup, simulate: Simulator, settings: CompensationSettings | None = None, *,
+               checks=(), header: str = "", on_iteration=None, spindle_rpm: float | None = None,
+               require_spindle: bool = False, tool_radius: float | None = None) -> CompensationResult:
+    """Iterate the mirror compensation of ``nominal`` (module docstring).
+
+    Parameters
+    ----------
+    nominal : ProgramSetup
+        The original program (:func:`simulate.pipeline.load_program`).
+    simulate : Simulator
+        Usually :func:`pipeline_simulator`.
+    settings : CompensationSettings
+    checks : iterable of float
+        Stiffness scales [-] at which both programs are simulated again after the iteration (the
+        robot stiffer (>1) or softer (<1) than the model the compensation used).
+    header : str
+        Comment written at the top of the corrected program.
+    on_iteration : callable(Iteration), optional
+        Called after every simulation (progress).
+    spindle_rpm, require_spindle
+        As for :func:`simulate.pipeline.load_program` of the corrected programs.
+    tool_radius : float, optional
+        Cutter radius [m]: arcs of at most this radius get the correction blended between their
+        neighbours' (:func:`blend_corners`).
+    """
+    s = settings or CompensationSettings()
+    s.validate()
+    for sc in checks:
+        if not (math.isfinite(sc) and sc > 0):
+            raise InputError(f"stiffness scale must be > 0, got {sc!r}", field="check-scale")
+    path = NominalPath.of(nominal)
+    t_nom = nominal.interp.duration
+    v_nom = feed_peak_speed(nominal)
+    corr = Correction.zero(path)
+    run = simulate(nominal, 1.0)
+    raw = deviation_field(path, None, run, GRID)
+    dev = deviation_field(path, None, run, s.smoothing)
+    rms, mx = _path_stats(raw)
+    it0 = Iteration(0, table_sum(run.table) if run.table is not None else None,
+                    run.table.score if run.table is not None else None, rms, mx, 0.0, 1.0, 1.0, 0, run.wall_time)
+    iters = [it0]
+    if on_iteration:
+        on_iteration(it0)
+    real = corr
+    best = (0, corr, run, None, raw)
+    run0, before_raw = run, raw
+    prev = None
+    with tempfile.TemporaryDirectory(prefix="greybench-compensate-") as tmp:
+        for k in range(1, s.iterations + 1):
+            new = update_correction(real, dev, prev, s)
+            prev = (real, dev)
+            corr = blend_corners(path, new, tool_radius) if tool_radius else new
+            wp = write_program(path, corr, s, header=f"{header} iteration {k}".strip())
+            f = Path(tmp) / f"iteration{k}.nc"
+            f.write_text(wp.text, encoding="utf-8")
+            setup = _load(f, path, spindle_rpm, require_spindle)
+            run = simulate(setup, 1.0)
+            raw = deviation_field(path, wp, run, GRID)
+            dev = deviation_field(path, wp, run, s.smoothing)
+            # the correction the pieces realise (a run starts at an uncorrected rapid end): the update
+            # starts from it, so what the program cannot realise does not wind up
+            real = deviation_field(path, wp, run, GRID, points=setup.interp.xyz)
+            rms, mx = _path_stats(raw)
+            it = Iteration(k, table_sum(run.table) if run.table is not None else None,
+                           run.table.score if run.table is not None else None, rms, mx, corr.max_norm(),
+                           setup.interp.duration / t_nom, feed_peak_speed(setup) / v_nom, wp.n_pieces,
+                           run.wall_time)
+            iters.append(it)
+            if on_iteration:
+                on_iteration(it)
+            if it.within_contract and it.objective() < iters[best[0]].objective():
+                best = (k, corr, run, wp, raw)
+            else:
+                break
+        k, corr_b, run_b, wp_b, raw_b = best
+        if wp_b is None:   # nothing improved: the original's pieces, no correction
+            wp_b = write_program(path, corr_b, s, header=f"{header} no correction".strip())
+        out = {}
+        for sc in checks:
+            f = Path(tmp) / "best.nc"
+            f.write_text(wp_b.text, encoding="utf-8")
+            setup_b = _load(f, path, spindle_rpm, require_spindle)
+            out[float(sc)] = (simulate(nominal, float(sc)), simulate(setup_b, float(sc)))
+    return CompensationResult(path, wp_b, corr_b, run0, run_b, iters, k, before_raw, raw_b, out)

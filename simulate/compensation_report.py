@@ -1,0 +1,288 @@
+"""Outputs of a compensation (:mod:`simulate.compensation`): the corrected program, its stock, the
+offset and feed-forward tables, a markdown report and a figure, written all or nothing.
+
+Files in the output folder:
+
+- ``compensated.nc``: the corrected program (same F and S words, same lines, feed lines split);
+- ``compensated.stock.json``: a copy of the original stock (so ``rank-poses`` finds it beside it);
+- ``offsets.csv``: one row per 2 ms cycle of the *original* program, as a controller's offset table
+  would take it: ``t_s, line, dx_mm, dy_mm, dz_mm`` (the correction in the workpiece frame) and
+  ``dq1_rad .. dq6_rad`` (the joint offsets that realise it with the tool orientation kept, from the
+  inverse kinematics of the corrected points minus that of the nominal points);
+- ``feedforward.csv``: one row per cycle of the *compensated* program: ``t_s, line`` and
+  ``tau_f1_Nm .. tau_f6_Nm``, the friction torque of each joint's friction model along the
+  compensated motion (the servo simulation's friction torque), for a drive's torque feed-forward;
+- ``report.md`` and ``deviation.png`` (normal deviation along the path before and after).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import pandas as pd
+
+from identify.errors import InputError
+from identify.records import write_table
+from simulate import defaults as DEFAULTS
+from simulate.compensation import MAX_OFFSET, TIME_RATIO, CompensationResult, table_sum
+
+UM = 1e-6
+
+
+def worse_rows(before, after) -> list[str]:
+    """Rows whose |deviation| grew by more than max(10 %, 2 um)."""
+    out = []
+    for rb, ra in zip(before.rows, after.rows):
+        if abs(ra.deviation) > abs(rb.deviation) + max(0.1 * abs(rb.deviation), 2 * UM):
+            out.append(rb.name)
+    return out
+
+
+def evaluation(result: CompensationResult, scale: float = 1.0) -> tuple:
+    """(original, compensated) runs at a stiffness scale: the iteration's own at 1."""
+    if scale == 1.0 or scale not in result.checks:
+        return result.before, result.after
+    return result.checks[scale]
+
+
+def summary(result: CompensationResult, scale: float = 1.0) -> dict:
+    """The ``--json`` object: Table-2 sums [mm] before/after at ``scale`` and at every check scale,
+    their ratio, rows worse than allowed, the iterations and the contract figures."""
+    def pair(sc):
+        b, a = evaluation(result, sc)
+        if b.table is None or a.table is None:
+            return None
+        sb, sa = table_sum(b.table), table_sum(a.table)
+        return {"stiffness_scale": sc, "sum_before_mm": sb / 1e-3, "sum_after_mm": sa / 1e-3,
+                "ratio": sa / sb if sb > 0 else None, "score_before": b.table.score, "score_after": a.table.score,
+                "rows_worse": worse_rows(b.table, a.table),
+                "rows_mm": [{"name": rb.name, "tolerance": rb.tolerance / 1e-3, "before": rb.deviation / 1e-3,
+                             "after": ra.deviation / 1e-3} for rb, ra in zip(b.table.rows, a.table.rows)]}
+
+    best = result.iterations[result.best]
+    return {"evaluation": pair(scale),
+            "checks": [pair(sc) for sc in sorted(result.checks) if sc != scale],
+            "best_iteration": result.best,
+            "iterations": [{"index": it.index, "table_sum_mm": None if it.table_sum is None else it.table_sum / 1e-3,
+                            "score": it.score, "path_rms_um": it.path_rms / UM, "path_max_um": it.path_max / UM,
+                            "max_offset_um": it.max_offset / UM, "time_ratio": it.time_ratio,
+                            "speed_ratio": it.speed_ratio, "pieces": it.pieces, "wall_time_s": it.wall_time}
+                           for it in result.iterations],
+            "max_offset_mm": best.max_offset / 1e-3, "time_ratio": best.time_ratio, "speed_ratio": best.speed_ratio}
+
+
+def offsets_table(result: CompensationResult, robot, placement) -> pd.DataFrame:
+    """Per cycle of the original program: t_s, line, dx_mm, dy_mm, dz_mm, dq1_rad..dq6_rad."""
+    from simulate.toolpath.placement import joint_trajectory
+
+    path = result.path
+    it = path.setup.interp
+    c = result.correction.on_cycles(path)
+    cols = {"t_s": it.t, "line": it.line, "dx_mm": c[:, 0] / 1e-3, "dy_mm": c[:, 1] / 1e-3, "dz_mm": c[:, 2] / 1e-3}
+    q0 = result.before.trajectory.q if result.before.trajectory is not None else None
+    if q0 is not None and robot is not None:
+        jt = joint_trajectory(robot, replace(it, xyz=it.xyz + c), placement, source=path.setup.source,
+                              check_speed=False)
+        dq = (jt.q - q0 + np.pi) % (2 * np.pi) - np.pi
+        for j in range(6):
+            cols[f"dq{j + 1}_rad"] = dq[:, j]
+    return pd.DataFrame(cols)
+
+
+def feedforward_table(result: CompensationResult, robot, components, substeps: int) -> pd.DataFrame:
+    """Per cycle of the compensated program: t_s, line, tau_f1_Nm..tau_f6_Nm (friction torque of the
+    joints' friction models along the compensated motion, from the servo simulation)."""
+    from simulate.robot.servo import simulate_servo
+
+    jt = result.after.trajectory
+    sv = simulate_servo(robot, jt.t, jt.q, friction=bool(components.friction), backlash=bool(components.switching),
+                        substeps=substeps)
+    cols = {"t_s": jt.t, "line": jt.line}
+    for j in range(6):
+        cols[f"tau_f{j + 1}_Nm"] = sv.tau_friction[:, j]
+    return pd.DataFrame(cols)
+
+
+def plot(result: CompensationResult, path: Path) -> None:
+    """Normal deviation of the tool from the nominal path before and after, and the correction."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(11, 4.2))
+    x0 = 0.0
+    for r, g in enumerate(result.path.runs and result.deviation_before.grids):
+        x = x0 + (g - g[0]) / 1e-3
+        b = np.linalg.norm(result.deviation_before.values[r], axis=1) / UM
+        a = np.linalg.norm(result.deviation_after.values[r], axis=1) / UM
+        c = np.linalg.norm(result.correction.values[r], axis=1) / UM
+        ax.plot(x, b, color="tab:red", lw=0.8, label="before" if r == 0 else None)
+        ax.plot(x, a, color="tab:green", lw=0.8, label="after" if r == 0 else None)
+        ax.plot(x, c, color="tab:blue", lw=0.6, ls="--", label="correction |dx|" if r == 0 else None)
+        if r:
+            ax.axvline(x0, color="0.7", lw=0.5)
+        x0 = x[-1] + 5.0
+    ax.set_xlabel("path length along the feed moves [mm] (grey: a rapid between runs)")
+    ax.set_ylabel("normal deviation from the nominal path [µm]")
+    ax.set_title("Tool deviation from the nominal path (deflection + tracking error), before and after compensation")
+    ax.legend(loc="upper right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def report_text(result: CompensationResult, info: dict, title: str, scale: float) -> str:
+    ev = info["evaluation"]
+    lines = [f"# Compensation: {title}", ""]
+    lines += ["Mirror compensation from the machining simulation, iterated (simulate/compensation.py, "
+              "docs/compensation.md). Deviations: ISO 10791-7 Table-2 rows of the virtual CMM, µm.", ""]
+    if ev is not None:
+        lines += [f"## Table 2 before / after (robot stiffness x{scale:g} against the model)", "",
+                  "| row | tol [µm] | before [µm] | after [µm] | after/before |", "|---|---:|---:|---:|---:|"]
+        for r in ev["rows_mm"]:
+            ratio = abs(r["after"]) / abs(r["before"]) if r["before"] else float("nan")
+            lines.append(f"| {r['name']} | {r['tolerance'] * 1e3:.0f} | {r['before'] * 1e3:+.1f} | "
+                         f"{r['after'] * 1e3:+.1f} | {ratio:.2f} |")
+        lines += ["", f"Sum of |deviation|: before {ev['sum_before_mm'] * 1e3:.1f} µm, after "
+                      f"{ev['sum_after_mm'] * 1e3:.1f} µm, **ratio {ev['ratio']:.3f}**; score "
+                      f"{ev['score_before']:.2f} -> {ev['score_after']:.2f}. Rows worse than before by more than "
+                      f"max(10 %, 2 µm): {', '.join(ev['rows_worse']) or 'none'}.", ""]
+    if info["checks"]:
+        lines += ["## Robustness: the robot stiffer or softer than the compensating model", "",
+                  "| stiffness scale | sum before [µm] | sum after [µm] | ratio | rows worse |",
+                  "|---:|---:|---:|---:|---|"]
+        for c in info["checks"]:
+            lines.append(f"| {c['stiffness_scale']:g} | {c['sum_before_mm'] * 1e3:.1f} | {c['sum_after_mm'] * 1e3:.1f} "
+                         f"| {c['ratio']:.3f} | {', '.join(c['rows_worse']) or 'none'} |")
+        lines.append("")
+    lines += ["## Iterations (model stiffness)", "",
+              "| iteration | sum of abs. deviation [µm] | score | path RMS [µm] | path max [µm] | max offset [µm] | time ratio "
+              "| peak speed ratio | pieces | wall [s] |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for it in info["iterations"]:
+        s = "-" if it["table_sum_mm"] is None else f"{it['table_sum_mm'] * 1e3:.1f}"
+        sc = "-" if it["score"] is None else f"{it['score']:.2f}"
+        mark = " (chosen)" if it["index"] == info["best_iteration"] else ""
+        lines.append(f"| {it['index']}{mark} | {s} | {sc} | {it['path_rms_um']:.1f} | {it['path_max_um']:.1f} | "
+                     f"{it['max_offset_um']:.1f} | {it['time_ratio']:.3f} | {it['speed_ratio']:.3f} | {it['pieces']} | "
+                     f"{it['wall_time_s']:.1f} |")
+    lines += ["", "## The corrected program", "",
+              f"- largest offset from the nominal path {info['max_offset_mm'] * 1e3:.1f} µm "
+              f"(contract <= {MAX_OFFSET * 1e3:g} mm);",
+              f"- program time {info['time_ratio']:.3f} x the original's (contract {TIME_RATIO[0]}-{TIME_RATIO[1]});",
+              f"- peak path speed {info['speed_ratio']:.3f} x the original's (contract <= 1);",
+              "- same F and S words; feed lines split into pieces of the same kind whose end points carry the "
+              "correction.", "",
+              "Files: `compensated.nc`, `compensated.stock.json` (the original stock), `offsets.csv` (per 2 ms cycle "
+              "of the original program: correction in mm, joint offsets in rad), `feedforward.csv` (per cycle of the "
+              "compensated program: friction torque per joint in Nm), `deviation.png`.", "",
+              "![deviation](deviation.png)", ""]
+    return "\n".join(lines)
+
+
+def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement, components, substeps: int,
+                  title: str, scale: float = 1.0) -> dict:
+    """Write every file (module docstring) into ``out_dir``: staged in a temporary folder and moved
+    in only when all succeeded. Returns the summary (:func:`summary`) with the file paths."""
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.compensate-"))
+    try:
+        info = summary(result, scale)
+        (tmp / "compensated.nc").write_text(result.program.text, encoding="utf-8")
+        shutil.copyfile(result.path.setup.stock, tmp / "compensated.stock.json")
+        write_table(offsets_table(result, robot, placement), tmp / "offsets.csv")
+        write_table(feedforward_table(result, robot, components, substeps), tmp / "feedforward.csv")
+        plot(result, tmp / "deviation.png")
+        (tmp / "report.md").write_text(report_text(result, info, title, scale), encoding="utf-8")
+        (tmp / "summary.json").write_text(json.dumps(info, indent=1), encoding="utf-8")
+        out_dir.mkdir(exist_ok=True)
+        files = []
+        for f in sorted(tmp.iterdir()):
+            dest = out_dir / f.name
+            os.replace(f, dest)
+            files.append(str(dest))
+        info["files"] = files
+        return info
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def compensation_job(program: Path, robot: str, pose: Path, name: Optional[str], *, spacing_mm: float,
+                     probe_spacing_mm: float, size: Optional[int], friction: dict):
+    """The loaded program, the :class:`simulate.pipeline.MachiningJob` (ranking settings: trimmed stock,
+    Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates) and the placement."""
+    from simulate.evaluation.ranking import RankSettings
+    from simulate.pipeline import MachiningJob, load_program, piece_size
+    from simulate.robot.model import Robot, load_robot
+    from simulate.toolpath.placement import load_poses, select_pose
+
+    program = Path(program)
+    if not program.exists():
+        raise InputError("program not found", source=str(program))
+    placement = select_pose(load_poses(pose), name, source=str(pose))
+    rob = robot if isinstance(robot, Robot) else load_robot(robot)
+    setup = load_program(program, require_spindle=True)
+    sz = piece_size(setup, size)
+    rs = RankSettings(spacing=spacing_mm * 1e-3, probe_spacing=probe_spacing_mm * 1e-3, size=sz or 0)
+    settings = rs.machining()
+    if sz is None:
+        from dataclasses import replace
+
+        settings = replace(settings, size=0, features=False)
+    settings.validate()
+    if friction:
+        # the chosen models go into the robot, so that the simulation and the feed-forward table
+        # (the servo's friction torque) both use them
+        from simulate.robot.model import FrictionSpec
+
+        specs = list(rob.friction)
+        for joint, ref in sorted(friction.items()):
+            specs[int(joint) - 1] = FrictionSpec(model=ref if ":/" in ref else str(Path(ref).resolve()))
+        rob = rob.with_changes(friction=tuple(specs))
+    job = MachiningJob(program=setup, robot=rob, placement=placement, settings=settings)
+    return setup, job, placement, rob
+
+
+def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_dir: Path, *,
+                     iterations: int = 4, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
+                     spacing_mm: float = DEFAULTS.RANKING_DEXEL_SPACING * 1e3,
+                     probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: Optional[int] = None,
+                     friction: Optional[dict] = None, advance=None) -> dict:
+    """Compensate, evaluate and write every output (``greybench compensate``'s work; the service's
+    compensation jobs call it too). ``robot``: robot TOML path or a loaded robot; ``advance(n)``:
+    progress in simulated 2 ms steps.
+
+    ``stiffness_scale`` [-]: the robot the *evaluation* simulates is that much stiffer than the model
+    the compensation iterates with (both programs); ``check_scales`` add more such evaluations.
+    Returns the summary (:func:`simulate.compensation_report.summary`) with the files.
+    """
+    from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError("output path exists and is not a folder", source=str(out_dir), field="out")
+    for v, opt in [(stiffness_scale, "stiffness-scale")] + [(c, "check-scale") for c in check_scales]:
+        if isinstance(v, bool) or not (isinstance(v, (int, float)) and v == v and 0 < v < float("inf")):
+            raise InputError(f"must be > 0, got {v!r}", field=opt)
+    cs = CompensationSettings(iterations=iterations, gain=gain)
+    cs.validate()
+    setup, job, placement, rob = compensation_job(program, robot, pose, name, spacing_mm=spacing_mm,
+                                                  probe_spacing_mm=probe_spacing_mm, size=size,
+                                                  friction=friction or {})
+    scales = sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
+    from simulate.evaluation.cutter import robot_cutter
+
+    sim = pipeline_simulator(job, advance=advance)
+    res = compensate(setup, sim, cs, checks=scales, require_spindle=True, tool_radius=robot_cutter(rob).radius,
+                     header=f"compensated by greybench for robot {rob.name}, pose {placement.name}")
+    title = f"{program.name}, robot {rob.name}, pose {placement.name}"
+    return write_outputs(res, out_dir, robot=rob, placement=placement, components=job.components,
+                         substeps=job.settings.substeps, title=title, scale=float(stiffness_scale))

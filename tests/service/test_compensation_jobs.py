@@ -1,0 +1,59 @@
+"""Compensation jobs: bad input answers 4xx naming the place (in process), and, marked slow, a
+real server compensates iso160 for one pose: poll, download the program and the tables."""
+from __future__ import annotations
+
+import csv
+import io
+import time
+
+import pytest
+
+HEADERS = {"X-API-Key": "test-key-0123456789"}  # conftest.KEY
+BAD_GCODE = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 X10 Y0 Z0 F300\nG1 X10 Y10 Q\n"
+ROBOT_FRICTION = [{"axis": a, "model": "robot"} for a in range(1, 7)]
+
+
+def test_bad_gcode_unknown_pose_and_names_are_4xx(client):
+    r = client.post("/compensations", headers=HEADERS, json={"gcode": BAD_GCODE, "stock": "iso160",
+                                                            "pose_set": "iso160", "pose": "near"})
+    assert r.status_code == 422 and r.json()["detail"]["source"] == "gcode" and r.json()["detail"]["line"] == 4
+    r = client.post("/compensations", headers=HEADERS, json={"program": "iso160", "pose_set": "iso160", "pose": "far",
+                                                            "friction": ROBOT_FRICTION})
+    assert r.status_code == 422 and r.json()["detail"]["field"] == "pose" and "far" in r.json()["detail"]["message"]
+    r = client.post("/compensations", headers=HEADERS, json={"program": "nope", "pose_set": "iso160", "pose": "near"})
+    assert r.status_code == 404
+    r = client.post("/compensations", headers=HEADERS, json={"program": "iso160", "pose": "near"})
+    assert r.status_code == 422   # a pose name needs a pose set
+    r = client.post("/compensations", headers={}, json={})
+    assert r.status_code == 401
+    assert client.get("/compensations/" + "0" * 32, headers=HEADERS).status_code == 404
+
+
+@pytest.mark.slow
+def test_compensation_job_end_to_end(make_server):
+    srv = make_server(GREYBENCH_WORKERS="1")
+    with srv.client() as c:
+        r = c.post("/compensations", json={"program": "iso160", "pose_set": "iso160", "pose": "near",
+                                           "friction": ROBOT_FRICTION,
+                                           "options": {"spacing_mm": 1.0, "iterations": 1}})
+        assert r.status_code == 202, r.text
+        job = r.json()["id"]
+        assert r.headers["Location"] == f"/compensations/{job}"
+        deadline = time.time() + 1800
+        while True:
+            st = c.get(f"/compensations/{job}").json()
+            if st["state"] in ("succeeded", "failed", "cancelled"):
+                break
+            assert time.time() < deadline
+            time.sleep(1.0)
+        assert st["state"] == "succeeded", st
+        ev = st["result"]["evaluation"]
+        assert ev["ratio"] < 0.6 and len(ev["rows_mm"]) == 10
+        prog = c.get(f"/compensations/{job}/files/compensated.nc")
+        assert prog.status_code == 200 and "F2000" in prog.text and "S12000" in prog.text
+        off = c.get(f"/compensations/{job}/files/offsets.csv")
+        header = next(csv.reader(io.StringIO(off.text)))
+        assert header[:5] == ["t_s", "line", "dx_mm", "dy_mm", "dz_mm"]
+        ff = c.get(f"/compensations/{job}/files/feedforward.csv")
+        assert next(csv.reader(io.StringIO(ff.text)))[2] == "tau_f1_Nm"
+        assert c.get(f"/compensations/{job}/files/secret.txt").status_code == 404
