@@ -715,7 +715,7 @@ class SavedDiagnosis:
 
 
 def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, directory, *,
-                   track: bool = True, experiment: str = "diagnose") -> SavedDiagnosis:
+                   track: bool = True, experiment: str = "diagnose", extra_params: dict | None = None) -> SavedDiagnosis:
     """Write the extended model, the baseline, ``report.md`` with plots and ``diagnosis.json``.
 
     Everything is staged in a temporary folder beside ``directory`` and renamed into place,
@@ -723,7 +723,8 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
     when it is empty or an earlier diagnosis output.
 
     With ``track``, both models are logged as runs of the MLflow experiment ``experiment``
-    (:mod:`identify.tracking`), the gain as a metric of both.
+    (:mod:`identify.tracking`), the gain as a metric of both, and ``extra_params`` (e.g. the
+    derivative cut-off) as params of both.
     """
     import json
     import os
@@ -752,7 +753,7 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
         (stage / REPORT_FILE).write_text(render_report(result, train, test, plots))
         runs = {}
         if track:
-            runs = _track(result, train, test, experiment)
+            runs = _track(result, train, test, experiment, extra_params or {})
         doc = {**result.to_json(), "causes": [c.value for c in result.analysis.causes],
                "threshold": result.analysis.threshold, "timings": result.timings, "mlflow_runs": runs}
         (stage / RESULT_FILE).write_text(json.dumps(doc, indent=2) + "\n")
@@ -766,11 +767,13 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
                           runs=runs)
 
 
-def _track(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, experiment: str) -> dict[str, str]:
+def _track(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, experiment: str,
+           extra_params: dict) -> dict[str, str]:
     """Log both models as runs of one experiment, with the gain as a metric."""
     from identify import tracking
 
-    extra = {"diagnosed_cause": result.cause.value, "named_causes": ",".join(c.value for c in result.analysis.causes)}
+    extra = {**extra_params, "diagnosed_cause": result.cause.value,
+             "named_causes": ",".join(c.value for c in result.analysis.causes)}
     runs = {}
     for role, model in (("baseline", result.baseline), ("extended", result.extended)):
         run = tracking.log_fit(model, train, test, fit_time=result.timings.get(

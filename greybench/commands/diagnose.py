@@ -3,11 +3,13 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import typer
 from rich.table import Table
 
+from greybench.commands.friction import derivative_note, record_params
 from greybench.support import emit_json, guarded, out, progress
 from identify.diagnosis import CANDIDATES, SCORE_THRESHOLD, Cause, diagnose as run_diagnosis, save_diagnosis
 from identify.errors import InputError
@@ -26,6 +28,11 @@ def diagnose(
                                     help="Held-out RMS torque a cause must explain to be named [Nm]."),
     track: bool = typer.Option(True, "--track/--no-track", help="Log both models as runs of the MLflow experiment "
                                                                 "'diagnose' (gain [-] as a metric)."),
+    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
+                                                                   "qd/qdd (default: chosen from the training "
+                                                                   "record's sampling rate and position spectrum)."),
+    linear: bool = typer.Option(False, "--linear", help="A linear axis: q [m], qd [m/s], tau [N] (also declared by "
+                                                        "record headers such as 'q [m]', 'tau [N]')."),
     as_json: bool = typer.Option(False, "--json", help='Print {"cause", "ranking", "baseline", "extended", "gain"} '
                                                        "(RMSE and scores in Nm, gain relative) as one JSON object."),
 ) -> None:
@@ -36,16 +43,18 @@ def diagnose(
         raise InputError("must be >= 1", field="--generations")
     if not threshold >= 0:
         raise InputError("must be >= 0", field="--threshold")
-    train_rec = load_record(train)
-    test_rec = load_record(test)
+    train_rec = load_record(train, linear=True if linear else None, cutoff_hz=cutoff)
+    test_rec = load_record(test, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
     if (train_rec.tau_rb is None) != (test_rec.tau_rb is None):
         raise InputError("both records need a 'tau_rb' column, or neither", source=str(test), field="tau_rb")
     with progress("diagnosing (baseline fit, held-out tests, extended refit)", total=None, enabled=not as_json):
         result = run_diagnosis(train_rec, test_rec, seed=seed, generations=generations, threshold=threshold)
-        saved = save_diagnosis(result, train_rec, test_rec, out_dir, track=track)
+        saved = save_diagnosis(result, train_rec, test_rec, out_dir, track=track,
+                               extra_params=record_params(train_rec))
     if as_json:
-        emit_json(result.to_json())
+        emit_json(result.to_json())  # the diagnosis JSON contract; the cut-off is in MLflow
         return
+    out.print(derivative_note(train_rec), highlight=False)
     table = Table(title=f"diagnosis: {result.cause.value} (threshold {threshold * 1e3:.1f} mNm held-out RMS)")
     for col in ("cause", "score [mNm]", "alone [mNm]", "named"):
         table.add_column(col, justify="left" if col == "cause" else "right")

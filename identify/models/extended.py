@@ -135,6 +135,8 @@ class LuGreExtended(FrictionModel):
     def fit_from(self, baseline: LuGre, record: AxisRecord) -> "LuGreExtended":
         """Extend an already fitted LuGre ``baseline`` (same training ``record``); returns self."""
         self.rigid_ = bool(baseline.rigid_)
+        self.linear_ = bool(record.linear)
+        self.cutoff_hz_ = record.cutoff_hz
         self._extend(baseline, record)
         self.train_metrics_ = self.score(record)
         return self
