@@ -25,7 +25,9 @@ def diagnose(
     seed: int = typer.Option(0, "--seed", help="Seed of the baseline's genetic algorithm [-]."),
     generations: int = typer.Option(30, "--generations", help="GA generations of the LuGre baseline [-]."),
     threshold: float = typer.Option(SCORE_THRESHOLD, "--threshold",
-                                    help="Held-out RMS torque a cause must explain to be named [Nm]."),
+                                    help="Held-out RMS torque a cause must explain to be named, as a share of the "
+                                         "held-out residual's noise RMS [-] (scale-free: the same for a record in "
+                                         "other units)."),
     track: bool = typer.Option(True, "--track/--no-track", help="Log both models as runs of the MLflow experiment "
                                                                 "'diagnose' (gain [-] as a metric)."),
     cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
@@ -36,7 +38,7 @@ def diagnose(
     as_json: bool = typer.Option(False, "--json", help='Print {"cause", "ranking", "baseline", "extended", "gain"} '
                                                        "(RMSE and scores in Nm, gain relative) as one JSON object."),
 ) -> None:
-    """Name what the LuGre model gets wrong (load, temperature, position, asymmetry, inertia, drift or none)
+    """Name what the LuGre model gets wrong (load, temperature, position, asymmetry, inertia, drift, gravity or none)
     by held-out nested-model tests, extend the model with the named causes, refit and report the test
     RMSE gain [-]."""
     if generations < 1:
@@ -55,14 +57,17 @@ def diagnose(
         emit_json(result.to_json())  # the diagnosis JSON contract; the cut-off is in MLflow
         return
     out.print(derivative_note(train_rec), highlight=False)
-    table = Table(title=f"diagnosis: {result.cause.value} (threshold {threshold * 1e3:.1f} mNm held-out RMS)")
-    for col in ("cause", "score [mNm]", "alone [mNm]", "named"):
+    a = result.analysis
+    mu = f"m{a.unit}"
+    table = Table(title=f"diagnosis: {result.cause.value} (threshold {a.threshold * 1e3:.3g} {mu} held-out RMS = "
+                        f"{threshold:g} x noise RMS {a.noise * 1e3:.3g} {mu})")
+    for col in ("cause", f"score [{mu}]", f"alone [{mu}]", "named"):
         table.add_column(col, justify="left" if col == "cause" else "right")
     for s in result.analysis.ranking:
         table.add_row(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", "yes" if s.selected else "no")
     out.print(table)
-    out.print(f"baseline {result.baseline.name}: test RMSE {result.baseline_test.rmse:.5f} Nm; "
-              f"extended {result.extended_label}: test RMSE {result.extended_test.rmse:.5f} Nm; "
+    out.print(f"baseline {result.baseline.name}: test RMSE {result.baseline_test.rmse:.5g} {a.unit}; "
+              f"extended {result.extended_label}: test RMSE {result.extended_test.rmse:.5g} {a.unit}; "
               f"gain {result.gain * 100:+.1f} %\nreport: {saved.report}")
 
 
@@ -114,7 +119,9 @@ def generated_cases(n_cases: int, seed: int = 0, ratios=(2.0, 3.0, 5.0, 10.0), c
     (identifiable effect RMS / noise RMS, :func:`effect_rms`) drawn from ``ratios``.
     """
     rng = np.random.default_rng(seed)
-    effects = [c.value for c in CANDIDATES]
+    from identify.plant import Effect
+
+    effects = [c.value for c in CANDIDATES if c.value in {e.value for e in Effect}]  # what the plant can hide
     n_clean = int(round(clean_share * n_cases))
     kinds = ["none"] * n_clean + [effects[i % len(effects)] for i in range(n_cases - n_clean)]
     kinds = [kinds[i] for i in rng.permutation(len(kinds))]

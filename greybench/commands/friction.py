@@ -721,6 +721,62 @@ def bench_friction(
     out.print(table)
 
 
+def bench_realdata(
+    data: Path = typer.Option(..., "--data", help="Folder with joint<J>_train.csv, joint<J>_test.csv (t [s], q [rad], "
+                                                  "qd [rad/s], qdd [rad/s^2], tau [Nm], tau_rb [Nm]) and "
+                                                  "published_friction_joint<J>_test.csv (t [s], tau_f [Nm])."),
+    models: Optional[str] = typer.Option(None, "--models", help=f"Comma-separated models (default: {','.join(COMPARE_MODELS)})."),
+    joints: Optional[str] = typer.Option(None, "--joints", help="Comma-separated joints (default: every joint in --data)."),
+    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] of the learned models "
+                                                                "(default: the benchmark's modest settings)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
+    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "summary": {...}} (RMSE in Nm) as one JSON object.'),
+) -> None:
+    """Fit every model type on every joint of a real log and print, per joint, the test RMSE [Nm] of
+    tau - tau_rb - tau_friction_pred beside the published friction model's (same samples)."""
+    from greybench.benchmarks import realdata as rd
+
+    names = _parse_models(models)
+    found = rd.joints_in(data)
+    if joints:
+        try:
+            wanted = [int(j) for j in joints.split(",") if j.strip()]
+        except ValueError:
+            raise InputError(f"not a list of joint numbers: {joints!r}", field="--joints") from None
+        for j in wanted:
+            if j not in found:
+                raise InputError(f"joint {j} has no records in {data} (have {', '.join(map(str, found))})",
+                                 field="--joints")
+        found = wanted
+    if epochs is not None and epochs < 1:
+        raise InputError("must be >= 1", field="--epochs")
+    results = []
+    t0 = time.perf_counter()
+    with progress(f"bench realdata: {len(names)} models x {len(found)} joints", total=len(names) * len(found),
+                  enabled=not as_json) as advance:
+        for j in found:
+            results.append(rd.run_joint(data, j, names, seed=seed, epochs=epochs, advance=advance))
+    wall = time.perf_counter() - t0
+    summ = rd.summary(results)
+    if as_json:
+        emit_json({"data": str(data), "models": names, "settings": rd.BENCH_SETTINGS, "wall_time_s": wall,
+                   "joints": [r.to_dict() for r in results], "summary": summ})
+        return
+    table = Table(title=f"bench realdata {data}: test RMSE [Nm] of tau - tau_rb - friction, one run ({wall:.0f} s)")
+    for col in ("joint", "published", "no friction", *names):
+        table.add_column(col, justify="right")
+    for r in results:
+        table.add_row(str(r.joint), f"{r.published:.4f}", f"{r.no_friction:.4f}",
+                      *[f"{r.rmse[n]:.4f}" + ("*" if r.rmse[n] <= r.published else "") for n in names])
+    out.print(table)
+    out.print("* at or below the published model", highlight=False)
+    if "greybox_at_or_below_published" in summ:
+        line = f"grey-box at or below the published model on {summ['greybox_at_or_below_published']}/{summ['joints']} joints"
+        if "residual_over_greybox_max" in summ:
+            line += f"; residual / grey-box at most {summ['residual_over_greybox_max']:.3f} (goal <= 1.1)"
+        out.print(line, highlight=False)
+
+
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     app.command("trajectory")(guarded(trajectory))
     app.command("synth")(guarded(synth))
@@ -731,3 +787,4 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     app.command("promote")(guarded(promote))
     app.command("ui")(guarded(ui))
     bench_app.command("friction")(guarded(bench_friction))
+    bench_app.command("realdata")(guarded(bench_realdata))

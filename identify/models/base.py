@@ -7,7 +7,10 @@ fitted state ends in ``_``; predicting or saving before fitting raises
 The rigid-body torque contract, the same for every model type:
 
 - a record *with* ``tau_rb`` [Nm]: the model learns the friction ``tau - tau_rb``
-  (:attr:`~identify.records.AxisRecord.friction_target`) and nothing rigid;
+  (:attr:`~identify.records.AxisRecord.friction_target`) and nothing rigid, apart from a
+  constant offset c [Nm] of the torque reading (a sensor bias no rigid-body model holds; on
+  real arms it is of the order of the friction itself), which it reports as ``c`` and
+  predicts as part of ``tau_friction_pred``;
 - a record *without* it: the model learns ``tau`` and co-identifies an inertia J [kg m^2] and
   an offset c [Nm] with the friction (as in IDIM-LS).
 
@@ -93,6 +96,12 @@ class FrictionModel:
                              source=record.source, field="tau_rb")
         return record.tau_rb
 
+    def offset(self) -> float:
+        """The co-identified torque offset c [Nm] that belongs to the friction prediction: when
+        the model was fitted with ``tau_rb`` (without, c is part of :meth:`rigid_part`)."""
+        self._check_fitted()
+        return 0.0 if self.rigid_ else float(self.params_.get("c", 0.0))
+
     def target_part(self, record: AxisRecord) -> np.ndarray:
         """The model's prediction of ``record.friction_target`` [Nm]: the friction, plus J*qdd + c
         when co-identified (never plus ``tau_rb``, which the target has already left out)."""
@@ -103,7 +112,10 @@ class FrictionModel:
         """``(tau_friction_pred, tau_pred)`` [Nm] per sample: the friction, and the total joint
         torque ``tau_friction_pred + tau_rb`` (or ``+ J*qdd + c``), see the module docstring."""
         friction = self.predict_friction(record)
-        return friction, friction + self.rigid_part(record)
+        total = friction + self.rigid_part(record)
+        if not self.rigid_:  # everything learned of tau - tau_rb (extensions' corrections too)
+            friction = total - record.tau_rb
+        return friction, total
 
     def predict(self, record: AxisRecord) -> np.ndarray:
         """Total joint torque [Nm] per sample, comparable to the record's ``tau``."""
