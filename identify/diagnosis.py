@@ -40,7 +40,9 @@ Method
    through ``qdd``. The ripple order ``n`` [1/rad] is found by a least-squares periodogram of
    the training residual against ``q`` (:func:`ripple_periodogram`), searched only from two
    periods inside the training record's travel (fewer cannot tell a ripple from a trend) up to a
-   period of four samples at the typical speed (:func:`ripple_orders`); order 1 is the gravity
+   period of four samples at the typical speed (:func:`ripple_orders`), and only when the
+   periodogram's peak lies inside that range (a power still rising at two periods is a trend,
+   not a resolved ripple); order 1 is the gravity
    candidate's, which exists for rotary axes only (a linear axis's weight is a constant).
 3. **Held-out nested-model test.** Coefficients are fitted on the training record only; the
    score of a candidate is the torque it explains *on the test record*,
@@ -208,11 +210,15 @@ class Periodogram:
         Share of the residual's variance explained by ``sin(n q), cos(n q)`` [-].
     best : float
         Order of the largest power [1/rad].
+    resolved : bool
+        The peak lies inside the searched range (a power still rising at the range's edge is a
+        trend over fewer periods than the range allows, not a resolved ripple).
     """
 
     orders: np.ndarray
     power: np.ndarray
     best: float
+    resolved: bool = True
 
 
 def ripple_periodogram(q: np.ndarray, r: np.ndarray, orders: tuple[float, float] = RIPPLE_ORDERS,
@@ -260,6 +266,7 @@ def ripple_periodogram(q: np.ndarray, r: np.ndarray, orders: tuple[float, float]
 
     power = powers(grid)
     k = int(np.argmax(power))
+    resolved = 0 < k < grid.size - 1
     # the peak, refined on a grid 32x finer within one coarse step either side (a parabola
     # through coarse points is biased by the peak's sinc shape, and a misplaced order leaves
     # a residual that other candidates would pick up)
@@ -272,7 +279,7 @@ def ripple_periodogram(q: np.ndarray, r: np.ndarray, orders: tuple[float, float]
         den = a - 2 * b + c
         if den < 0:
             best += 0.5 * (fine[1] - fine[0]) * (a - c) / den
-    return Periodogram(orders=grid, power=power, best=best)
+    return Periodogram(orders=grid, power=power, best=best, resolved=resolved)
 
 
 def _refine_order(p: Periodogram, q: np.ndarray, base: np.ndarray, r: np.ndarray) -> Periodogram:
@@ -295,7 +302,7 @@ def _refine_order(p: Periodogram, q: np.ndarray, base: np.ndarray, r: np.ndarray
     lo, hi = max(p.best - 0.5 * dn, float(p.orders[0])), min(p.best + 0.5 * dn, float(p.orders[-1]))
     res = minimize_scalar(sse, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4 * dn})
     best = float(res.x) if res.fun <= sse(p.best) else p.best
-    return Periodogram(orders=p.orders, power=p.power, best=best)
+    return Periodogram(orders=p.orders, power=p.power, best=best, resolved=p.resolved)
 
 
 def _column(record: AxisRecord, name: str) -> np.ndarray:
@@ -489,7 +496,7 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
     orders = ripple_orders(train, test)
     ripple = ripple_periodogram(train.q, p_tr.residual - Xb @ beta0, orders or RIPPLE_ORDERS)
     ripple = _refine_order(ripple, train.q, Xb, p_tr.residual)
-    available = available_candidates(train, test)
+    available = [c for c in available_candidates(train, test) if c is not Cause.POSITION or ripple.resolved]
     noise = noise_rms(p_te.residual)
     threshold = max(share * noise, LEVEL_SHARE * float(np.std(test.friction_target)))
     unit = test.units["tau"]

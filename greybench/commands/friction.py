@@ -762,12 +762,16 @@ def bench_realdata(
         emit_json({"data": str(data), "models": names, "settings": rd.BENCH_SETTINGS, "wall_time_s": wall,
                    "joints": [r.to_dict() for r in results], "summary": summ})
         return
-    table = Table(title=f"bench realdata {data}: test RMSE [Nm] of tau - tau_rb - friction, one run ({wall:.0f} s)")
-    for col in ("joint", "published", "no friction", *names):
-        table.add_column(col, justify="right")
+    # models as rows, joints as columns: seven joints fit an 80-column terminal
+    table = Table(title=f"bench realdata: test RMSE \\[mNm] of tau - tau_rb - friction ({wall:.0f} s)",
+                  pad_edge=False)
+    table.add_column("model", no_wrap=True)
     for r in results:
-        table.add_row(str(r.joint), f"{r.published:.4f}", f"{r.no_friction:.4f}",
-                      *[f"{r.rmse[n]:.4f}" + ("*" if r.rmse[n] <= r.published else "") for n in names])
+        table.add_column(f"J{r.joint}", justify="right")
+    table.add_row("published", *[f"{r.published * 1e3:.1f} " for r in results])
+    table.add_row("no friction", *[f"{r.no_friction * 1e3:.1f} " for r in results])
+    for n in names:
+        table.add_row(n, *[f"{r.rmse[n] * 1e3:.1f}" + ("*" if r.rmse[n] <= r.published else " ") for r in results])
     out.print(table)
     out.print("* at or below the published model", highlight=False)
     if "greybox_at_or_below_published" in summ:

@@ -41,6 +41,7 @@ def seven_joint_log(frame: pd.DataFrame) -> pd.DataFrame:
         log[f"q{j}"] = frame["q"] * k
         log[f"tau{j}"] = frame["tau"] * k
     log["tau_rb7"] = frame["tau_rb"]
+    log["qd7"], log["qdd7"] = frame["qd"], frame["qdd"]
     return pd.DataFrame(log)
 
 
@@ -53,7 +54,13 @@ def test_seven_joint_log_axis_7(plant_frames, tmp_path, mlflow_store):
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
     assert doc["run"]["registered"] == "max100-axis7-friction"
-    assert doc["test"]["rmse"] < 10 * NOISE and "J" not in doc["params"]  # tau_rb7 was used
+    assert "J" not in doc["params"]  # tau_rb7 was used
+    # the same as fitting joint 7's own axis record
+    train.to_csv(tmp_path / "j7.csv", index=False)
+    test.to_csv(tmp_path / "j7_test.csv", index=False)
+    plain = json.loads(run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "j7.csv", "--test",
+                           tmp_path / "j7_test.csv", "--no-track", "--json").stdout)
+    assert doc["params"] == pytest.approx(plain["params"]) and doc["test"]["rmse"] == pytest.approx(plain["test"]["rmse"])
     assert doc["warnings"] == []  # tau_rb given: no coupling warning although joints 1..6 move
     r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "log.csv", "--axis", 3, "--no-track", "--json")
     warn = json.loads(r.stdout)["warnings"]
@@ -74,7 +81,7 @@ def test_non_monotonic_time_names_file_and_column(plant_frames, tmp_path):
     bad.loc[100, "t"] = bad.loc[98, "t"]
     bad.to_csv(tmp_path / "bad.csv", index=False)
     r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "bad.csv", "--no-track", "--out", tmp_path / "m")
-    assert r.exit_code == 2 and "bad.csv" in r.output and "'t'" in r.output and "row 99" in r.output
+    assert r.exit_code == 2 and "bad.csv" in r.output and "'t'" in r.output and "row 100" in r.output
     assert not (tmp_path / "m").exists()
 
 
