@@ -53,7 +53,8 @@ Method
    makes ``d`` negative.
 4. **Selection.** Forward selection on held-out data: the candidate with the largest score
    is accepted when its score exceeds :data:`SCORE_THRESHOLD`; the remaining candidates are
-   then re-scored *given* the accepted ones (partial test), and so on. Finally each
+   then re-scored *given* the accepted ones (partial test), and so on; a further cause must also
+   explain :data:`SECONDARY_SHARE` of what the first one does. Finally each
    accepted cause is scored by its unique contribution (the held-out loss when it alone is
    dropped from the accepted set); the top cause is the one that explains most of what
    the others cannot. No candidate above the threshold: ``none``.
@@ -112,6 +113,11 @@ SCORE_THRESHOLD = 0.1
 #: ... and at least this share of the held-out torque's standard deviation [-] (a floor for
 #: records whose torque is almost noise-free).
 LEVEL_SHARE = 1e-3
+#: A further cause must explain at least this share of what the first named cause explains [-]:
+#: the candidates are linearised forms of the effects (e.g. dT * qd for a viscosity falling
+#: exponentially), and a strong effect's linearisation error, a few per cent of it, is left for
+#: other candidates to pick up. Two real causes of comparable size are both named.
+SECONDARY_SHARE = 0.1
 #: Periods a position ripple must complete inside the travel to be a candidate [-].
 MIN_RIPPLE_PERIODS = 2.0
 #: Shortest ripple period searched, in samples at the 90th-percentile speed [-].
@@ -511,8 +517,11 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
             break
         gains = {c: design.gain(c, accepted) for c in rest}
         best = max(rest, key=lambda c: gains[c])
-        if gains[best] <= threshold:
+        bar = threshold if not accepted else max(threshold, SECONDARY_SHARE * first)
+        if gains[best] <= bar:
             break
+        if not accepted:
+            first = gains[best]
         accepted.append(best)
     # unique contribution of each accepted cause; partial gain of the others
     scores = {c: design.gain(c, accepted) for c in available}
