@@ -7,6 +7,7 @@ from typing import Optional
 
 import numpy as np
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from greybench.commands.friction import derivative_note, record_params
@@ -61,7 +62,7 @@ def diagnose(
     mu = f"m{a.unit}"
     table = Table(title=f"diagnosis: {result.cause.value} (threshold {a.threshold * 1e3:.3g} {mu} held-out RMS = "
                         f"{threshold:g} x noise RMS {a.noise * 1e3:.3g} {mu})")
-    for col in ("cause", f"score [{mu}]", f"alone [{mu}]", "named"):
+    for col in ("cause", escape(f"score [{mu}]"), escape(f"alone [{mu}]"), "named"):
         table.add_column(col, justify="left" if col == "cause" else "right")
     for s in result.analysis.ranking:
         table.add_row(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", "yes" if s.selected else "no")
