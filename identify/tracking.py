@@ -220,17 +220,18 @@ def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> 
 
     pred = model.predict(record) if pred is None else pred
     rigid = model.rigid_part(record)
+    tu, vu = record.units["tau"], record.units["qd"]  # Nm, rad/s (N, m/s on a linear axis)
     f_meas = record.tau - rigid
     f_pred = pred - rigid
     out = {}
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     ax1.plot(record.t, record.tau, lw=0.6, label="measured")
     ax1.plot(record.t, pred, lw=0.6, label=f"{model.name}")
-    ax1.set_ylabel("torque [Nm]")
+    ax1.set_ylabel(f"torque [{tu}]")
     ax1.legend(loc="upper right")
     ax1.set_title(f"{model.name} on {label}")
     ax2.plot(record.t, pred - record.tau, lw=0.5, color="C3")
-    ax2.set_ylabel("error [Nm]")
+    ax2.set_ylabel(f"error [{tu}]")
     ax2.set_xlabel("t [s]")
     fig.tight_layout()
     out["prediction_time.png"] = fig
@@ -239,8 +240,8 @@ def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> 
     ax.scatter(f_meas, f_pred, s=1, alpha=0.3)
     lim = [float(min(f_meas.min(), f_pred.min())), float(max(f_meas.max(), f_pred.max()))]
     ax.plot(lim, lim, color="red", lw=1)
-    ax.set_xlabel("measured friction torque [Nm]")
-    ax.set_ylabel("predicted friction torque [Nm]")
+    ax.set_xlabel(f"measured friction torque [{tu}]")
+    ax.set_ylabel(f"predicted friction torque [{tu}]")
     ax.set_title(f"parity, {model.name} on {label}")
     fig.tight_layout()
     out["parity.png"] = fig
@@ -249,8 +250,8 @@ def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> 
     ax.scatter(record.qd, f_meas, s=1, alpha=0.2, label="measured")
     ax.plot(record.qd, f_pred, lw=0.5, color="C1", label=model.name)
     ax.set_xscale("symlog", linthresh=1e-3)
-    ax.set_xlabel("qd [rad/s] (symlog)")
-    ax.set_ylabel("friction torque [Nm]")
+    ax.set_xlabel(f"qd [{vu}] (symlog)")
+    ax.set_ylabel(f"friction torque [{tu}]")
     ax.legend(loc="upper left")
     ax.set_title(f"friction-velocity hysteresis, {label}")
     fig.tight_layout()

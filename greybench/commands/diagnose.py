@@ -3,11 +3,14 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import typer
+from rich.markup import escape
 from rich.table import Table
 
+from greybench.commands.friction import derivative_note, record_params
 from greybench.support import emit_json, guarded, out, progress
 from identify.diagnosis import CANDIDATES, SCORE_THRESHOLD, Cause, diagnose as run_diagnosis, save_diagnosis
 from identify.errors import InputError
@@ -23,37 +26,49 @@ def diagnose(
     seed: int = typer.Option(0, "--seed", help="Seed of the baseline's genetic algorithm [-]."),
     generations: int = typer.Option(30, "--generations", help="GA generations of the LuGre baseline [-]."),
     threshold: float = typer.Option(SCORE_THRESHOLD, "--threshold",
-                                    help="Held-out RMS torque a cause must explain to be named [Nm]."),
+                                    help="Held-out RMS torque a cause must explain to be named, as a share of the "
+                                         "held-out residual's noise RMS [-] (scale-free: the same for a record in "
+                                         "other units)."),
     track: bool = typer.Option(True, "--track/--no-track", help="Log both models as runs of the MLflow experiment "
                                                                 "'diagnose' (gain [-] as a metric)."),
+    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
+                                                                   "qd/qdd (default: chosen from the training "
+                                                                   "record's sampling rate and position spectrum)."),
+    linear: bool = typer.Option(False, "--linear", help="A linear axis: q [m], qd [m/s], tau [N] (also declared by "
+                                                        "record headers such as 'q [m]', 'tau [N]')."),
     as_json: bool = typer.Option(False, "--json", help='Print {"cause", "ranking", "baseline", "extended", "gain"} '
                                                        "(RMSE and scores in Nm, gain relative) as one JSON object."),
 ) -> None:
-    """Name what the LuGre model gets wrong (load, temperature, position, asymmetry, inertia, drift or none)
+    """Name what the LuGre model gets wrong (load, temperature, position, asymmetry, inertia, drift, gravity or none)
     by held-out nested-model tests, extend the model with the named causes, refit and report the test
     RMSE gain [-]."""
     if generations < 1:
         raise InputError("must be >= 1", field="--generations")
     if not threshold >= 0:
         raise InputError("must be >= 0", field="--threshold")
-    train_rec = load_record(train)
-    test_rec = load_record(test)
+    train_rec = load_record(train, linear=True if linear else None, cutoff_hz=cutoff)
+    test_rec = load_record(test, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
     if (train_rec.tau_rb is None) != (test_rec.tau_rb is None):
         raise InputError("both records need a 'tau_rb' column, or neither", source=str(test), field="tau_rb")
     with progress("diagnosing (baseline fit, held-out tests, extended refit)", total=None, enabled=not as_json):
         result = run_diagnosis(train_rec, test_rec, seed=seed, generations=generations, threshold=threshold)
-        saved = save_diagnosis(result, train_rec, test_rec, out_dir, track=track)
+        saved = save_diagnosis(result, train_rec, test_rec, out_dir, track=track,
+                               extra_params=record_params(train_rec))
     if as_json:
-        emit_json(result.to_json())
+        emit_json(result.to_json())  # the diagnosis JSON contract; the cut-off is in MLflow
         return
-    table = Table(title=f"diagnosis: {result.cause.value} (threshold {threshold * 1e3:.1f} mNm held-out RMS)")
-    for col in ("cause", "score [mNm]", "alone [mNm]", "named"):
+    out.print(derivative_note(train_rec), highlight=False)
+    a = result.analysis
+    mu = f"m{a.unit}"
+    table = Table(title=f"diagnosis: {result.cause.value} (threshold {a.threshold * 1e3:.3g} {mu} held-out RMS = "
+                        f"{threshold:g} x noise RMS {a.noise * 1e3:.3g} {mu})")
+    for col in ("cause", escape(f"score [{mu}]"), escape(f"alone [{mu}]"), "named"):
         table.add_column(col, justify="left" if col == "cause" else "right")
     for s in result.analysis.ranking:
         table.add_row(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", "yes" if s.selected else "no")
     out.print(table)
-    out.print(f"baseline {result.baseline.name}: test RMSE {result.baseline_test.rmse:.5f} Nm; "
-              f"extended {result.extended_label}: test RMSE {result.extended_test.rmse:.5f} Nm; "
+    out.print(f"baseline {result.baseline.name}: test RMSE {result.baseline_test.rmse:.5g} {a.unit}; "
+              f"extended {result.extended_label}: test RMSE {result.extended_test.rmse:.5g} {a.unit}; "
               f"gain {result.gain * 100:+.1f} %\nreport: {saved.report}")
 
 
@@ -105,7 +120,9 @@ def generated_cases(n_cases: int, seed: int = 0, ratios=(2.0, 3.0, 5.0, 10.0), c
     (identifiable effect RMS / noise RMS, :func:`effect_rms`) drawn from ``ratios``.
     """
     rng = np.random.default_rng(seed)
-    effects = [c.value for c in CANDIDATES]
+    from identify.plant import Effect
+
+    effects = [c.value for c in CANDIDATES if c.value in {e.value for e in Effect}]  # what the plant can hide
     n_clean = int(round(clean_share * n_cases))
     kinds = ["none"] * n_clean + [effects[i % len(effects)] for i in range(n_cases - n_clean)]
     kinds = [kinds[i] for i in rng.permutation(len(kinds))]

@@ -9,10 +9,11 @@ from pathlib import Path
 from typing import Optional
 
 import numpy as np
+import pandas as pd
 import typer
 from rich.table import Table
 
-from greybench.support import emit_json, guarded, out, progress, resolve_robot
+from greybench.support import emit_json, err, guarded, out, progress, resolve_robot
 from identify.axis_limits import load_axis_limits
 from identify.errors import InputError
 from identify.metrics import Metrics
@@ -29,9 +30,9 @@ class TrajectoryKind(str, Enum):
     presliding = "presliding"
 
 
-def _metrics_table(title: str, rows: dict[str, Metrics]) -> Table:
+def _metrics_table(title: str, rows: dict[str, Metrics], unit: str = "Nm") -> Table:
     table = Table(title=title)
-    for col in ("record", "RMSE [Nm]", "R^2", "NRMSE", "max error [Nm]", "samples"):
+    for col in ("record", f"RMSE [{unit}]", "R^2", "NRMSE", f"max error [{unit}]", "samples"):
         table.add_column(col, justify="right" if col != "record" else "left")
     for name, m in rows.items():
         table.add_row(name, f"{m.rmse:.4f}", f"{m.r2:.5f}", f"{m.nrmse:.4f}", f"{m.max_error:.4f}", str(m.n))
@@ -43,9 +44,26 @@ def _params_table(model: FrictionModel) -> Table:
     table.add_column("parameter")
     table.add_column("value", justify="right")
     table.add_column("unit")
+    units = model.param_units()
     for k, v in model.params_.items():
-        table.add_row(k, f"{v:.6g}", model.units.get(k, ""))
+        table.add_row(k, f"{v:.6g}", units.get(k, ""))
     return table
+
+
+def derivative_note(record) -> str:
+    """One line: how the record's velocity and acceleration were obtained (the cut-off [Hz])."""
+    if record.cutoff_hz is None:
+        return f"derivatives: qd, qdd read from {record.source} (no cut-off applied)"
+    return (f"derivatives: {', '.join(record.derived)} derived with cut-off {record.cutoff_hz:.3g} Hz "
+            f"(zero-phase low-pass at {1.0 / record.sample_time:.4g} Hz sampling)")
+
+
+def record_params(record) -> dict:
+    """MLflow params describing a training record: derivative cut-off [Hz] and axis units."""
+    units = record.units
+    return {"deriv_cutoff_hz": "record" if record.cutoff_hz is None else f"{record.cutoff_hz:.6g}",
+            "axis_kind": "linear" if record.linear else "rotary",
+            "unit_position": units["q"], "unit_torque": units["tau"]}
 
 
 def trajectory(
@@ -128,27 +146,57 @@ COMPARE_MODELS = ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "g
 
 
 def _check_axis(axis: Optional[int]) -> None:
-    if axis is not None and not 1 <= axis <= 6:
-        raise InputError(f"axis must be 1..6, got {axis}", field="--axis")
+    if axis is not None and axis < 1:
+        raise InputError(f"axis must be >= 1, got {axis}", field="--axis")
 
 
-def load_axis_record(path: Path, axis: Optional[int]):
-    """An axis record from a file: a plain axis record, or column ``q<axis>``/``tau<axis>`` of a
-    six-axis robot log (``t, q1..q6, tau1..tau6``; tau_i taken as total torque)."""
+def _log_axes(columns) -> list[int]:
+    """Joint numbers N of the ``qN`` columns of a robot log (headers may carry units)."""
+    import re
+
+    axes = set()
+    for c in columns:
+        m = re.match(r"^\s*q(\d+)\s*(\[.*\])?\s*$", str(c))
+        if m:
+            axes.add(int(m.group(1)))
+    return sorted(axes)
+
+
+def load_axis_record(path: Path, axis: Optional[int], *, linear: Optional[bool] = None,
+                     cutoff_hz: Optional[float] = None):
+    """An axis record from a file: a plain axis record, or joint ``axis`` of a robot log with any
+    number of joints (``t, q1..qN, tau1..tauN``, optional ``qdN, qddN, tempN, tau_rbN, tau_loadN``;
+    headers may declare units, ``q7 [m]``). ``linear`` declares a linear axis (m, N); ``cutoff_hz``
+    [Hz] fixes the derivative cut-off (else chosen from the record)."""
+    from identify.records import split_unit_headers
+
     df = read_table(path)
-    is_log = "q" not in df.columns and any(f"q{i}" in df.columns for i in range(1, 7))
+    plain, units = split_unit_headers(df, str(path))
+    axes = _log_axes(plain.columns)
+    is_log = "q" not in plain.columns and bool(axes)
     if not is_log:
-        return validate_frame(df, source=str(path))
+        return validate_frame(df, source=str(path), linear=linear, cutoff_hz=cutoff_hz)
     if axis is None:
-        raise InputError("this is a six-axis robot log (q1..q6): choose the joint with --axis 1..6",
-                         source=str(path), field="--axis")
+        raise InputError(f"this is a robot log with joints {axes[0]}..{axes[-1]} (q{axes[0]}..q{axes[-1]}): choose "
+                         f"the joint with --axis", source=str(path), field="--axis")
     cols = {"t": "t", f"q{axis}": "q", f"tau{axis}": "tau", f"qd{axis}": "qd", f"qdd{axis}": "qdd",
             f"temp{axis}": "temp", f"tau_rb{axis}": "tau_rb", f"tau_load{axis}": "tau_load"}
     for need in ("t", f"q{axis}", f"tau{axis}"):
-        if need not in df.columns:
-            raise InputError(f"robot log has no column '{need}'", source=str(path), field=need)
-    sub = df[[c for c in cols if c in df.columns]].rename(columns=cols)
-    return validate_frame(sub, source=f"{path} (axis {axis})")
+        if need not in plain.columns:
+            have = f" (the log has joints {', '.join(map(str, axes))})" if need != "t" else ""
+            raise InputError(f"robot log has no column '{need}' for axis {axis}{have}", source=str(path), field=need)
+    keep = [c for c in cols if c in plain.columns]
+    sub = plain[keep].rename(columns={c: (f"{cols[c]} [{units[c]}]" if c in units else cols[c]) for c in keep})
+    rec = validate_frame(sub, source=f"{path} (axis {axis})", linear=linear, cutoff_hz=cutoff_hz)
+    own = float(np.ptp(rec.q)) or 1.0
+    moving = []
+    for j in axes:
+        if j != axis and f"q{j}" in plain.columns:
+            qj = pd.to_numeric(plain[f"q{j}"], errors="coerce").to_numpy(dtype=float)
+            if np.isfinite(qj).all() and float(np.ptp(qj)) > 0.01 * own:
+                moving.append(j)
+    rec.other_joints_moving = tuple(moving)
+    return rec
 
 
 def _make(model: str, seed: int, epochs: Optional[int]) -> FrictionModel:
@@ -170,16 +218,59 @@ def _robot_name(robot: str) -> str:
     return Path(resolve_robot(robot)).stem
 
 
+#: An axis whose gravity torque over the arm's workspace exceeds this share of the largest
+#: joint's is taken to be loaded by the arm (so a fit without tau_rb takes gravity for friction) [-].
+GRAVITY_SHARE = 0.02
+
+
+def coupling_warnings(record, robot: str, axis: Optional[int]) -> list[str]:
+    """Why a record without ``tau_rb`` would mix the arm's torques into the friction (empty when
+    it has ``tau_rb``): the robot model says gravity loads the axis (its torque varies over the
+    joint limits), or the robot log moves other joints (their coupling loads this one)."""
+    if record.tau_rb is not None:
+        return []
+    msgs = []
+    a = axis or 1
+    fix = "give a tau_rb column or split the log with `greybench prepare`"
+    try:
+        from simulate.robot.dynamics import gravity_torque
+        from simulate.robot.model import load_robot
+
+        rob = load_robot(resolve_robot(robot))
+        n_joints = len(rob.lower)
+    except (InputError, OSError, ValueError):
+        rob, n_joints = None, 0
+    if rob is not None and a <= n_joints:
+        rng = np.random.default_rng(0)  # seeded poses within the joint limits
+        poses = rng.uniform(rob.lower, rob.upper, size=(256, n_joints))
+        g = gravity_torque(rob, poses)
+        peak = np.abs(g).max(axis=0)
+        if peak[a - 1] > GRAVITY_SHARE * peak.max():
+            msgs.append(f"{record.source}: axis {a} of {Path(resolve_robot(robot)).stem} carries gravity torque up to "
+                        f"{peak[a - 1]:.3g} Nm and the record has no tau_rb: the fit takes it for friction; {fix}")
+    moving = getattr(record, "other_joints_moving", ())
+    if moving:
+        msgs.append(f"{record.source}: joints {', '.join(map(str, moving))} move in the log and their coupling loads "
+                    f"axis {a}, but the record has no tau_rb; {fix}")
+    return msgs
+
+
 def fit(
     model: str = typer.Option(..., "--model", help=f"Model name: {', '.join(MODELS)}."),
-    train: Path = typer.Option(..., "--train", help="Training axis record, or six-axis robot log with --axis "
-                                                    "(.csv/.parquet; SI: t [s], q [rad], tau [Nm], ...)."),
+    train: Path = typer.Option(..., "--train", help="Training axis record, or robot log (t, q1..qN, tau1..tauN) with "
+                                                    "--axis (.csv/.parquet; SI: t [s], q [rad], tau [Nm], ...)."),
     test: Optional[Path] = typer.Option(None, "--test", help="Test record (same format) for held-out metrics [Nm]."),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="Folder for the fitted model (params.json with units, "
                                                                "+ model files); the MLflow run holds it too."),
-    axis: Optional[int] = typer.Option(None, "--axis", help="Joint 1..6 (picks q<N>, tau<N> [rad, Nm] from a robot log; "
+    axis: Optional[int] = typer.Option(None, "--axis", help="Joint N >= 1 (picks q<N>, tau<N> [rad, Nm; m, N when "
+                                                            "linear] from a robot log with any number of joints; "
                                                             "names the registered model). Default 1."),
     robot: str = typer.Option("max100", "--robot", help="Robot name or file; names the registered model."),
+    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
+                                                                   "qd/qdd (default: chosen from each record's "
+                                                                   "sampling rate and position spectrum)."),
+    linear: bool = typer.Option(False, "--linear", help="A linear axis: q [m], qd [m/s], tau [N] (also declared by "
+                                                        "record headers such as 'q [m]', 'tau [N]')."),
     seed: int = typer.Option(0, "--seed", help="Random seed of the identification (GA, torch)."),
     epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models (default per model)."),
     experiment: str = typer.Option("friction", "--experiment", help="MLflow experiment name."),
@@ -193,9 +284,16 @@ def fit(
     record has tau_rb [Nm]); track it in MLflow, save it, print RMSE [Nm], R^2, NRMSE, max error [Nm]."""
     _check_axis(axis)
     est = _make(model, seed, epochs)
-    train_rec = load_axis_record(train, axis)
-    test_rec = load_axis_record(test, axis) if test else None
+    train_rec = load_axis_record(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
+    # the test record is differentiated like the training record (the model learned on that filter)
+    test_rec = (load_axis_record(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
+                if test else None)
     robot_name = _robot_name(robot)
+    warnings = coupling_warnings(train_rec, robot, axis)
+    for w in warnings:
+        err.print(f"[bold yellow]warning:[/] {w}", highlight=False, markup=True, soft_wrap=True)
+    if not as_json:
+        out.print(derivative_note(train_rec), highlight=False)
     run = None
     with progress(f"fit {model}") as advance:
         advance.describe("fitting")
@@ -213,15 +311,18 @@ def fit(
 
             advance.describe("logging to MLflow (plots, residual analysis, model)")
             run = log_fit(est, train_rec, test_rec, fit_time=fit_time, experiment=experiment, axis=axis or 1,
-                          robot=robot_name, register=registered_name(robot_name, axis or 1) if register else None)
+                          robot=robot_name, register=registered_name(robot_name, axis or 1) if register else None,
+                          extra_params=record_params(train_rec))
     if as_json:
-        emit_json({"model": model, "params": est.params_, "fit_time": fit_time, "n_parameters": est.n_parameters(),
+        emit_json({"model": model, "params": est.params_, "units": est.param_units(), "fit_time": fit_time,
+                   "n_parameters": est.n_parameters(), "warnings": warnings,
+                   "derivative_cutoff_hz": train_rec.cutoff_hz, "linear": train_rec.linear,
                    "out": str(out_dir) if out_dir else None, "run": run.to_dict() if run else None,
                    **{k: v.to_dict() for k, v in metrics.items()}})
     else:
         out.print(_params_table(est))
         where = f", saved to {out_dir}" if out_dir else ""
-        out.print(_metrics_table(f"{model}: fit in {fit_time:.2f} s{where}", metrics))
+        out.print(_metrics_table(f"{model}: fit in {fit_time:.2f} s{where}", metrics, train_rec.units["tau"]))
         if run:
             reg = f"; registered {run.registered} v{run.version} as {run.alias}" if run.registered else ""
             out.print(f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}")
@@ -236,23 +337,42 @@ def _load_any_model(ref: str) -> FrictionModel:
 def predict(
     model_ref: str = typer.Option(..., "--model", help="Saved model folder, runs:/<run_id>/model or models:/<name>@<alias>."),
     data: Path = typer.Option(..., "--data", help="Axis record to predict (.csv/.parquet), or a robot log with --axis."),
-    out_file: Path = typer.Option(..., "--out", help="Output table: the input columns plus tau_pred [Nm]."),
-    axis: Optional[int] = typer.Option(None, "--axis", help="Joint 1..6 when --data is a six-axis robot log."),
+    out_file: Path = typer.Option(..., "--out", help="Output table: the input columns plus tau_friction_pred [Nm] "
+                                                     "(the friction) and tau_pred [Nm] (the total joint torque: "
+                                                     "tau_friction_pred + tau_rb when the model was fitted with "
+                                                     "tau_rb, else tau_friction_pred + J*qdd + c)."),
+    axis: Optional[int] = typer.Option(None, "--axis", help="Joint N >= 1 when --data is a robot log (t, q1..qN, tau1..tauN)."),
+    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
+                                                                   "(default: the one the model was fitted with, "
+                                                                   "else chosen from the record)."),
     as_json: bool = typer.Option(False, "--json", help="Print metrics as one JSON object."),
 ) -> None:
-    """Predict the joint torque tau_pred [Nm] of a record with a fitted model."""
+    """Predict a record with a fitted model: the friction tau_friction_pred [Nm] and the total
+    joint torque tau_pred [Nm], comparable to the measured tau.
+
+    A model fitted on records with tau_rb [Nm] learned the friction tau - tau_rb, and gives
+    tau_pred = tau_friction_pred + tau_rb (the record must then have tau_rb). A model fitted
+    without tau_rb co-identified an inertia J [kg m^2] and an offset c [Nm]:
+    tau_pred = tau_friction_pred + J*qdd + c. The metrics compare tau_pred with tau."""
     _check_axis(axis)
     est = _load_any_model(model_ref)
-    rec = load_axis_record(data, axis)
-    tau_pred = est.predict(rec)
+    rec = load_axis_record(data, axis, linear=getattr(est, "linear_", None) or None,
+                           cutoff_hz=cutoff or getattr(est, "cutoff_hz_", None))
+    if getattr(est, "linear_", False) != rec.linear:
+        raise InputError(f"mixed units: the model was fitted on a {'linear' if est.linear_ else 'rotary'} axis and "
+                         f"the record is {'linear' if rec.linear else 'rotary'}", source=str(data), field="q")
+    friction, tau_pred = est.predict_parts(rec)
     frame = rec.frame.copy()
+    frame["tau_friction_pred"] = friction
     frame["tau_pred"] = tau_pred
     write_table(frame, out_file)
     m = est.score(rec)
     if as_json:
-        emit_json({"model": est.name, "out": str(out_file), "metrics": m.to_dict()})
+        emit_json({"model": est.name, "out": str(out_file), "metrics": m.to_dict(),
+                   "derivative_cutoff_hz": rec.cutoff_hz})
     else:
-        out.print(_metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m}))
+        out.print(derivative_note(rec), highlight=False)
+        out.print(_metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"]))
 
 
 def _parse_models(models: Optional[str]) -> list[str]:
@@ -273,7 +393,10 @@ def compare(
     train: Path = typer.Option(..., "--train", help="Training axis record (or robot log with --axis), SI units."),
     test: Path = typer.Option(..., "--test", help="Test axis record (same format); the table is sorted by its RMSE [Nm]."),
     models: Optional[str] = typer.Option(None, "--models", help=f"Comma-separated models (default: {','.join(COMPARE_MODELS)})."),
-    axis: Optional[int] = typer.Option(None, "--axis", help="Joint 1..6 (robot logs; recorded in the runs)."),
+    axis: Optional[int] = typer.Option(None, "--axis", help="Joint N >= 1 (robot logs; recorded in the runs)."),
+    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
+                                                                   "(default: chosen from the training record)."),
+    linear: bool = typer.Option(False, "--linear", help="A linear axis: q [m], tau [N]."),
     robot: str = typer.Option("max100", "--robot", help="Robot name or file (recorded in the runs)."),
     seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
     epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for the learned models (default per model)."),
@@ -285,8 +408,8 @@ def compare(
     fit time [s] and parameter count; every fit is a run of one MLflow experiment."""
     _check_axis(axis)
     names = _parse_models(models)
-    train_rec = load_axis_record(train, axis)
-    test_rec = load_axis_record(test, axis)
+    train_rec = load_axis_record(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
+    test_rec = load_axis_record(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
     robot_name = _robot_name(robot)
     parent = None
     if track:
@@ -311,7 +434,7 @@ def compare(
                 if track:
                     advance.describe(f"logging {name} to MLflow")
                     run = log_fit(est, train_rec, test_rec, fit_time=fit_time, experiment=experiment, axis=axis or 1,
-                                  robot=robot_name, parent_run_id=parent)
+                                  robot=robot_name, parent_run_id=parent, extra_params=record_params(train_rec))
                     row["run_id"] = run.run_id
                     fitted[name] = est
                 rows.append(row)
@@ -332,7 +455,10 @@ def compare(
                    "rows": rows})
         return
     table = Table(title=f"compare on {test} (axis {axis or 1}), sorted by test RMSE")
-    for col in ("rank", "model", "test RMSE [Nm]", "test R^2", "train RMSE [Nm]", "fit time \\[s]", "parameters"):
+    u = train_rec.units["tau"]
+    # units escaped: rich would read "[s]" as markup
+    for col in ("rank", "model", f"test RMSE \\[{u}]", "test R^2", f"train RMSE \\[{u}]", "fit time \\[s]",
+                "parameters"):
         table.add_column(col, justify="left" if col == "model" else "right")
     for i, r in enumerate(rows, 1):
         table.add_row(str(i), r["model"], f"{r['test_rmse']:.4f}", f"{r['test_r2']:.5f}", f"{r['train_rmse']:.4f}",
@@ -372,6 +498,9 @@ def train_robot(
         _check_axis(a)
     _make(model, seed, epochs)  # unknown names fail before any work
     rob = load_robot(resolve_robot(robot))
+    for a in axis_list:
+        if a > 6:
+            raise InputError(f"--axis {a}: the robot model and `prepare` handle joints 1..6", field="--axes")
     robot_name = _robot_name(robot)
     ext = Path(log).suffix.lower()
     with tempfile.TemporaryDirectory(prefix="greybench-train-robot-") as tmp:
@@ -649,6 +778,66 @@ def bench_friction(
     out.print(table)
 
 
+def bench_realdata(
+    data: Path = typer.Option(..., "--data", help="Folder with joint<J>_train.csv, joint<J>_test.csv (t [s], q [rad], "
+                                                  "qd [rad/s], qdd [rad/s^2], tau [Nm], tau_rb [Nm]) and "
+                                                  "published_friction_joint<J>_test.csv (t [s], tau_f [Nm])."),
+    models: Optional[str] = typer.Option(None, "--models", help=f"Comma-separated models (default: {','.join(COMPARE_MODELS)})."),
+    joints: Optional[str] = typer.Option(None, "--joints", help="Comma-separated joints (default: every joint in --data)."),
+    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] of the learned models "
+                                                                "(default: the benchmark's modest settings)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
+    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "summary": {...}} (RMSE in Nm) as one JSON object.'),
+) -> None:
+    """Fit every model type on every joint of a real log and print, per joint, the test RMSE [Nm] of
+    tau - tau_rb - tau_friction_pred beside the published friction model's (same samples)."""
+    from greybench.benchmarks import realdata as rd
+
+    names = _parse_models(models)
+    found = rd.joints_in(data)
+    if joints:
+        try:
+            wanted = [int(j) for j in joints.split(",") if j.strip()]
+        except ValueError:
+            raise InputError(f"not a list of joint numbers: {joints!r}", field="--joints") from None
+        for j in wanted:
+            if j not in found:
+                raise InputError(f"joint {j} has no records in {data} (have {', '.join(map(str, found))})",
+                                 field="--joints")
+        found = wanted
+    if epochs is not None and epochs < 1:
+        raise InputError("must be >= 1", field="--epochs")
+    results = []
+    t0 = time.perf_counter()
+    with progress(f"bench realdata: {len(names)} models x {len(found)} joints", total=len(names) * len(found),
+                  enabled=not as_json) as advance:
+        for j in found:
+            results.append(rd.run_joint(data, j, names, seed=seed, epochs=epochs, advance=advance))
+    wall = time.perf_counter() - t0
+    summ = rd.summary(results)
+    if as_json:
+        emit_json({"data": str(data), "models": names, "settings": rd.BENCH_SETTINGS, "wall_time_s": wall,
+                   "joints": [r.to_dict() for r in results], "summary": summ})
+        return
+    # models as rows, joints as columns: seven joints fit an 80-column terminal
+    table = Table(title=f"bench realdata: test RMSE \\[mNm] of tau - tau_rb - friction ({wall:.0f} s)",
+                  pad_edge=False)
+    table.add_column("model", no_wrap=True)
+    for r in results:
+        table.add_column(f"J{r.joint}", justify="right")
+    table.add_row("published", *[f"{r.published * 1e3:.1f} " for r in results])
+    table.add_row("no friction", *[f"{r.no_friction * 1e3:.1f} " for r in results])
+    for n in names:
+        table.add_row(n, *[f"{r.rmse[n] * 1e3:.1f}" + ("*" if r.rmse[n] <= r.published else " ") for r in results])
+    out.print(table)
+    out.print("* at or below the published model", highlight=False)
+    if "greybox_at_or_below_published" in summ:
+        line = f"grey-box at or below the published model on {summ['greybox_at_or_below_published']}/{summ['joints']} joints"
+        if "residual_over_greybox_max" in summ:
+            line += f"; residual / grey-box at most {summ['residual_over_greybox_max']:.3f} (goal <= 1.1)"
+        out.print(line, highlight=False)
+
+
 def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     app.command("trajectory")(guarded(trajectory))
     app.command("synth")(guarded(synth))
@@ -659,3 +848,4 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     app.command("promote")(guarded(promote))
     app.command("ui")(guarded(ui))
     bench_app.command("friction")(guarded(bench_friction))
+    bench_app.command("realdata")(guarded(bench_realdata))

@@ -4,13 +4,25 @@ As in pysindy/scikit-learn: ``__init__`` stores hyperparameters only; ``fit`` re
 fitted state ends in ``_``; predicting or saving before fitting raises
 :class:`~identify.errors.NotFittedError`; ``save``/``load`` round-trip exactly.
 
-Every model predicts the *total* torque of a record, like the measurement it is fitted to::
+The rigid-body torque contract, the same for every model type:
 
-    tau_pred = tau_F(qd, ...) + J*qdd + c        (no tau_rb in the training record)
-    tau_pred = tau_F(qd, ...) + tau_rb           (tau_rb given: rigid body known)
+- a record *with* ``tau_rb`` [Nm]: the model learns the friction ``tau - tau_rb``
+  (:attr:`~identify.records.AxisRecord.friction_target`) and nothing rigid, apart from a
+  constant offset c [Nm] of the torque reading (a sensor bias no rigid-body model holds; on
+  real arms it is of the order of the friction itself), which it reports as ``c`` and
+  predicts as part of ``tau_friction_pred``;
+- a record *without* it: the model learns ``tau`` and co-identifies an inertia J [kg m^2] and
+  an offset c [Nm] with the friction (as in IDIM-LS).
 
-so the inertia J [kg m^2] and offset c [Nm] are co-identified with the friction (as in
-IDIM-LS) unless the rigid-body torque is known.
+Predictions come in two parts (:meth:`FrictionModel.predict_parts`): the friction
+``tau_friction_pred`` = tau_F(qd, ...) and the total joint torque, comparable to ``tau``::
+
+    tau_pred = tau_friction_pred + tau_rb          (fitted with tau_rb)
+    tau_pred = tau_friction_pred + J*qdd + c       (fitted without)
+
+``tau_rb`` is never subtracted twice: a model composed of others (the residual model) trains
+its parts on :meth:`FrictionModel.target_part`, the share of ``friction_target`` a part
+explains, never on the total.
 """
 from __future__ import annotations
 
@@ -53,6 +65,8 @@ class FrictionModel:
     def fit(self, record: AxisRecord) -> "FrictionModel":
         """Identify the model on a training record; returns self."""
         self.rigid_ = record.tau_rb is None
+        self.linear_ = bool(record.linear)
+        self.cutoff_hz_ = record.cutoff_hz
         self._fit(record)
         self.train_metrics_ = self.score(record)
         return self
@@ -83,12 +97,42 @@ class FrictionModel:
                              source=record.source, field="tau_rb")
         return record.tau_rb
 
+    def offset(self) -> float:
+        """The co-identified torque offset c [Nm] that belongs to the friction prediction: when
+        the model was fitted with ``tau_rb`` (without, c is part of :meth:`rigid_part`)."""
+        self._check_fitted()
+        return 0.0 if self.rigid_ else float(self.params_.get("c", 0.0))
+
+    def target_part(self, record: AxisRecord) -> np.ndarray:
+        """The model's prediction of ``record.friction_target`` [Nm]: the friction, plus J*qdd + c
+        when co-identified (never plus ``tau_rb``, which the target has already left out)."""
+        _, total = self.predict_parts(record)
+        return total if self.rigid_ else total - record.tau_rb
+
+    def predict_parts(self, record: AxisRecord) -> tuple[np.ndarray, np.ndarray]:
+        """``(tau_friction_pred, tau_pred)`` [Nm] per sample: the friction, and the total joint
+        torque ``tau_friction_pred + tau_rb`` (or ``+ J*qdd + c``), see the module docstring."""
+        friction = self.predict_friction(record)
+        total = friction + self.rigid_part(record)
+        if not self.rigid_:  # everything learned of tau - tau_rb (extensions' corrections too)
+            friction = total - record.tau_rb
+        return friction, total
+
     def predict(self, record: AxisRecord) -> np.ndarray:
         """Total joint torque [Nm] per sample, comparable to the record's ``tau``."""
-        return self.predict_friction(record) + self.rigid_part(record)
+        return self.predict_parts(record)[1]
 
     def score(self, record: AxisRecord) -> Metrics:
         return evaluate(record.tau, self.predict(record))
+
+    def param_units(self) -> dict[str, str]:
+        """Units of the fitted parameters, for this model's axis kind (rotary: :attr:`units`;
+        linear: m for rad, N for Nm, kg for kg m^2)."""
+        from identify.records import linear_unit
+
+        if getattr(self, "linear_", False):
+            return {k: linear_unit(u) for k, u in self.units.items()}
+        return dict(self.units)
 
     def n_parameters(self) -> int:
         """Number of identified scalars (parameters and network weights)."""
@@ -112,8 +156,11 @@ class FrictionModel:
                 "model": self.name,
                 "format": FORMAT_VERSION,
                 "rigid": bool(self.rigid_),
+                "linear": bool(getattr(self, "linear_", False)),
+                "derivative_cutoff_hz": getattr(self, "cutoff_hz_", None),
                 "hyperparameters": self.get_hyperparameters(),
-                "params": {k: {"value": float(v), "unit": self.units.get(k, "")} for k, v in self.params_.items()},
+                "params": {k: {"value": float(v), "unit": self.param_units().get(k, "")}
+                           for k, v in self.params_.items()},
                 "train_metrics": self.train_metrics_.to_dict() if hasattr(self, "train_metrics_") else None,
             }
             (tmp / PARAMS_FILE).write_text(json.dumps(doc, indent=2) + "\n")
@@ -136,6 +183,9 @@ class FrictionModel:
     def from_document(cls, doc: dict, directory: Path) -> "FrictionModel":
         model = cls(**doc.get("hyperparameters", {}))
         model.rigid_ = bool(doc["rigid"])
+        model.linear_ = bool(doc.get("linear", False))
+        cut = doc.get("derivative_cutoff_hz")
+        model.cutoff_hz_ = None if cut is None else float(cut)
         model.params_ = {k: float(v["value"]) for k, v in doc["params"].items()}
         if doc.get("train_metrics"):
             model.train_metrics_ = Metrics(**doc["train_metrics"])

@@ -8,7 +8,7 @@ compose by multiplication (levels) or addition (torques)::
     g(qd, .)  = g_Stribeck(qd) * m_load * m_temp * m_dir       static level [Nm]
     nu(.)     = nu * exp(k_nu_temp * dT)                       viscous coefficient [Nm s/rad]
     tau_F     = s0*z + s1*zdot + nu(.)*qd + ripple             bristle update with g(qd, .)
-    tau       = tau_F + (J + k_J*dL)*qdd + c + drift*(t - t0)
+    tau       = tau_F + (J + k_J*dL)*qdd + c + drift*(t - t0) + grav_cos*cos q + grav_sin*sin q
 
 with ``dL = |tau_load| - load_ref`` [Nm], ``dT = temp - temp_ref`` [K] (references: the
 training record's means, stored with the parameters) and
@@ -31,6 +31,13 @@ training record's means, stored with the parameters) and
 - ``drift``: ``drift*(t - t0)``, a slow additive torque drift from the record's start ``t0``
   (a sensor offset creeping while the record runs; each record restarts it, which is the
   only assumption that can be carried to another record).
+- ``gravity``: ``grav_cos*cos(q) + grav_sin*sin(q)``, a pose-dependent torque the rigid-body
+  model left in the data: the gravity torque of a missing mass m at radius r about a rotary
+  joint is ``m g r cos(q - phi)`` exactly, whatever phi (rotary axes only).
+
+With ``tau_rb`` the inertia, drift and gravity terms correct the rigid-body torque; they are
+part of what the model learned of ``tau - tau_rb``, so ``tau_friction_pred`` holds them
+(:meth:`~identify.models.base.FrictionModel.predict_parts`).
 
 Multiplicative level factors are floored at 0.05 so a level stays positive when a linear
 law is extrapolated far beyond the training range.
@@ -61,6 +68,7 @@ EXTENSIONS: dict[str, dict[str, str]] = {
     "asymmetry": {"asym": "-"},
     "inertia": {"k_J": "kg m^2/Nm"},
     "drift": {"drift": "Nm/s"},
+    "gravity": {"grav_cos": "Nm", "grav_sin": "Nm"},
 }
 #: Columns an extension needs in every record it predicts.
 NEEDS = {"load": "tau_load", "temperature": "temp", "inertia": "tau_load"}
@@ -135,6 +143,8 @@ class LuGreExtended(FrictionModel):
     def fit_from(self, baseline: LuGre, record: AxisRecord) -> "LuGreExtended":
         """Extend an already fitted LuGre ``baseline`` (same training ``record``); returns self."""
         self.rigid_ = bool(baseline.rigid_)
+        self.linear_ = bool(record.linear)
+        self.cutoff_hz_ = record.cutoff_hz
         self._extend(baseline, record)
         self.train_metrics_ = self.score(record)
         return self
@@ -167,7 +177,8 @@ class LuGreExtended(FrictionModel):
 
     # the refit's free parameters: transformed so that bounds are simple boxes
     def _free(self) -> list[str]:
-        names = ["s0", "fc", "fs", "vs", "delta", "s1", "nu"] + (["J", "c"] if self.rigid_ else [])
+        names = ["s0", "fc", "fs", "vs", "delta", "s1", "nu"] + (["J", "c"] if self.rigid_ else
+                                                                 (["c"] if "c" in self.params_ else []))
         for c in self.causes:
             names += list(EXTENSIONS[c])
         return names
@@ -249,6 +260,8 @@ class LuGreExtended(FrictionModel):
         if "position" in self.causes:
             n = q["ripple_order"]
             f = f + q["ripple_sin"] * np.sin(n * record.q) + q["ripple_cos"] * np.cos(n * record.q)
+        if not self.rigid_:
+            f = f + q.get("c", 0.0)  # the torque offset (fitted with tau_rb, base module)
         return f
 
     def _rigid_extra(self, q: dict, record: AxisRecord, base: bool) -> np.ndarray:
@@ -258,6 +271,8 @@ class LuGreExtended(FrictionModel):
             out = out + q["k_J"] * (np.abs(record.tau_load) - q["load_ref"]) * record.qdd
         if "drift" in self.causes:
             out = out + q["drift"] * (record.t - record.t[0])
+        if "gravity" in self.causes:
+            out = out + q["grav_cos"] * np.cos(record.q) + q["grav_sin"] * np.sin(record.q)
         return out
 
     def _friction(self, record: AxisRecord) -> np.ndarray:

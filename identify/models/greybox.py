@@ -4,6 +4,7 @@ Model (paper eqs. 7-9 with eq. 5 replaced by a network, Fig. 2)::
 
     tau_F = s0*z + s1*zdot + nu*qd,   zdot = qd - s0*|qd|*z/g(qd),   g = MLP(qd) > 0
     tau   = tau_F + J*qdd + c          (J, c co-identified when the record has no tau_rb)
+    tau   = tau_F + c + tau_rb         (with tau_rb: only the torque offset c, predicted with tau_F)
 
 - ``g``: one hidden layer of 10 sigmoid nodes, softplus output times a torque scale, so
   g > 0 by construction. Its input is the speed through a fixed log compression
@@ -45,6 +46,7 @@ from scipy.optimize import lsq_linear
 from torch import nn
 
 from identify.models.base import FrictionModel
+from identify.models.lugre import relative_bounds
 from identify.models.lugre_kernel import bristle_states
 from identify.models.scan import linear_recurrence
 from identify.records import AxisRecord
@@ -184,7 +186,8 @@ class GreyBoxLuGreNet(nn.Module):
         self.raw_s1 = nn.Parameter(torch.tensor(_inverse_softplus(s1 / float(self.s1_scale)), dtype=DTYPE))
         self.raw_nu = nn.Parameter(torch.tensor(_inverse_softplus(nu / float(self.nu_scale)), dtype=DTYPE))
         self.raw_J = nn.Parameter(torch.tensor(J / float(self.J_scale), dtype=DTYPE), requires_grad=rigid)
-        self.raw_c = nn.Parameter(torch.tensor(c / float(self.c_scale), dtype=DTYPE), requires_grad=rigid)
+        # the offset is co-identified with or without tau_rb (a torque-reading bias, base module)
+        self.raw_c = nn.Parameter(torch.tensor(c / float(self.c_scale), dtype=DTYPE))
 
     # physical parameters, positive by construction
     @property
@@ -214,13 +217,16 @@ class GreyBoxLuGreNet(nn.Module):
         w0 = g[0] * torch.sign(qd[0])  # steady state of the first velocity (zero at rest)
         w = bristle_recurrence(v_int, dt, self.level(v_int), s0, w0)
         friction = w + self.s1 * (qd - qd.abs() * w / g) + self.nu * qd
+        if not self.rigid:
+            friction = friction + self.c
         total = friction + self.J * qdd + self.c if self.rigid else friction
         return GreyBoxOutput(friction=friction, total=total, w=w)
 
     def physical_parameters(self) -> dict[str, float]:
         p = {"s0": self.s0, "s1": self.s1, "nu": self.nu}
         if self.rigid:
-            p.update(J=self.J, c=self.c)
+            p["J"] = self.J
+        p["c"] = self.c
         return {k: float(v.detach()) for k, v in p.items()}
 
 
@@ -239,7 +245,7 @@ def forward_recurrent(net: GreyBoxLuGreNet, qd: torch.Tensor, qdd: torch.Tensor,
         v = qd[k:k + 1]
         g = net.level(v)[0]
         f = w + s1 * (qd[k] - qd[k].abs() * w / g) + nu * qd[k]
-        out.append(f + net.J * qdd[k] + net.c if net.rigid else f)
+        out.append(f + net.J * qdd[k] + net.c if net.rigid else f + net.c)
         gi = net.level(v_int[k:k + 1])[0]
         a = torch.exp(-s0 * v_int[k].abs() * dt[k] / gi)
         w = a * w + (1.0 - a) * gi * torch.sign(v_int[k])
@@ -300,11 +306,10 @@ def _static_level_estimate(record: AxisRecord, level: StaticLevelNet, rigid: boo
     knots = np.linspace(x_min, 1.0, n_knots)
     keep = x >= x_min
     H = _hat_basis(x[keep], knots) * np.sign(record.qd[keep])[:, None]
-    cols = [H, record.qd[keep, None]] + ([record.qdd[keep, None], np.ones((int(keep.sum()), 1))] if rigid else [])
+    cols = [H, record.qd[keep, None]] + ([record.qdd[keep, None]] if rigid else []) + [np.ones((int(keep.sum()), 1))]
     X = np.hstack(cols)
     lb = np.zeros(X.shape[1])
-    if rigid:
-        lb[-1] = -np.inf
+    lb[-1] = -np.inf  # the offset c
     res = lsq_linear(X, record.friction_target[keep], bounds=(lb, np.full(X.shape[1], np.inf)), method="bvls")
     return _hat_basis(xe, knots) @ res.x[:n_knots]
 
@@ -319,21 +324,22 @@ def _initial_lugre(record: AxisRecord, level: StaticLevelNet, rigid: bool) -> di
         g_int = level(torch.tensor(v_int, dtype=DTYPE)).numpy()
         g = level(torch.tensor(qd, dtype=DTYPE)).numpy()
     best = None
-    for s0 in np.geomspace(1e2, 1e6, 17):
+    (s0_lo, s0_hi), _ = relative_bounds(y, qd)  # the LuGre search range, from the record's scales
+    for s0 in np.geomspace(s0_lo, s0_hi, 17):
         z = bristle_states(v_int, dt, g_int, s0)
         z[0] = np.sign(qd[0]) * g[0] / s0
         w = s0 * z
-        cols = [qd - np.abs(qd) * w / g, qd] + ([record.qdd, np.ones(record.n)] if rigid else [])
+        cols = [qd - np.abs(qd) * w / g, qd] + ([record.qdd] if rigid else []) + [np.ones(record.n)]
         X = np.column_stack(cols)
-        lb = np.array([0.0, 0.0, 0.0, -np.inf][: X.shape[1]])
+        lb = np.array([0.0, 0.0] + ([0.0] if rigid else []) + [-np.inf])
         res = lsq_linear(X, y - w, bounds=(lb, np.full(X.shape[1], np.inf)), method="bvls")
         sse = float(np.sum((X @ res.x - (y - w)) ** 2))
         if best is None or sse < best[0]:
             best = (sse, s0, res.x)
     _, s0, x = best
-    p = {"s0": float(s0), "s1": float(x[0]), "nu": float(x[1])}
+    p = {"s0": float(s0), "s1": float(x[0]), "nu": float(x[1]), "c": float(x[-1])}
     if rigid:
-        p.update(J=float(x[2]), c=float(x[3]))
+        p["J"] = float(x[2])
     return p
 
 

@@ -61,6 +61,30 @@ class LuGreTable:
         return np.interp(v, self.v, self.g)
 
 
+#: Bristle time constants ``level / (s0 * v_max)`` [s] searched: the time the joint takes at
+#: top speed to cross its pre-sliding deflection. On the synthetic axis (level ~ 7 Nm, top speed
+#: ~ 1.7 rad/s) these are the former fixed bounds 1e2..1e6 Nm/rad.
+BRISTLE_TIME = (4e-6, 4e-2)
+#: Stribeck velocity range relative to the top speed [-] (former 1e-3..1 rad/s at ~2 rad/s).
+STRIBECK_SHARE = (5e-4, 0.5)
+
+
+def torque_level(y: np.ndarray) -> float:
+    """Friction-level scale of a target torque [Nm]: 1.5 x its 99th percentile magnitude."""
+    return 1.5 * float(np.percentile(np.abs(y), 99)) + 1e-300
+
+
+def relative_bounds(y: np.ndarray, qd: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Search ranges of s0 [Nm/rad] and vs [rad/s] from the record's own scales (top speed
+    ``v_max`` and :func:`torque_level`): ``s0 = level / (v_max * tau_b)`` for the bristle times
+    :data:`BRISTLE_TIME` and ``vs = v_max *`` :data:`STRIBECK_SHARE`. Scaling the torque or the
+    position unit (a linear axis in m) scales the ranges with the parameters."""
+    v_max = float(np.max(np.abs(qd))) or 1.0
+    level = torque_level(y)
+    s0 = (level / (v_max * BRISTLE_TIME[1]), level / (v_max * BRISTLE_TIME[0]))
+    return s0, (v_max * STRIBECK_SHARE[0], v_max * STRIBECK_SHARE[1])
+
+
 def velocity_grid(v_max: float, n: int = 513) -> np.ndarray:
     """Symmetric grid on [-v_max, v_max], dense near zero where the Stribeck dip lives."""
     half = np.geomspace(1e-5, v_max, (n - 1) // 2)
@@ -80,10 +104,12 @@ class LuGre(FrictionModel):
         Random seed of the GA.
     polish : bool
         Run the local least-squares polish after the GA.
-    s0_bounds : tuple of float
-        Search range of s0 [Nm/rad].
-    vs_bounds : tuple of float
-        Search range of the Stribeck velocity [rad/s].
+    s0_bounds : tuple of float, optional
+        Search range of s0 [Nm/rad]. None (default): relative to the record, see
+        :func:`relative_bounds` (so a record in other units, or of a linear axis, is
+        searched alike).
+    vs_bounds : tuple of float, optional
+        Search range of the Stribeck velocity [rad/s]; None: relative to the record.
     delta_bounds : tuple of float
         Search range of the Stribeck exponent [-].
     """
@@ -93,38 +119,43 @@ class LuGre(FrictionModel):
              "delta": "-", "J": "kg m^2", "c": "Nm"}
 
     def __init__(self, population: int = 48, generations: int = 50, seed: int = 0, polish: bool = True,
-                 s0_bounds: tuple[float, float] = (1e2, 1e6), vs_bounds: tuple[float, float] = (1e-3, 1.0),
+                 s0_bounds: tuple[float, float] | None = None, vs_bounds: tuple[float, float] | None = None,
                  delta_bounds: tuple[float, float] = (0.5, 3.0)):
         self.population = population
         self.generations = generations
         self.seed = seed
         self.polish = polish
-        self.s0_bounds = tuple(s0_bounds)
-        self.vs_bounds = tuple(vs_bounds)
+        self.s0_bounds = None if s0_bounds is None else tuple(s0_bounds)
+        self.vs_bounds = None if vs_bounds is None else tuple(vs_bounds)
         self.delta_bounds = tuple(delta_bounds)
 
     # ---- identification --------------------------------------------------------------
-    def _gene_space(self, y: np.ndarray) -> list[dict]:
-        level = 1.5 * float(np.percentile(np.abs(y), 99)) + 1e-9
-        return [{"low": np.log10(self.s0_bounds[0]), "high": np.log10(self.s0_bounds[1])},
+    def _gene_space(self, y: np.ndarray, qd: np.ndarray) -> list[dict]:
+        level = torque_level(y)
+        s0_rel, vs_rel = relative_bounds(y, qd)
+        s0b = self.s0_bounds or s0_rel
+        vsb = self.vs_bounds or vs_rel
+        return [{"low": np.log10(s0b[0]), "high": np.log10(s0b[1])},
                 {"low": 0.0, "high": level},
                 {"low": 0.0, "high": level},
-                {"low": np.log10(self.vs_bounds[0]), "high": np.log10(self.vs_bounds[1])},
+                {"low": np.log10(vsb[0]), "high": np.log10(vsb[1])},
                 {"low": self.delta_bounds[0], "high": self.delta_bounds[1]}]
 
     def _fit(self, record: AxisRecord) -> None:
         qd = np.ascontiguousarray(record.qd, dtype=float)
-        qdd = np.ascontiguousarray(record.qdd, dtype=float)
+        # with tau_rb only the offset c is co-identified: a zero acceleration column keeps the
+        # same linear solve (J then stays 0 and is not reported)
+        qdd = np.ascontiguousarray(record.qdd if self.rigid_ else np.zeros(record.n), dtype=float)
         dt = np.ascontiguousarray(record.dt, dtype=float)
         y = np.ascontiguousarray(record.friction_target, dtype=float)
-        rigid = bool(self.rigid_)
+        rigid = True
         n = float(y.size)
 
         def fitness(_ga, solutions, _idx):
             sse, _ = population_sse(np.ascontiguousarray(np.atleast_2d(solutions), dtype=float), qd, qdd, dt, y, rigid)
             return list(-sse / n)
 
-        space = self._gene_space(y)
+        space = self._gene_space(y, qd)
         ga = pygad.GA(num_generations=self.generations, num_parents_mating=max(4, self.population // 3),
                       fitness_func=fitness, fitness_batch_size=self.population, sol_per_pop=self.population,
                       num_genes=5, gene_space=space, gene_type=float, parent_selection_type="tournament",
@@ -133,11 +164,11 @@ class LuGre(FrictionModel):
         ga.run()
         best, _, _ = ga.best_solution(pop_fitness=ga.last_generation_fitness)
         _, lin = population_sse(np.ascontiguousarray(best[None, :], dtype=float), qd, qdd, dt, y, rigid)
-        x = np.concatenate([best, lin[0, :4 if rigid else 2]])
+        x = np.concatenate([best, lin[0, :4]])
         self.ga_generations_ = int(ga.generations_completed)
         if self.polish:
             x = self._polish(x, qd, qdd, dt, y, rigid, space)
-        self.params_ = self._unpack(x, rigid)
+        self.params_ = self._unpack(x, bool(self.rigid_))
 
     @staticmethod
     def _unpack(x: np.ndarray, rigid: bool) -> dict[str, float]:
@@ -145,6 +176,8 @@ class LuGre(FrictionModel):
              "s1": x[5], "nu": x[6]}
         if rigid:
             p.update(J=x[7], c=x[8])
+        elif x.size > 8:
+            p["c"] = x[8]  # the torque offset (with tau_rb; base module)
         return {k: float(v) for k, v in p.items()}
 
     def _polish(self, x0, qd, qdd, dt, y, rigid, space):
@@ -169,7 +202,7 @@ class LuGre(FrictionModel):
         p = self.params_
         z = np.empty(record.n)
         return lugre_stribeck(np.ascontiguousarray(record.qd, dtype=float), np.ascontiguousarray(record.dt),
-                              p["s0"], p["s1"], p["nu"], p["fc"], p["fs"], p["vs"], p["delta"], z)
+                              p["s0"], p["s1"], p["nu"], p["fc"], p["fs"], p["vs"], p["delta"], z) + self.offset()
 
     def static_curve(self, v: np.ndarray) -> np.ndarray:
         """Fitted static level g(v) [Nm]."""

@@ -1,6 +1,7 @@
 """The residual LuGre model: conventional LuGre plus an MLP on its residual (paper 2.3.1, ref. [62]).
 
-    tau = tau_LuGre(qd; GA-identified, incl. J*qdd + c) + tau_scale * MLP(x)
+    tau_friction = tau_LuGre(qd; GA-identified) + tau_scale * MLP(x)
+    tau          = tau_friction + J*qdd + c  (co-identified)   or  + tau_rb  (given)
 
 The conventional LuGre model (:class:`identify.models.lugre.LuGre`, genetic algorithm +
 least squares) is fitted first; the network (2 hidden layers of 10 nodes, LeakyReLU, linear
@@ -96,22 +97,23 @@ class ResidualLuGre(FrictionModel):
         self.population = population
         self.generations = generations
 
-    def _lugre_inputs(self, record: AxisRecord) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, np.ndarray]:
-        """(qd, normalised bristle state, LuGre friction) tensors and the LuGre total torque."""
+    def _lugre_inputs(self, record: AxisRecord) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(qd, normalised bristle state, LuGre friction) tensors."""
         p = self.base_.params_
         qd = np.ascontiguousarray(record.qd, dtype=float)
         z = np.empty(record.n)
         f = lugre_stribeck(qd, np.ascontiguousarray(record.dt, dtype=float), p["s0"], p["s1"], p["nu"], p["fc"],
-                           p["fs"], p["vs"], p["delta"], z)
+                           p["fs"], p["vs"], p["delta"], z) + self.base_.offset()
         g = self.base_.static_curve(qd)
-        total = f + self.base_.rigid_part(record)
         as_t = lambda x: torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)
-        return as_t(qd), as_t(p["s0"] * z / g), as_t(f), total
+        return as_t(qd), as_t(p["s0"] * z / g), as_t(f)
 
     def _fit(self, record: AxisRecord) -> None:
         self.base_ = LuGre(population=self.population, generations=self.generations, seed=self.seed).fit(record)
-        qd, state, f, total = self._lugre_inputs(record)
-        residual = torch.tensor(record.friction_target - total, dtype=DTYPE)
+        qd, state, f = self._lugre_inputs(record)
+        # what LuGre leaves of the friction target: J*qdd + c only when co-identified (with tau_rb
+        # the target has already left the rigid body out; taking it off again subtracted it twice)
+        residual = torch.tensor(record.friction_target - self.base_.target_part(record), dtype=DTYPE)
         v_max = float(np.max(np.abs(record.qd))) or 1.0
         torch.manual_seed(self.seed)
         net = ResidualNet(v_max, float(np.std(record.friction_target)) or 1.0, float(residual.std()) or 1.0,
@@ -127,7 +129,7 @@ class ResidualLuGre(FrictionModel):
         self.params_ = dict(self.base_.params_)
 
     def _friction(self, record: AxisRecord) -> np.ndarray:
-        qd, state, f, _ = self._lugre_inputs(record)
+        qd, state, f = self._lugre_inputs(record)
         with torch.no_grad():
             return f.numpy() + self.net_(qd, state, f).numpy()
 

@@ -17,7 +17,8 @@ from identify.records import AxisRecord
 
 
 def _rigid_columns(record: AxisRecord, rigid: bool) -> list[np.ndarray]:
-    return [record.qdd, np.ones(record.n)] if rigid else []
+    """J*qdd + c co-identified without tau_rb; with it, only the torque offset c (base module)."""
+    return [record.qdd, np.ones(record.n)] if rigid else [np.ones(record.n)]
 
 
 def _bounded_lsq(columns: list[np.ndarray], y: np.ndarray, nonneg: list[bool]) -> tuple[np.ndarray, float]:
@@ -38,14 +39,16 @@ class CoulombViscous(FrictionModel):
 
     def _fit(self, record: AxisRecord) -> None:
         cols = [np.sign(record.qd), record.qd] + _rigid_columns(record, self.rigid_)
-        x, _ = _bounded_lsq(cols, record.friction_target, [True, True, True, False][: len(cols)])
+        x, _ = _bounded_lsq(cols, record.friction_target, [True, True] + ([True, False] if self.rigid_ else [False]))
         self.params_ = {"mu": float(x[0]), "nu": float(x[1])}
         if self.rigid_:
             self.params_.update(J=float(x[2]), c=float(x[3]))
+        else:
+            self.params_["c"] = float(x[2])
 
     def _friction(self, record: AxisRecord) -> np.ndarray:
         p = self.params_
-        return p["mu"] * np.sign(record.qd) + p["nu"] * record.qd
+        return p["mu"] * np.sign(record.qd) + p["nu"] * record.qd + self.offset()
 
 
 class Stribeck(FrictionModel):
@@ -69,7 +72,7 @@ class Stribeck(FrictionModel):
     def _solve_linear(self, record, log_vs, delta):
         shape = np.sign(record.qd) * np.exp(-np.abs(record.qd / 10.0**log_vs) ** delta)
         cols = [np.sign(record.qd), shape, record.qd] + _rigid_columns(record, self.rigid_)
-        return _bounded_lsq(cols, record.friction_target, [True, True, True, True, False][: len(cols)])
+        return _bounded_lsq(cols, record.friction_target, [True, True, True] + ([True, False] if self.rigid_ else [False]))
 
     def _fit(self, record: AxisRecord) -> None:
         lo = np.log10(self.vs_bounds)
@@ -84,7 +87,10 @@ class Stribeck(FrictionModel):
         self.params_ = {"fc": float(x[0]), "fs": float(x[0] + x[1]), "vs": 10.0**log_vs, "delta": delta, "nu": float(x[2])}
         if self.rigid_:
             self.params_.update(J=float(x[3]), c=float(x[4]))
+        else:
+            self.params_["c"] = float(x[3])
 
     def _friction(self, record: AxisRecord) -> np.ndarray:
         p = self.params_
-        return np.sign(record.qd) * stribeck(record.qd, p["fc"], p["fs"], p["vs"], p["delta"]) + p["nu"] * record.qd
+        return (np.sign(record.qd) * stribeck(record.qd, p["fc"], p["fs"], p["vs"], p["delta"]) + p["nu"] * record.qd
+                + self.offset())

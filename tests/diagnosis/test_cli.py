@@ -23,7 +23,8 @@ def test_diagnose_json_outputs_and_tracking(case_files, tmp_path):
     assert len(res.stdout.strip().splitlines()) == 1  # exactly one JSON object on stdout
     assert set(doc) == {"cause", "ranking", "baseline", "extended", "gain"}
     assert doc["cause"] == "drift"
-    assert {r["cause"] for r in doc["ranking"]} == {"load", "temperature", "position", "asymmetry", "inertia", "drift"}
+    assert {r["cause"] for r in doc["ranking"]} == {"load", "temperature", "position", "asymmetry", "inertia", "drift",
+                                                   "gravity"}
     assert all(set(r) == {"cause", "score", "evidence"} for r in doc["ranking"])
     assert doc["baseline"]["model"] == "lugre" and doc["extended"]["model"] == "lugre-extended[drift]"
     assert doc["gain"] == pytest.approx(1 - doc["extended"]["test_rmse"] / doc["baseline"]["test_rmse"])

@@ -110,11 +110,11 @@ def test_plant_inertia_follows_the_load(trajectories):
 
 
 def test_records_without_optional_columns_skip_their_candidates(make_pair):
-    """No temp/tau_load columns: only position, asymmetry and drift can be tested, and are."""
+    """No temp/tau_load columns: only position, asymmetry, drift and gravity can be tested, and are."""
     def strip(frame):
         return frame.drop(columns=["temp", "tau_load"])
 
     train, test = make_pair("drift", 0.5, seed=51, extra=strip)
     res = diagnose(train, test, generations=GENERATIONS)
-    assert {s.cause for s in res.analysis.ranking} == {Cause.POSITION, Cause.ASYMMETRY, Cause.DRIFT}
+    assert {s.cause for s in res.analysis.ranking} == {Cause.POSITION, Cause.ASYMMETRY, Cause.DRIFT, Cause.GRAVITY}
     assert res.cause is Cause.DRIFT

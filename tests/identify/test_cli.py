@@ -48,7 +48,7 @@ def test_fit_json_and_predict(chain):
     assert r.exit_code == 0, r.output
     pred = pd.read_csv(chain / "pred.csv")
     src = pd.read_parquet(chain / "test.parquet")
-    assert list(pred.columns) == list(src.columns) + ["tau_pred"]
+    assert list(pred.columns) == list(src.columns) + ["tau_friction_pred", "tau_pred"]
 
 
 def test_bad_training_file_exits_2_and_writes_nothing(chain, tmp_path):

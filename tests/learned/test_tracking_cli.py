@@ -157,7 +157,7 @@ def test_compare_json_rows_sorted(mlflow_store, short_files):
 
 @pytest.mark.parametrize("args, where", [
     (["compare", "--models", "coulomb-viscous,nonsense"], "--models"),
-    (["compare", "--models", "stribeck", "--axis", "7"], "--axis"),
+    (["compare", "--models", "stribeck", "--axis", "0"], "--axis"),
     (["fit", "--model", "nonsense"], "--model"),
     (["fit", "--model", "greybox", "--epochs", "0"], "--epochs"),
 ])

@@ -1,0 +1,158 @@
+"""Real measured records as a benchmark: every friction model type fitted on every joint of a
+robot log and scored against a published friction model on held-out samples.
+
+A data folder holds, per joint J, an axis record ``joint{J}_train.csv`` and ``joint{J}_test.csv``
+(``t, q, qd, qdd, tau, tau_rb``: ``tau_rb`` the published rigid-body model's torque) and the
+published friction model's prediction on the test samples, ``published_friction_joint{J}_test.csv``
+(``t, tau_f``). Every model learns the friction ``tau - tau_rb`` from the training record
+(:mod:`identify.models.base`); the score is the RMSE [Nm] of ``tau - tau_rb - tau_friction_pred``
+on the test record, the same quantity as the published model's ``tau - tau_rb - tau_f``. The
+rigid-body model's own error is in both, so the numbers compare friction models on equal terms.
+"""
+from __future__ import annotations
+
+import re
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from identify.errors import InputError
+from identify.models import make_model
+from identify.records import load_record, read_table
+
+#: Model types in the order of the table.
+MODELS = ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox")
+#: Modest settings so seven joints run in a few minutes on two cores; documented in the README.
+BENCH_SETTINGS: dict[str, dict] = {
+    "lugre": {"generations": 30},
+    "lstm": {"epochs": 40},
+    "residual": {"epochs": 200, "generations": 30},
+    "greybox": {"epochs": 300},
+}
+PUBLISHED = "published_friction_joint{}_test.csv"
+
+
+@dataclass
+class JointResult:
+    """One joint's scores on its test record.
+
+    Attributes
+    ----------
+    joint : int
+    n_train, n_test : int
+        Samples.
+    published : float
+        RMSE [Nm] of ``tau - tau_rb - tau_f`` (the published friction model).
+    no_friction : float
+        RMSE [Nm] of ``tau - tau_rb`` (no friction model at all).
+    rmse : dict
+        Model name -> RMSE [Nm] of ``tau - tau_rb - tau_friction_pred``.
+    fit_time : dict
+        Model name -> fit wall time [s].
+    """
+
+    joint: int
+    n_train: int
+    n_test: int
+    published: float
+    no_friction: float
+    rmse: dict[str, float] = field(default_factory=dict)
+    fit_time: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def joints_in(data: Path) -> list[int]:
+    """Joint numbers J with a ``joint{J}_train.csv`` in ``data``; each must have its test record
+    and published prediction (InputError naming the missing file)."""
+    data = Path(data)
+    if not data.is_dir():
+        raise InputError("not a folder", source=str(data), field="--data")
+    joints = sorted(int(m.group(1)) for p in data.iterdir() if (m := re.fullmatch(r"joint(\d+)_train\.csv", p.name)))
+    if not joints:
+        raise InputError("no joint<J>_train.csv records in the folder", source=str(data), field="--data")
+    for j in joints:
+        for name in (f"joint{j}_test.csv", PUBLISHED.format(j)):
+            if not (data / name).exists():
+                raise InputError(f"joint {j} has a training record but no {name}", source=str(data / name))
+    return joints
+
+
+def _published(data: Path, joint: int, t_test: np.ndarray) -> np.ndarray:
+    path = data / PUBLISHED.format(joint)
+    df = read_table(path)
+    for col in ("t", "tau_f"):
+        if col not in df.columns:
+            raise InputError(f"missing column '{col}'", source=str(path), field=col)
+    t = df["t"].to_numpy(dtype=float)
+    if t.size != t_test.size or not np.allclose(t, t_test, atol=1e-6):
+        raise InputError(f"its {t.size} times do not match the {t_test.size} samples of joint{joint}_test.csv",
+                         source=str(path), field="t")
+    tau_f = df["tau_f"].to_numpy(dtype=float)
+    if not np.isfinite(tau_f).all():
+        row = int(np.argmax(~np.isfinite(tau_f)))
+        raise InputError("NaN or infinite value", source=str(path), field="tau_f", row=row)
+    return tau_f
+
+
+def _rmse(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def run_joint(data: Path, joint: int, models=MODELS, *, seed: int = 0, epochs: int | None = None,
+              advance: Callable[[float], None] = lambda n=1: None) -> JointResult:
+    """Fit ``models`` on one joint's training record and score them on its test record."""
+    data = Path(data)
+    train = load_record(data / f"joint{joint}_train.csv")
+    test = load_record(data / f"joint{joint}_test.csv", cutoff_hz=train.cutoff_hz)
+    for rec in (train, test):
+        if rec.tau_rb is None:
+            raise InputError("the benchmark needs the rigid-body torque column 'tau_rb'", source=rec.source,
+                             field="tau_rb")
+    tau_f = _published(data, joint, test.t)
+    y = test.friction_target
+    res = JointResult(joint=joint, n_train=train.n, n_test=test.n, published=_rmse(y - tau_f), no_friction=_rmse(y))
+    for name in models:
+        kwargs = dict(BENCH_SETTINGS.get(name, {}))
+        est0 = make_model(name)
+        hp = est0.get_hyperparameters()
+        if "seed" in hp:
+            kwargs["seed"] = seed
+        if epochs is not None and "epochs" in hp:
+            kwargs["epochs"] = epochs
+        est = make_model(name, **kwargs)
+        _one_torch_thread()
+        t0 = time.perf_counter()
+        est.fit(train)
+        res.fit_time[name] = time.perf_counter() - t0
+        friction, _ = est.predict_parts(test)
+        res.rmse[name] = _rmse(y - friction)
+        advance(1)
+    return res
+
+
+def _one_torch_thread() -> None:
+    """The GA's numba threads raise torch's thread count (shared OpenMP); small nets run
+    fastest on one, and results stay independent of the machine."""
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+def summary(results: list[JointResult], grey: str = "greybox", residual: str = "residual") -> dict:
+    """The benchmark's goals: grey-box at or below the published model on every joint, the
+    residual model within 1.1x of the grey-box."""
+    out = {}
+    if results and grey in results[0].rmse:
+        out["greybox_at_or_below_published"] = sum(r.rmse[grey] <= r.published for r in results)
+        out["joints"] = len(results)
+        if residual in results[0].rmse:
+            out["residual_over_greybox_max"] = max(r.rmse[residual] / r.rmse[grey] for r in results)
+    return out
