@@ -84,7 +84,7 @@ from identify.records import AxisRecord
 
 
 class Cause(str, Enum):
-    """Candidate explanations of a friction model's residual (issue 4)."""
+    """Candidate explanations of a friction model's residual."""
 
     NONE = "none"
     LOAD = "load"

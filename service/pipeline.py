@@ -2,7 +2,7 @@
 
 The service is a thin layer: every number here comes from :mod:`simulate` and :mod:`identify`.
 A simulation job (paper 3.8, the planner's assistance system) runs, per pose, the pose ranking of
-issue 8 (:func:`simulate.evaluation.ranking.rank_poses` with that one placement):
+(:func:`simulate.evaluation.ranking.rank_poses` with that one placement):
 
 1. the program interpolated at the 2 ms cycle (:func:`simulate.toolpath.interpolation.interpolate`),
 2. the workpiece placed and the joint trajectory by inverse kinematics with switching points
@@ -155,12 +155,12 @@ def _model_folders(task: PoseTask) -> dict[int, str]:
 def simulate_pose(task: PoseTask) -> PoseOutcome:
     """Simulate, measure and score one pose; deterministic.
 
-    One call of :func:`simulate.evaluation.ranking.rank_poses` (issue 8) with this single placement
+    One call of :func:`simulate.evaluation.ranking.rank_poses` with this single placement
     and one in-process worker, so the service computes exactly what ``greybench rank-poses`` does;
     the virtual workpiece it saves is exported as GLB (coloured by deflection,
     :func:`simulate.machining.virtual_workpiece.export_meshes`).
     """
-    ranking_mod = _import_stage("simulate.evaluation.ranking", "the pose ranking (issue 8)")
+    ranking_mod = _import_stage("simulate.evaluation.ranking", "the pose ranking")
     from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes
     from simulate.toolpath.placement import parse_poses
 
@@ -312,7 +312,7 @@ def pose_tasks(request: dict, job_dir: Path, progress: Progress) -> list[PoseTas
 def rank(outcomes: list[PoseOutcome]) -> tuple[list[dict], list[dict]]:
     """Ranking and Table-2 rows (mm) with one deviation per pose.
 
-    Score of issue 8 (:attr:`simulate.evaluation.features.FeatureTable.score`): the sum over the
+    Score (:attr:`simulate.evaluation.features.FeatureTable.score`): the sum over the
     ten rows of |deviation| / tolerance, lower is better; ties broken by more rows in tolerance.
     """
     order = sorted(outcomes, key=lambda o: (o.summary["score"], -o.summary["in_tolerance"], o.pose))
@@ -347,8 +347,8 @@ def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address
 
 
 def run_diagnose(request: dict, job_dir: Path, progress: Progress) -> dict:
-    """Friction diagnosis (issue 4) of the uploaded records; report and models in ``diagnosis/``."""
-    diagnosis = _import_stage("identify.diagnosis", "friction diagnosis (issue 4)")
+    """Friction diagnosis of the uploaded records; report and models in ``diagnosis/``."""
+    diagnosis = _import_stage("identify.diagnosis", "friction diagnosis")
     from identify.records import load_record
 
     train = load_record(job_dir / "train.csv")
@@ -365,11 +365,11 @@ def run_diagnose(request: dict, job_dir: Path, progress: Progress) -> dict:
 
 
 def run_explain(request: dict, job_dir: Path, progress: Progress) -> dict:
-    """Explain a measured part (issue 9): name the cause, calibrate, report; outputs in ``explain/``.
+    """Explain a measured part: name the cause, calibrate, report; outputs in ``explain/``.
 
     Same steps as ``greybench explain`` (:func:`simulate.explain.pipeline.explain_part`).
     """
-    pipeline_mod = _import_stage("simulate.explain.pipeline", "part explanation (issue 9)")
+    pipeline_mod = _import_stage("simulate.explain.pipeline", "part explanation")
     from simulate.explain.measured import read_measured_scan
     from simulate.explain.report import write_report
     from simulate.explain.simulation import load_setup

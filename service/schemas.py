@@ -196,7 +196,7 @@ STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: Dia
 
 class RankingEntry(BaseModel):
     pose: str
-    score: float = Field(description="ranking score of issue 8 (lower is better) [-]")
+    score: float = Field(description="ranking score (lower is better) [-]")
     rank: int | None = Field(None, description="1 = best")
 
     model_config = ConfigDict(extra="allow")

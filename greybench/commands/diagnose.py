@@ -1,4 +1,4 @@
-"""Friction diagnosis commands: ``greybench diagnose`` and ``greybench bench diagnose`` (issue 4)."""
+"""Friction diagnosis commands: ``greybench diagnose`` and ``greybench bench diagnose``."""
 from __future__ import annotations
 
 import time

@@ -1,4 +1,4 @@
-"""``greybench explain`` and ``greybench bench explain`` (issue 9): name what the simulation gets wrong
+"""``greybench explain`` and ``greybench bench explain``: name what the simulation gets wrong
 about a measured part, calibrate it, and measure the gain."""
 from __future__ import annotations
 

@@ -141,7 +141,7 @@ def synth(
                   f"{cfg.static_curve}, noise {cfg.noise} Nm): {len(res.frame)} samples -> {out_file}")
 
 
-#: The six models of the paper's comparison (issue 3), in the order of the workflow.
+#: The six models of the paper's comparison, in the order of the workflow.
 COMPARE_MODELS = ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox")
 
 

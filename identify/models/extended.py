@@ -1,4 +1,4 @@
-"""LuGre extended by composable effect extensions, one per diagnosed cause (issue 4).
+"""LuGre extended by composable effect extensions, one per diagnosed cause.
 
 Baseline: the conventional LuGre model with the Stribeck static curve (paper eqs. 5, 7-9)
 and, without ``tau_rb``, the co-identified inertia J and offset c. Each extension changes

@@ -22,7 +22,7 @@ Model (paper eqs. 7-9 with eq. 5 replaced by a network, Fig. 2)::
 Bristle state, exactly and in parallel: the state is carried as ``w = s0*z`` [Nm] (no tiny
 numbers), and with the velocity constant over a sample interval the exact update is the
 linear recurrence ``w[k+1] = a[k]*w[k] + b[k]``, ``a = exp(-s0*|v|*dt/g)``,
-``b = (1 - a)*g*sgn(v)`` (domain notes section 2), evaluated by the associative scan of
+``b = (1 - a)*g*sgn(v)`` (modelling notes 2), evaluated by the associative scan of
 :mod:`identify.models.scan`. The paper does not say which velocity holds over an interval;
 a record's qd is a *sample*, so the interval's velocity is taken as the mean of its two end
 samples (trapezoid). On the synthetic plant this cuts the discretisation error of the exact

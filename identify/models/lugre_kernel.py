@@ -1,12 +1,12 @@
 """numba kernels for the LuGre friction model with the exact bristle update.
 
-LuGre (paper eqs. 7-9; domain notes section 1)::
+LuGre (paper eqs. 7-9; modelling notes 1)::
 
     tau_F = s0*z + s1*zdot + nu*qd,    zdot = qd - s0*|qd|*z/g(qd)
 
 The bristle ODE is stiff (time constant g/(s0*|qd|), a fraction of a millisecond at speed),
 so explicit Euler diverges at robot sampling rates for realistic s0. With qd held over a
-sample interval the ODE is linear in z and its exact solution is (domain notes section 2)::
+sample interval the ODE is linear in z and its exact solution is (modelling notes 2)::
 
     z[k+1] = zss + (z[k] - zss)*exp(-s0*|qd[k]|*dt[k]/g[k]),   zss = g[k]*sgn(qd[k])/s0
 

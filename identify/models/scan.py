@@ -1,6 +1,6 @@
 """Parallel associative scan of the linear recurrence ``z[k+1] = a[k]*z[k] + b[k]`` in torch.
 
-The LuGre bristle state under the exact update (domain notes section 2) is such a
+The LuGre bristle state under the exact update (modelling notes 2) is such a
 recurrence, so a whole record is computed in O(log n) vectorised levels instead of ``n``
 Python steps, and autograd differentiates it like any other tensor code.
 

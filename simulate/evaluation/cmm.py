@@ -7,7 +7,7 @@ on the dexel model it runs along the ray family closest to that normal (x- or y-
 z-rays for floors, tops and the 3 deg slope) through the grid point nearest the nominal point, and
 touches the material where that ray's interval ends: an exact surface point at a continuous
 coordinate (no voxel rounding), which is what makes micrometre wall deviations measurable at any grid
-(domain notes 7). The contact point differs from the nominal point tangentially by at most half the
+(modelling notes 7). The contact point differs from the nominal point tangentially by at most half the
 dexel spacing, which does not matter because every feature value comes from a fit to the points.
 Among the ray's ends the one facing the probe (exit end for a normal along +axis) nearest the
 nominal position within ``search`` is taken; none there counts as a miss (no material, or a

@@ -1,6 +1,6 @@
 """The ten feature rows of the paper's Table 2 (ISO 10791-7 test piece) from probe points.
 
-Rows (domain notes section 8; nominals scale with the piece, tolerances as printed, mm):
+Rows (modelling notes 8; nominals scale with the piece, tolerances as printed, mm):
 
 ==============================  =========  ====  ===================================================
 row                             nominal    tol   deviation (measured - nominal unless stated)

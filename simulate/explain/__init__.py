@@ -1,4 +1,4 @@
-"""Explain a measured part (issue 9): simulate it again, compare point by point and feature by feature,
+"""Explain a measured part: simulate it again, compare point by point and feature by feature,
 name the cause (``stiffness:<axis>``, ``backlash:<axis>``, ``friction:<axis>``, ``tool_radius``,
 ``thermal`` or ``none``), calibrate it by re-simulating and report the gain.
 

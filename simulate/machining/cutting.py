@@ -11,7 +11,7 @@ edge angle psi (workpiece frame, from +x counter-clockwise), ``u = (cos psi, sin
 - force *on the cutter* ``F = -f_t e - f_r n - f_a a``, summed over teeth and disks (workpiece
   frame, N). With feed +x this is Altintas' convention (phi = 90 deg - psi), whose full-slot means
   are ``Fx = -N a Krc c/4 - N a Kre/pi``, ``Fy = N a Ktc c/4 + N a Kte/pi``,
-  ``|Fz| = N a Kac c/pi + N a Kae/2`` (domain notes 6). The axial force pulls the cutter into the
+  ``|Fz| = N a Kac c/pi + N a Kae/2`` (modelling notes 6). The axial force pulls the cutter into the
   part (-z), the usual sign for a right-hand helix.
 
 The force handed to the robot model is the *mean over a spindle revolution* at the step's

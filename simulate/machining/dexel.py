@@ -4,7 +4,7 @@ Paper section 3.3 (multi-dexel model after its ref. [67]). Each ray family sits 
 of the two other axes at ``spacing``; ray centres are at ``lower + (i + 0.5) * spacing``, so a ray
 stands for a square prism of side ``spacing``. Interval ends are continuous float64 coordinates
 (metres, workpiece frame): a wall normal to x sits on the x-rays at its exact position, which keeps
-micrometre resolution at any grid (domain notes 7).
+micrometre resolution at any grid (modelling notes 7).
 
 Storage is flat for numba: per family, ``lo``/``hi`` arrays of shape ``(n_rays, capacity)``, a
 per-ray ``count`` and, per end, the index of the simulation step that created it (``-1`` for the

@@ -141,7 +141,7 @@ class Tool:
 
 @dataclass(frozen=True, eq=False)
 class LuGreParams:
-    """Inline LuGre friction of one joint, joint side (paper 2.2; domain notes 1).
+    """Inline LuGre friction of one joint, joint side (paper 2.2; modelling notes 1).
 
     ``tau_F = s0*z + s1*zdot + nu*qd``, ``zdot = qd - s0*|qd|*z/g(qd)``,
     ``g(qd) = fc + (fs - fc)*exp(-|qd/vs|^delta)``.

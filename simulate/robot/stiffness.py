@@ -2,7 +2,7 @@
 
 Paper 2.1 / 3.5: the structural model turns the process wrench at the TCP into a TCP
 displacement that depends on the pose. With joint stiffnesses ``K = diag(k_i)`` the
-Cartesian compliance is ``C(q) = J(q) K^-1 J(q)^T`` (domain notes 4), and a wrench
+Cartesian compliance is ``C(q) = J(q) K^-1 J(q)^T`` (modelling notes 4), and a wrench
 ``w = [F; M]`` (base frame, at the TCP, applied to the tool) moves the TCP by
 ``[dx, dy, dz, rx, ry, rz] = C w`` (small displacement and small rotation vector, base frame).
 

@@ -1,7 +1,7 @@
 """The ISO 10791-7 test piece the paper machined (section 4, Figure 13, Table 2): geometry, semi-finished
 stock and the finishing program.
 
-What the paper measured (domain notes section 8): a circle of diameter 218 mm, a square of side
+What the paper measured (modelling notes 8): a circle of diameter 218 mm, a square of side
 220 mm, edges at 30 and 60 deg, a 3 deg slope of length 320 mm, feature heights of 6 mm, on a
 320 x 320 x 62 mm aluminium block. The drawing of ISO 10791-7 is not public; this module is a
 *faithful approximation* built from those figures (all lateral sizes scale with ``size / 320``,

@@ -1,4 +1,4 @@
-"""Hidden-effect tests (issue 9): the "measured" part is simulated with a copy of the robot file with one
+"""Hidden-effect tests: the "measured" part is simulated with a copy of the robot file with one
 hidden change; explain gets only the nominal file and must name the cause and recover the parameter
 within 20 %; an unchanged robot gives ``none``."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Mean cutting forces against Altintas' closed forms (domain notes 6)."""
+"""Mean cutting forces against Altintas' closed forms (modelling notes 6)."""
 import math
 
 import numpy as np

@@ -23,7 +23,7 @@ def _rot_err(Ta, Tb):
     return np.max(np.abs(Ta[..., :3, :3] - Tb[..., :3, :3]))
 
 
-def test_opw_parameters_match_domain_notes(robot):
+def test_opw_parameters_match_the_modelling_notes(robot):
     assert opw_parameters(robot) == dict(a1=0.350, a2=-0.041, b=0.0, c1=0.675, c2=1.150, c3=1.200, c4=0.215)
 
 

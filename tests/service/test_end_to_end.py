@@ -43,7 +43,7 @@ def check_results(c, job: str, poses: list[str]) -> dict:
     assert len(names) == 10 and names[0] == "circle height zMZ" and names[-1] == "slope angle"
     for f in report["features"]:
         assert set(f["deviation_mm"]) == set(poses) and f["tolerance_mm"] > 0
-    # the ranking score is the sum of |deviation| / tolerance over the rows (issue 8)
+    # the ranking score is the sum of |deviation| / tolerance over the rows
     for e in entries:
         total = sum(abs(f["deviation_mm"][e["pose"]]) / f["tolerance_mm"] for f in report["features"])
         assert total == pytest.approx(e["score"], rel=1e-9)

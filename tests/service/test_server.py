@@ -103,7 +103,7 @@ def test_short_job_results_and_bounded_load_without_errors(shared_server):
         assert sorted(e["pose"] for e in ranking) == ["far_rotated", "near"] and ranking[0]["rank"] == 1
         report = c.get(f"/simulations/{job}/report").json()
         assert len(report["features"]) == 10
-        for e in ranking:  # the score is the sum of |deviation| / tolerance (issue 8)
+        for e in ranking:  # the score is the sum of |deviation| / tolerance
             assert e["score"] == pytest.approx(sum(abs(f["deviation_mm"][e["pose"]]) / f["tolerance_mm"]
                                                    for f in report["features"]), rel=1e-9)
         assert len(c.get(f"/simulations/{job}/report?format=csv").text.strip().splitlines()) == 1 + 20
