@@ -60,7 +60,9 @@ def test_outputs_keep_the_contract(small, tmp_path):
     assert len(off) == len(it_n.t)
     np.testing.assert_allclose(off["t_s"], it_n.t, atol=1e-12)
     d = np.linalg.norm(off[["dx_mm", "dy_mm", "dz_mm"]].to_numpy(), axis=1)
-    assert d.max() < 1.0 and d.max() == pytest.approx(info["max_offset_mm"], rel=1e-6)
+    # the reported largest offset is the maximum over the correction's sampling grid along the path,
+    # the table samples it at the 2 ms cycles: never above it, and within 1 % of it
+    assert d.max() < 1.0 and 0.99 * info["max_offset_mm"] <= d.max() <= info["max_offset_mm"] * (1 + 1e-9)
     assert np.abs(off[[f"dq{j}_rad" for j in range(1, 7)]].to_numpy()).max() < 0.01   # micro-radians, not a new pose
     ff = pd.read_csv(out / "feedforward.csv")
     assert list(ff.columns) == ["t_s", "line"] + [f"tau_f{j}_Nm" for j in range(1, 7)]
