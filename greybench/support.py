@@ -271,3 +271,18 @@ def resolve_robot(name_or_path: str) -> Path:
         known = sorted(x.stem for x in (DATA_DIR / "robots").glob("*.toml"))
         raise InputError(f"unknown robot '{name_or_path}' (known: {', '.join(known)})", field="robot")
     return candidate
+
+
+def check_cost(program: Path, stock: Path | None, spacing_mm: float, simulations: int = 1) -> None:
+    """Refuse a machining command before any work when its estimated cut time or memory exceeds the
+    limits of :class:`simulate.costs.CostLimits` (the service's defaults): ``InputError`` naming
+    ``--program`` (and its line) or ``--spacing``; exit 2 through :func:`guarded`. Files that are
+    missing are left to the command's own checks."""
+    from simulate.costs import CostFields, check_machining_cost
+
+    stock = stock if stock is not None else program.with_name(program.stem + ".stock.json")
+    if not (program.is_file() and stock.is_file()):
+        return
+    check_machining_cost(program.read_text(errors="replace"), stock.read_text(errors="replace"), spacing_mm * 1e-3,
+                         simulations=simulations, source=str(program), stock_source=str(stock),
+                         fields=CostFields(program="--program", spacing="--spacing", stock="--stock"))

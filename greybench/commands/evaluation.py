@@ -8,7 +8,7 @@ from typing import Optional
 import typer
 from rich.table import Table
 
-from greybench.support import emit_json, err, guarded, out, progress, resolve_robot
+from greybench.support import check_cost, emit_json, err, guarded, out, progress, resolve_robot
 from identify.errors import InputError
 from simulate import defaults as DEFAULTS
 from simulate.evaluation.features import MM
@@ -103,6 +103,8 @@ def rank_poses_cmd(
     robot_path = resolve_robot(robot)
     load_robot(robot_path)  # validate before any worker starts
     placements = load_poses(poses)
+    # refused before anything is written: the poses, and with --shares the component re-runs, run in turn
+    check_cost(program, None, spacing, simulations=len(placements) * (1 + (len(COMPONENTS) if shares else 0)))
     if out_dir is not None:
         if out_dir.exists() and not out_dir.is_dir():
             raise InputError("output must be a folder", source=str(out_dir))

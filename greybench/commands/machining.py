@@ -10,7 +10,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from greybench.support import DATA_DIR, emit_json, guarded, out, progress, print_summary, resolve_robot
+from greybench.support import DATA_DIR, check_cost, emit_json, guarded, out, progress, print_summary, resolve_robot
 from identify.errors import InputError
 from simulate import defaults as DEFAULTS
 
@@ -146,6 +146,7 @@ def machine(
         raise InputError("output path exists and is not a folder", source=str(out_dir), field="out")
     from simulate.pipeline import prepare, run_job
 
+    check_cost(program, stock, spacing)
     job = machining_job(program, robot, pose, name, ideal=ideal, spacing_mm=spacing, no_deflection=no_deflection,
                         no_friction=no_friction, no_switching=no_switching, no_tracking=no_tracking,
                         material=material, stock=stock, spindle_rpm=spindle_rpm, size=size,

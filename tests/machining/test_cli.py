@@ -223,3 +223,32 @@ def test_bad_cmm_inputs_exit_2(small_job, tmp_path, case):
     for e in expect:
         assert e in msg, msg
     assert _no_output(out)
+
+
+def test_costly_machining_commands_are_refused_before_any_work(tmp_path):
+    """A dexel spacing whose workpiece would take tens of GiB, and a crawling feed, are refused by
+    ``machine`` and ``rank-poses`` with exit 2 and one line naming the option (and the line of the
+    feed) within seconds; nothing is written. The same program at 1 mm passes the check."""
+    import time
+
+    from greybench.support import check_cost
+
+    prog = tmp_path / "slow.nc"
+    text = ISO160.read_text()
+    prog.write_text(text.replace("F2000", "F0.0001"))
+    (tmp_path / "slow.stock.json").write_text(ISO160.with_name("iso160.stock.json").read_text())
+    cases = [(["machine", "--program", str(ISO160), "--pose", str(ISO_POSES), "--name", "pose1",
+               "--spacing", "0.01"], "--spacing"),
+             (["rank-poses", "--program", str(ISO160), "--poses", str(ISO_POSES), "--spacing", "0.01"], "--spacing"),
+             (["machine", "--program", str(prog), "--pose", str(ISO_POSES), "--name", "pose1"], "--program")]
+    for args, option in cases:
+        out = tmp_path / "out"
+        t0 = time.perf_counter()
+        r = runner.invoke(app, [*args, "--out", str(out)])
+        assert r.exit_code == 2, r.output
+        assert time.perf_counter() - t0 < 30
+        assert option in r.output and len(r.output.strip().splitlines()) == 1, r.output
+        assert not out.exists()
+        if option == "--program":
+            assert "line" in r.output and "mm/min" in r.output, r.output
+    check_cost(ISO160, None, 1.0, simulations=4)   # within the limits: no error
