@@ -87,7 +87,8 @@ def add_routes(app: FastAPI, settings, keyed: list) -> None:
     def submit_compensation(body: CompensationRequest, request: Request) -> JSONResponse:
         from simulate.toolpath.placement import parse_poses
 
-        text, source = svc._program(body)
+        limits = settings.cost_limits()
+        text, source = svc._program(body, limits)
         stock_text, stock_source = svc._stock(body)
         robot = svc._robot(body.robot)
         if isinstance(body.pose, str):
@@ -101,6 +102,9 @@ def add_routes(app: FastAPI, settings, keyed: list) -> None:
         else:
             parse_poses({"poses": [body.pose.model_dump()]}, source="pose")
             pose = body.pose.model_dump()
+        # each iteration simulates once, each stiffness check twice (original and compensated program)
+        svc._cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
+                  body.options.iterations + 1 + 2 * len(body.options.check_scales), limits)
         friction = svc._friction(body, robot, settings.mlflow_tracking_uri)
         job = {"program_source": source, "stock_source": stock_source, "robot": robot, "pose": pose,
                "friction": friction, "options": body.options.model_dump(), "tracking_uri": settings.mlflow_tracking_uri}

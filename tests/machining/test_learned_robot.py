@@ -29,8 +29,10 @@ def _robot_with_models(tmp_path: Path, refs: dict[int, str]) -> Path:
     parts = (ROOT / "data" / "robots" / "max100.toml").read_text().split("[[joint]]")
     for j, ref in refs.items():
         p = parts[j]
-        i = p.index("[joint.friction]")
-        rest = p[i + len("[joint.friction]"):]
+        # the table header at a line start (comments elsewhere also name [joint.friction])
+        hdr = re.search(r"^\[joint\.friction\][^\n]*", p, re.M)
+        i = hdr.start()
+        rest = p[hdr.end():]
         m = re.search(r"\n\[", rest)
         parts[j] = p[:i] + f'[joint.friction]\nmodel = "{ref}"\n' + rest[m.start() if m else len(rest):]
     out = tmp_path / "robot.toml"
@@ -96,8 +98,10 @@ def test_bad_model_reference_exits_2_naming_the_key(tmp_path, case):
                                  str(SMALL / "small160.poses.json"), "--robot", str(robot), "--out", str(out),
                                  "--spacing", "2"])
     assert r.exit_code == 2, r.output
-    msg = r.output.strip()
-    assert len(msg.splitlines()) == 1 and "joint[2].friction.model" in msg and "robot.toml" in msg, msg
+    # off a terminal the progress lines (ISO timestamps) come first; the error is one line of its own
+    lines = [ln for ln in r.output.strip().splitlines() if not re.match(r"\d{4}-\d\d-\d\dT", ln)]
+    msg = "\n".join(lines)
+    assert len(lines) == 1 and "joint[2].friction.model" in msg and "robot.toml" in msg, msg
     assert not out.exists() or not any(out.iterdir())
 
 

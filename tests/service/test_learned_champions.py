@@ -82,7 +82,7 @@ def _run(c, friction) -> dict:
 
 
 def _deviations(report) -> np.ndarray:
-    return np.array([row["deviation"]["near"] for row in report["features"]])   # mm
+    return np.array([row["deviation_mm"]["near"] for row in report["features"]])   # mm
 
 
 def test_learned_champions_succeed_and_change_the_part(make_server, champions):
