@@ -7,7 +7,14 @@ from __future__ import annotations
 
 import importlib
 
-import typer
+# Before torch or numba load: their thread pools sized to the cores this process may use
+# (affinity, cgroup quota, GREYBENCH_CORES), waiting threads sleeping, so a fit beside a busy
+# neighbour is slowed by sharing the cores, not by oversubscribed pools.
+from identify.resources import configure_process
+
+configure_process()
+
+import typer  # noqa: E402
 
 app = typer.Typer(no_args_is_help=True, pretty_exceptions_enable=False, add_completion=False, rich_markup_mode=None,
                   help="greybench: friction identification and robot machining simulation (SI units).")
