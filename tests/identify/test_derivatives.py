@@ -123,9 +123,13 @@ def test_fit_and_diagnose_print_and_log_the_cutoff(tmp_path):
     runs = client.search_runs([client.get_experiment_by_name("cut").experiment_id], order_by=["start_time ASC"])
     cut = [{k: v for k, v in run.data.params.items() if "cut" in k} for run in runs]
     assert [float(next(iter(c.values()))) for c in cut] == [pytest.approx(chosen, rel=1e-5), 12.5]
+    import time
+
+    t0_ms = int(time.time() * 1000)   # other tests log diagnoses into the same store: only this one's runs
     r = runner.invoke(app, ["diagnose", "--train", str(train), "--test", str(test), "--out", str(tmp_path / "d"),
                             "--generations", "5", "--cutoff", "9"])
     assert r.exit_code == 0, r.output
     assert "cut-off 9 Hz" in r.stdout
     exp = client.get_experiment_by_name("diagnose")
-    assert all(run.data.params["deriv_cutoff_hz"] == "9" for run in client.search_runs([exp.experiment_id]))
+    mine = client.search_runs([exp.experiment_id], filter_string=f"attributes.start_time >= {t0_ms}")
+    assert mine and all(run.data.params["deriv_cutoff_hz"] == "9" for run in mine)
