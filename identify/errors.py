@@ -63,3 +63,18 @@ class InputError(ValueError):
 
 class NotFittedError(RuntimeError):
     """An estimator was asked to predict or save before ``fit`` was called."""
+
+
+def read_json(path, missing: str = "not found"):
+    """The JSON document in ``path``; ``InputError`` naming the file (``missing`` when it does not
+    exist) or the line and column where it is not valid JSON."""
+    import json
+    from pathlib import Path
+
+    p = Path(path)
+    if not p.exists():
+        raise InputError(missing, source=str(p))
+    try:
+        return json.loads(p.read_text())
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not valid JSON: {exc.msg}", source=str(p), line=exc.lineno, column=exc.colno) from None

@@ -16,7 +16,6 @@ robot variants: pass it to :func:`run_job`).
 """
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -24,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from identify.errors import InputError
+from identify.errors import InputError, read_json
 from simulate import defaults
 
 
@@ -155,12 +154,7 @@ def load_program(program: str | Path, *, stock: str | Path | None = None, spindl
     program = Path(program)
     prog = read_program(program)
     stock = Path(stock) if stock is not None else program.with_name(program.stem + ".stock.json")
-    if not stock.exists():
-        raise InputError("stock description not found (give --stock)", source=str(stock))
-    try:
-        doc = json.loads(stock.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"invalid JSON: {exc.msg}", source=str(stock), line=exc.lineno, column=exc.colno) from None
+    doc = read_json(stock, missing="stock description not found (give --stock)")
     rpm = spindle_rpm
     if rpm is None:
         # segments carry the S word in rev/s (simulate.toolpath.gcode)

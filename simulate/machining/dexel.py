@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from identify.errors import InputError
+from identify.errors import InputError, read_json
 
 #: Default interval capacity per ray family (x, y, z). A 2.5-D part seen along z is one interval
 #: per ray; along x and y a ray can cross several bosses and pockets.
@@ -278,12 +278,7 @@ def read_stock_boxes(path) -> list[tuple[np.ndarray, np.ndarray]]:
     ``{"origin": [...], "size": [...]}``.
     """
     p = Path(path)
-    if not p.exists():
-        raise InputError("stock description not found", source=str(p))
-    try:
-        doc = json.loads(p.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"not valid JSON: {exc.msg}", source=str(p), line=exc.lineno, column=exc.colno) from None
+    doc = read_json(p, missing="stock description not found")
     if isinstance(doc, dict) and isinstance(doc.get("stock"), dict):
         doc = doc["stock"]
     if not isinstance(doc, dict) or "box" not in doc:

@@ -50,7 +50,6 @@ torch is imported only to read a learned model's ``network.pt``.
 """
 from __future__ import annotations
 
-import json
 import math
 from collections import namedtuple
 from enum import IntEnum, IntFlag
@@ -59,7 +58,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from identify.errors import InputError
+from identify.errors import InputError, read_json
 from simulate import defaults
 
 
@@ -390,10 +389,7 @@ def _read_doc(folder: Path) -> dict:
     p = folder / "params.json"
     if not p.exists():
         raise InputError("not a saved model folder (no params.json)", source=str(folder))
-    try:
-        doc = json.loads(p.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(f"invalid JSON: {exc.msg}", source=str(p), line=exc.lineno, column=exc.colno) from None
+    doc = read_json(p)
     if not isinstance(doc, dict) or not all(k in doc for k in ("model", "params")):
         raise InputError("not a saved friction model (needs 'model' and 'params')", source=str(p))
     return doc
