@@ -138,7 +138,7 @@ def add_routes(app: FastAPI, settings, keyed: list) -> None:
 
 def run(request: dict, job_dir: Path, progress) -> dict:
     """The job body: fetch the friction models, compensate, write the files into ``<job>/out``."""
-    from service.pipeline import PoseTask, _robot_file, pose_tasks
+    from service.pipeline import DATA_DIR, PoseTask, _model_folders, pose_tasks
     from simulate.compensation_report import run_compensation
 
     req = dict(request, poses=[request["pose"]])
@@ -151,7 +151,7 @@ def run(request: dict, job_dir: Path, progress) -> dict:
         (scratch / "program.stock.json").write_text(task.stock_text)
         poses = scratch / "poses.json"
         poses.write_text(json.dumps({"poses": [task.pose]}))
-        robot = _robot_file(task, scratch)
+        robot = DATA_DIR / "robots" / f"{task.robot}.toml"
         done = [0]
         progress(0.05, "simulating the original program")
 
@@ -170,7 +170,7 @@ def run(request: dict, job_dir: Path, progress) -> dict:
                                     stiffness_scale=float(opts.get("stiffness_scale", 1.0)),
                                     check_scales=tuple(opts.get("check_scales", [])),
                                     spacing_mm=float(opts.get("spacing_mm", RANKING_DEXEL_SPACING * 1e3)),
-                                    advance=advance)
+                                    friction=_model_folders(task), advance=advance)
         except InputError as exc:   # name the program as the client knows it
             if exc.source == str(program):
                 exc = InputError(exc.message, source=task.program_source, field=exc.field, row=exc.row,

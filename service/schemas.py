@@ -188,10 +188,17 @@ class ExplainJobStatus(JobStatus):
     kind: Literal[JobKind.explain] = Field(description="'explain'")
 
 
+class CompensationJobStatus(JobStatus):
+    """Status of a compensation job (``POST /compensations``); result: evaluation before/after, iterations, files."""
+
+    kind: Literal[JobKind.compensation] = Field(description="'compensation'")
+
+
 #: Any job's status: one of the kinds, told apart by ``kind`` (OpenAPI ``oneOf`` with a discriminator).
-AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus], Field(discriminator="kind")]
+AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus,
+                                   CompensationJobStatus], Field(discriminator="kind")]
 STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: DiagnoseJobStatus,
-                  JobKind.explain: ExplainJobStatus}
+                  JobKind.explain: ExplainJobStatus, JobKind.compensation: CompensationJobStatus}
 
 
 class RankingEntry(BaseModel):

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import time
 
 import pytest
+from pathlib import Path
 
 HEADERS = {"X-API-Key": "test-key-0123456789"}  # conftest.KEY
 BAD_GCODE = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 X10 Y0 Z0 F300\nG1 X10 Y10 Q\n"
@@ -57,3 +59,40 @@ def test_compensation_job_end_to_end(make_server):
         ff = c.get(f"/compensations/{job}/files/feedforward.csv")
         assert next(csv.reader(io.StringIO(ff.text)))[2] == "tau_f1_Nm"
         assert c.get(f"/compensations/{job}/files/secret.txt").status_code == 404
+
+
+def test_accepted_job_reports_its_status(client):
+    """An accepted compensation job answers 202 and its status validates (kind 'compensation')."""
+    r = client.post("/compensations", headers=HEADERS, json={"program": "iso160", "pose_set": "iso160",
+                                                            "pose": "near", "friction": ROBOT_FRICTION,
+                                                            "options": {"spacing_mm": 2.0, "iterations": 1}})
+    assert r.status_code == 202, r.text
+    st = client.get(r.headers["Location"], headers=HEADERS)
+    assert st.status_code == 200, st.text
+    assert st.json()["kind"] == "compensation"
+    client.delete(r.headers["Location"], headers=HEADERS)
+
+
+def test_job_body_passes_robot_file_and_models(tmp_path, monkeypatch):
+    """The job body hands run_compensation the shipped robot file and the fetched model folders per axis."""
+    from service import compensation
+    from simulate import compensation_report
+    from service.paths import DATA_DIR
+
+    seen = {}
+
+    def fake(program, robot, poses, name, out, **kw):
+        seen.update(robot=robot, friction=kw["friction"], program=program.read_text())
+        return {"evaluation": {}}
+
+    monkeypatch.setattr(compensation_report, "run_compensation", fake)
+    gcode = (DATA_DIR / "programs" / "iso160.nc").read_text()
+    (tmp_path / "program.nc").write_text(gcode)
+    (tmp_path / "stock.json").write_text((DATA_DIR / "programs" / "iso160.stock.json").read_text())
+    req = {"program_source": "gcode", "stock_source": "stock", "robot": "max100",
+           "pose": json.loads((DATA_DIR / "poses" / "iso160.json").read_text())["poses"][0],
+           "friction": [], "options": {"iterations": 1}}
+    info = compensation.run(req, tmp_path, lambda *a: None)
+    assert Path(seen["robot"]).is_file() and Path(seen["robot"]).suffix == ".toml"
+    assert seen["friction"] == {} and seen["program"] == gcode
+    assert "compensated.nc" in info["files"]
