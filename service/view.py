@@ -408,6 +408,11 @@ def add_routes(app, settings, keyed: list) -> None:
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
     token_param = Query(None, max_length=200, description="signed view link token (from POST .../view-link)")
     errors = {401: {"model": ErrorBody}, 404: {"model": ErrorBody}, 409: {"model": ErrorBody}}
+    # the page answers HTML; schema errors (422) stay JSON like every route's
+    html_errors = {200: {"content": {"text/html": {}}, "description": "the page"},
+                   401: {"content": {"text/html": {}}, "description": "the key form (no job data)"},
+                   404: {"content": {"text/html": {}}, "description": "no such job"},
+                   409: {"content": {"text/html": {}}, "description": "the job has not succeeded"}}
     # the three.js build and the page's own files: public code, no job data; gzip halves the download
     app.mount("/view-static", GZipMiddleware(StaticFiles(directory=STATIC), minimum_size=1024), name="view-static")
     index = (STATIC / "view" / "index.html").read_text()
@@ -431,7 +436,7 @@ def add_routes(app, settings, keyed: list) -> None:
                                     headers={"WWW-Authenticate": HEADER})
             return Context(request, svc._job(request, job_id, kind), prefix, token)
 
-        @app.get(f"{prefix}/{{job_id}}/view", response_class=HTMLResponse, tags=[tag], responses=errors,
+        @app.get(f"{prefix}/{{job_id}}/view", tags=[tag], responses=html_errors,
                  summary=f"Planner's page of a {view.title} job (HTML)")
         def page(request: Request, job_id: str = job_id_param, token: str | None = token_param,
                  key: str | None = Security(api_key_header)):
