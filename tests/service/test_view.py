@@ -81,6 +81,50 @@ def test_unfinished_job_is_a_clear_409_page(client):
     assert client.get(f"/compensations/{rec.id}/view", headers=HEADERS).status_code == 404
 
 
+#: Table-2 rows of a finished compensation [mm], as simulate.compensation_report's summary gives them.
+COMPENSATED_ROWS = [{"name": "circle diameter", "tolerance": 0.02, "before": 0.05, "after": 0.012},
+                    {"name": "slope angle", "tolerance": 0.02, "before": -0.004, "after": -0.009}]
+
+
+def _fake_compensation(store, jobs_dir) -> str:
+    """A succeeded compensation job with a summary and a deviation plot (the view reads only these)."""
+    from PIL import Image
+
+    from service.jobs import JobKind, JobState, folder_digests
+
+    rec = store.create(JobKind.compensation, {}, boot="test")
+    out = jobs_dir / rec.id / "out"
+    out.mkdir(parents=True)
+    Image.new("RGB", (60, 40), (200, 30, 30)).save(out / "deviation.png")
+    (out / "summary.json").write_text("{}")
+    result = {"evaluation": {"rows_mm": COMPENSATED_ROWS, "sum_before_mm": 0.054, "sum_after_mm": 0.021,
+                             "ratio": 0.021 / 0.054, "score_before": 2.7, "score_after": 1.05},
+              "best_iteration": 2, "max_offset_mm": 0.31, "time_ratio": 1.004}
+    assert store.finish(rec.id, "test", JobState.succeeded, result=result, files=folder_digests(jobs_dir / rec.id))
+    return rec.id
+
+
+def test_compensation_page_shows_before_and_after(client):
+    job_id = _fake_compensation(client.app.state.store, client.app.state.manager.jobs_dir)
+    assert client.get(f"/compensations/{job_id}/view", headers=HEADERS).status_code == 200
+    assert client.get(f"/simulations/{job_id}/view", headers=HEADERS).status_code == 404   # not a simulation
+    data = client.get(f"/compensations/{job_id}/view/data", headers=HEADERS).json()
+    sections = {s["type"]: s for s in data["sections"]}
+    rows = sections["before-after"]["rows"]
+    for got, want in zip(rows, COMPENSATED_ROWS):
+        assert got["name"] == want["name"]
+        assert got["before_um"] == pytest.approx(want["before"] * 1e3)
+        assert got["after_um"] == pytest.approx(want["after"] * 1e3)
+        assert got["tolerance_um"] == pytest.approx(want["tolerance"] * 1e3)
+    image = client.get(sections["image"]["url"], headers=HEADERS)
+    assert image.status_code == 200 and image.content[:4] == b"\x89PNG"
+    assert {f["name"] for f in sections["files"]["files"]} == {"out/deviation.png", "out/summary.json"}
+    # an altered result file is refused (409) and marks the job failed, as the API's downloads do
+    (client.app.state.manager.jobs_dir / job_id / "out" / "summary.json").write_text("{1}")
+    assert client.get(f"/compensations/{job_id}/view/files/out/summary.json", headers=HEADERS).status_code == 409
+    assert client.get(f"/compensations/{job_id}/view", headers=HEADERS).status_code == 409
+
+
 def test_static_files_ship_with_the_package(client):
     """three.js is served from the package (no CDN), with its licence and version."""
     r = client.get("/view-static/vendor/three/three.module.js", headers={"Accept-Encoding": "gzip"})
@@ -354,6 +398,22 @@ def test_page_in_chromium(job, browser, tmp_path):
     page.select_option(".wp-variable", "force")
     page.wait_for_function("window.greybenchView.ready")
     assert page.locator(".wp-unit").inner_text() == "N"
+    assert not problems, problems
+    page.close()
+
+
+def test_compensation_page_in_chromium(job, browser):
+    from service.jobs import JobStore
+
+    srv, _, _ = job
+    job_id = _fake_compensation(JobStore(srv.data_dir / "jobs.sqlite"), srv.data_dir / "jobs")
+    with srv.client() as c:
+        link = c.post(f"/compensations/{job_id}/view-link").json()
+    page, problems = _open(browser, srv.url + link["url"])
+    rows = page.locator("section.before-after table tr").all_inner_texts()
+    assert len(rows) == 1 + len(COMPENSATED_ROWS) and rows[1].split("\t")[:4] == ["circle diameter", "20", "50.0", "12.0"]
+    assert page.locator("section.before-after td.in-tol").count() == 3     # 12 µm; -4 and -9 µm of 20
+    page.wait_for_function("document.querySelector('section.image img').naturalWidth === 60")
     assert not problems, problems
     page.close()
 

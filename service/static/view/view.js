@@ -121,7 +121,7 @@ const RENDER = {
   },
 
   summary(section, el) {
-    const items = section.items.map(([k, v]) => `<tr><td>${esc(k)}</td><td>${typeof v === 'number' ? fmt(v, 3) : esc(v ?? '-')}</td></tr>`).join('');
+    const items = section.items.map(([k, v]) => `<tr><td>${esc(k)}</td><td>${typeof v === "number" ? (Number.isInteger(v) ? v : fmt(v, 3)) : esc(v ?? "-")}</td></tr>`).join('');
     el.insertAdjacentHTML('beforeend', `<table>${items}</table>`);
   },
 
