@@ -15,8 +15,18 @@ page's key form (401, no job data); the key a planner enters is kept in the tab'
 exchanged for a signed link. Job missing: 404; not finished: 409 (both a short HTML page).
 
 Job kinds plug in with :func:`register`: a kind gives its URL prefix and a function returning the
-page's *sections* (``ranking``, ``workpiece``, ``before-after``, ``polar``, ``image``, ``summary``,
-``files``; each a dict with ``type``, rendered by ``view.js``). Call it before :func:`add_routes`.
+page's *sections*, each a dict with ``type`` and ``title`` rendered by ``view.js``; call it before
+:func:`add_routes`. Section types and their fields:
+
+- ``ranking``: ``ranking`` (entries pose, rank, score, in_tolerance), ``rows`` (name, nominal_text,
+  tolerance_mm, deviation_mm by pose), ``poses`` (per-pose summaries, optional ``shares``);
+- ``workpiece``: ``poses``, ``variables`` (name, label, unit), ``colormap`` (sRGB triples),
+  ``stock_rgb``, ``click_radius_mm``, ``urls`` by pose (mesh, values, click, box);
+- ``before-after``: ``rows`` (name, tolerance_um, before_um, after_um);
+- ``polar``: ``series`` (label, angle_deg, deviation_um: radial deviation from the nominal circle),
+  e.g. a circle (ballbar) test;
+- ``image``: ``url``; ``summary``: ``items`` ([label with unit, value]); ``files``: ``files``
+  (name, bytes, url; :meth:`Context.files`).
 
 The data routes are thin: the geometry and values come from :mod:`simulate.machining.surface_mesh`
 and :mod:`simulate.machining.virtual_workpiece`, a click from :func:`simulate.evaluation.trace.trace_point`.

@@ -329,6 +329,18 @@ def _browser():
     return sync_playwright
 
 
+def test_browser_tests_skip_with_a_reason_or_fail_when_required(monkeypatch):
+    import tests.service.test_view as me
+
+    monkeypatch.setattr(me, "CHROMIUM", "/nonexistent/chromium")
+    monkeypatch.delenv("GREYBENCH_BROWSER_TESTS", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="chromium"):
+        me._browser()
+    monkeypatch.setenv("GREYBENCH_BROWSER_TESTS", "required")
+    with pytest.raises(pytest.fail.Exception, match="chromium"):
+        me._browser()
+
+
 @pytest.fixture(scope="module")
 def browser():
     sync_playwright = _browser()
