@@ -406,6 +406,9 @@ def test_page_in_chromium(job, browser, tmp_path):
     program = (folder / "program.nc").read_text().splitlines()
     texts = page.locator("table.trace-lines code.line").all_inner_texts()
     assert texts == [program[n - 1].strip() for n in shown]
+    # best to worst per row: green (hue 120) for the smallest |deviation| to red (hue 0) for the largest
+    hues = page.evaluate("window.greybenchView.rankColours([0.3, -0.1, 0.2, null])")
+    assert [int(h[4:].split(",")[0]) for h in hues] == [40, 120, 80, 0]
     # another variable recolours the part; the legend names its unit
     page.select_option(".wp-variable", "force")
     page.wait_for_function("window.greybenchView.ready")
@@ -436,6 +439,10 @@ def test_key_entered_once_opens_the_page(job, browser):
     page.goto(f"{srv.url}/simulations/{job_id}/view")
     page.wait_for_selector("#login:not([hidden])")
     assert page.locator("table.table2").count() == 0           # no data before a key
+    page.fill("#login-key", "not-the-key-0000")
+    page.click("#login-form button")
+    page.wait_for_function("document.querySelector('#login-error').textContent.includes('refused')")
+    assert "token=" not in page.url
     page.fill("#login-key", KEY)
     page.click("#login-form button")
     page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)

@@ -81,6 +81,8 @@ function rankColours(values) {
   return out;
 }
 
+window.greybenchView.rankColours = rankColours;
+
 const RENDER = {
   ranking(section, el) {
     const poses = section.ranking.map((e) => e.pose);
