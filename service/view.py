@@ -204,15 +204,35 @@ def mesh_of(vw, key):
     return _cached(("mesh", key), make)
 
 
+#: Derived per-step variable of the page: the tool's deviation from the commanded path, the vector sum of
+#: the deflection and the servo tracking error (both in the workpiece frame) [m]; shown in µm.
+TOOL_DEVIATION = "tool_deviation"
+
+
 def variables() -> list[dict]:
-    """The variables the virtual workpiece carries, with their display unit and factor from SI."""
+    """The variables the page colours by: the tool deviation (:data:`TOOL_DEVIATION`) and those the
+    virtual workpiece carries, each with its display unit and factor from SI."""
     from simulate.machining.virtual_workpiece import DISPLAY_UNITS, VARIABLES
 
     labels = {"deflection": "tool deflection |d|", "force": "cutting force |F|", "tracking_error":
               "servo tracking error |e|", "time": "time stamp", "line": "program line", "switch":
               "switching bits (axes stopping or reversing)", "peak_force": "peak cutting force"}
-    return [{"name": v, "label": labels.get(v, v.replace("_", " ")), "unit": DISPLAY_UNITS[v][1],
-             "factor": DISPLAY_UNITS[v][0]} for v in VARIABLES]
+    return [{"name": TOOL_DEVIATION, "label": "tool deviation |d + e|", "unit": "µm", "factor": 1e6}] + [
+        {"name": v, "label": labels.get(v, v.replace("_", " ")), "unit": DISPLAY_UNITS[v][1],
+         "factor": DISPLAY_UNITS[v][0]} for v in VARIABLES]
+
+
+def vertex_values(vw, step: np.ndarray, variable: str) -> np.ndarray:
+    """SI value of ``variable`` per vertex (NaN where no step made it: the stock surface)."""
+    from simulate.machining.virtual_workpiece import step_values
+
+    if variable != TOOL_DEVIATION:
+        return step_values(vw, step, variable)
+    dev = np.linalg.norm(np.asarray(vw.steps.deflection) + np.asarray(vw.steps.tracking_error), axis=1)
+    out = np.full(len(step), np.nan)
+    ok = step >= 0
+    out[ok] = dev[step[ok]]
+    return out
 
 
 def frame(header: dict, *arrays: np.ndarray) -> bytes:
@@ -236,11 +256,11 @@ def mesh_bytes(sm) -> bytes:
 def values_bytes(vw, sm, variable: str) -> bytes:
     """Per vertex the value of ``variable`` in its display unit (float32, NaN on the stock surface) and
     the colour scale's ends (:func:`simulate.machining.virtual_workpiece.colour_range`) in that unit."""
-    from simulate.machining.virtual_workpiece import DISPLAY_UNITS, colour_range, step_values
+    from simulate.machining.virtual_workpiece import DISPLAY_UNITS, colour_range
 
-    vals = step_values(vw, sm.vertex_step, variable)
+    vals = vertex_values(vw, np.asarray(sm.vertex_step), variable)
     lo, hi = colour_range(vals)
-    factor, unit = DISPLAY_UNITS[variable]
+    factor, unit = (1e6, "µm") if variable == TOOL_DEVIATION else DISPLAY_UNITS[variable]
     header = {"variable": variable, "unit": unit, "range": [lo * factor, hi * factor], "vertices": int(len(vals)),
               "arrays": [["value", "float32", 1]]}
     return frame(header, (vals * factor).astype("<f4"))

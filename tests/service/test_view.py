@@ -233,6 +233,15 @@ def test_mesh_and_values_match_the_workpiece(job):
     assert val.shape == (n,) and np.array_equal(np.isnan(val), np.isnan(expected))
     assert np.allclose(val[~np.isnan(val)], expected[~np.isnan(expected)], rtol=1e-6)
     assert vhead["unit"] == "N" and vhead["range"][0] == pytest.approx(np.nanmin(expected), rel=1e-6)
+    # the tool deviation: |deflection + tracking error| of the creating step, in µm
+    with srv.client() as c:
+        thead, tbody = _unframe(c.get(f"/simulations/{job_id}/view/workpiece/near/values",
+                                      params={"variable": "tool_deviation"}).content)
+    dev = np.frombuffer(tbody, "<f4")
+    ok = sm.vertex_step >= 0
+    d = vw.steps.deflection[sm.vertex_step[ok]] + vw.steps.tracking_error[sm.vertex_step[ok]]
+    assert thead["unit"] == "µm" and np.all(np.isnan(dev[~ok]))
+    assert np.allclose(dev[ok], np.sqrt(np.sum(d ** 2, axis=1)) * 1e6, rtol=1e-6)
 
 
 def test_click_is_what_trace_gives(job):
@@ -406,6 +415,24 @@ def test_page_in_chromium(job, browser, tmp_path):
     program = (folder / "program.nc").read_text().splitlines()
     texts = page.locator("table.trace-lines code.line").all_inner_texts()
     assert texts == [program[n - 1].strip() for n in shown]
+    # shift + drag: a box around the point lists the lines that cut the machined ends inside it
+    page.keyboard.down("Shift")
+    page.mouse.move(xy["x"] - 25, xy["y"] - 25)
+    page.mouse.down()
+    page.mouse.move(xy["x"] + 25, xy["y"] + 25, steps=4)
+    page.mouse.up()
+    page.keyboard.up("Shift")
+    page.wait_for_selector("table.box-lines", timeout=30_000)
+    box = page.evaluate("window.greybenchView.lastBox")
+    lo, hi = np.array(box["min_mm"]), np.array(box["max_mm"])
+    assert np.all(lo <= p + 1e-6) and np.all(p <= hi + 1e-6) and np.all(hi - lo < 60)
+    lines = set()
+    for axis in range(3):
+        pts, _, attrs = vw.end_attributes(axis)
+        inside = (attrs["step"] >= 0) & np.all((pts * 1e3 >= lo) & (pts * 1e3 <= hi), axis=1)
+        lines |= set(attrs["line"][inside].tolist())
+    boxed = page.locator("table.box-lines tr[data-line]").evaluate_all("rows => rows.map(r => +r.dataset.line)")
+    assert boxed and sorted(boxed) == sorted(lines)
     # best to worst per row: green (hue 120) for the smallest |deviation| to red (hue 0) for the largest
     hues = page.evaluate("window.greybenchView.rankColours([0.3, -0.1, 0.2, null])")
     assert [int(h[4:].split(",")[0]) for h in hues] == [40, 120, 80, 0]

@@ -188,7 +188,7 @@ class WorkpieceView {
     this.section = section;
     this.el = el;
     this.pose = section.poses[0];
-    this.variable = 'deflection';
+    this.variable = section.variables[0].name;
     this.lut = section.colormap.map((rgb) => rgb.map((v) => srgbToLinear(v / 255)));
     this.stock = section.stock_rgb.map((v) => srgbToLinear(v / 255));
     el.insertAdjacentHTML('beforeend', `
