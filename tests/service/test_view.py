@@ -277,6 +277,21 @@ def test_click_is_what_trace_gives(job):
     assert r["reversing_axes"] == [i + 1 for i in range(6) if bits >> i & 1]
 
 
+def test_click_where_an_axis_reverses_names_it(job):
+    """A machined end cut by a step with switching bits: the click names those axes (bit i-1: axis i)."""
+    srv, job_id, folder = job
+    vw = _vw(folder)
+    pts, step, _ = vw.workpiece.ends(0)
+    hit = np.flatnonzero((step >= 0) & (vw.steps.switch[np.maximum(step, 0)] != 0))
+    assert len(hit), "the job has switching points on the machined surface"
+    p, bits = pts[hit[0]], int(vw.steps.switch[step[hit[0]]])
+    with srv.client() as c:
+        r = c.get(f"/simulations/{job_id}/view/workpiece/near/click",
+                  params={"x_mm": p[0] * 1e3, "y_mm": p[1] * 1e3, "z_mm": p[2] * 1e3, "radius_mm": 0.01}).json()
+    assert r["n_ends"] >= 1
+    assert set(i + 1 for i in range(6) if bits >> i & 1) <= set(r["reversing_axes"]) and r["reversing_axes"]
+
+
 def test_box_gives_the_lines_that_cut_it(job):
     srv, job_id, folder = job
     vw = _vw(folder)
