@@ -108,12 +108,14 @@ class PoseTask:
 
 @dataclass
 class PoseOutcome:
-    """Result of one pose: a JSON summary, the feature rows and the virtual workpiece."""
+    """Result of one pose: a JSON summary, the feature rows and the virtual workpiece (GLB coloured by
+    deflection, and the ``workpiece.npz`` the planner's view colours and traces)."""
 
     pose: str
     summary: dict
     features: list[dict] | None = None
     glb: bytes | None = None
+    workpiece: bytes | None = None
 
 
 #: Per-process folder of the friction models the tasks carry, one sub-folder per content hash, so a
@@ -197,6 +199,7 @@ def simulate_pose(task: PoseTask) -> PoseOutcome:
         vw = VirtualWorkpiece.load(res.workpiece_file)
         glb_path = next(p for p in export_meshes(vw, scratch, "deflection") if p.suffix == ".glb")
         glb = glb_path.read_bytes()
+        workpiece = Path(res.workpiece_file).read_bytes()
         steps = res.steps
         table = res.table
         shares = ranking.shares(placement.name) if opts.get("shares") else None
@@ -225,7 +228,7 @@ def simulate_pose(task: PoseTask) -> PoseOutcome:
     features = [{"name": r.name, "nominal": r.nominal_display(), "nominal_text": r.nominal_text(),
                  "tolerance": r.tolerance / MM, "deviation": float(r.deviation) / MM,
                  "worst_instance": r.worst_instance} for r in table.rows]
-    return PoseOutcome(pose=placement.name, summary=summary, features=features, glb=glb)
+    return PoseOutcome(pose=placement.name, summary=summary, features=features, glb=glb, workpiece=workpiece)
 
 
 # ---- backends ---------------------------------------------------------------------------
@@ -336,6 +339,8 @@ def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address
     for o in outcomes:
         if o.glb is not None:
             _write_atomic(job_dir / "workpiece" / f"{o.pose}.glb", o.glb)
+        if o.workpiece is not None:  # dexels and step table: the view's colours and traces
+            _write_atomic(job_dir / "workpiece" / f"{o.pose}.npz", o.workpiece)
     report = {"poses": [o.summary for o in outcomes], "features": features,
               "friction": request.get("friction", [])}
     _write_atomic(job_dir / "report.json", json.dumps(report, indent=1))

@@ -26,6 +26,8 @@ variable                         meaning
                                  default 14400
 ``GREYBENCH_MAX_JOB_MEMORY_MB``  largest estimated memory of one job [MiB], default 4096
 ``GREYBENCH_MAX_BODY_BYTES``     largest request body in bytes (413 above), default 2 MiB
+``GREYBENCH_VIEW_SECRET``        secret of the signed view links (HMAC); default: random bytes kept
+                                 in ``<data dir>/view-secret``
 ``RAY_ADDRESS``                  when set, pose simulations run as Ray tasks on that cluster
                                  (``local`` starts a local Ray instance)
 ``MLFLOW_TRACKING_URI``          the MLflow store holding the registered friction models
@@ -63,6 +65,7 @@ class ServiceSettings(BaseSettings):
     max_job_memory_mb: float = Field(4096.0, gt=0, le=1e7, allow_inf_nan=False,
                                      description="largest estimated memory of one job [MiB]")
     max_body_bytes: int = Field(2 * 1024 * 1024, ge=1024, le=1024 ** 3, description="largest request body [bytes]")
+    view_secret: str | None = Field(None, min_length=16, description="secret of the signed view links (HMAC)")
     ray_address: str | None = Field(None, validation_alias=AliasChoices("RAY_ADDRESS", "GREYBENCH_RAY_ADDRESS"),
                                     description="Ray cluster for pose simulations")
     mlflow_tracking_uri: str | None = Field(None, validation_alias=AliasChoices("MLFLOW_TRACKING_URI",

@@ -1,0 +1,466 @@
+// The planner's page of a finished greybench job (served by service/view.py).
+// Reads the job's sections from <prefix>/<id>/view/data and renders each by its type; a job kind plugs in
+// by returning sections of the types below. Access: a signed link (?token=...) or an API key that the
+// planner enters once (sessionStorage: this tab's session) and that is exchanged for a signed link.
+import * as THREE from 'three';
+import { OrbitControls } from '/view-static/vendor/three/OrbitControls.js';
+
+const KEY_STORE = 'greybench-api-key';
+const params = new URLSearchParams(location.search);
+const token = params.get('token');
+const match = location.pathname.match(/^(.*)\/([0-9a-f]{32})\/view$/);
+const prefix = match ? match[1] : '';
+const jobId = match ? match[2] : '';
+const $ = (sel) => document.querySelector(sel);
+const fmt = (v, d = 3) => (v === null || v === undefined || Number.isNaN(v)) ? '-' : Number(v).toFixed(d);
+const esc = (s) => String(s).replace(/[&<>"']/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;', "'": '&#39;' }[c]));
+
+// hooks for the browser tests and for scripting the page
+window.greybenchView = { ready: false, views: [] };
+
+function status(text) { $('#status').textContent = text; }
+
+async function api(url, opts = {}) {
+  const headers = { ...(opts.headers || {}) };
+  const key = sessionStorage.getItem(KEY_STORE);
+  if (!token && key) headers['X-API-Key'] = key;
+  const r = await fetch(url, { ...opts, headers });
+  if (!r.ok) {
+    let detail = r.statusText;
+    try { const j = await r.json(); detail = typeof j.detail === 'string' ? j.detail : (j.detail.message || JSON.stringify(j.detail)); } catch (e) { /* not JSON */ }
+    const err = new Error(`${r.status}: ${detail}`);
+    err.status = r.status;
+    throw err;
+  }
+  return r;
+}
+
+// ---- access ---------------------------------------------------------------------------------------
+function showLogin(message) {
+  $('#login').hidden = false;
+  $('#login-error').textContent = message || '';
+  $('#login-key').focus();
+}
+
+async function exchange(key) {
+  // the key buys a signed link to this job's page; the page then runs on the link alone
+  const r = await fetch(`${prefix}/${jobId}/view-link`, {
+    method: 'POST', headers: { 'X-API-Key': key, 'Content-Type': 'application/json' }, body: '{}' });
+  if (r.ok) { location.replace((await r.json()).url); return; }
+  if (r.status === 401) { sessionStorage.removeItem(KEY_STORE); showLogin('The key was refused.'); return; }
+  let detail = r.statusText;
+  try { detail = (await r.json()).detail; } catch (e) { /* not JSON */ }
+  showLogin(`${r.status}: ${typeof detail === 'string' ? detail : JSON.stringify(detail)}`);
+}
+
+$('#login-form').addEventListener('submit', (ev) => {
+  ev.preventDefault();
+  const key = $('#login-key').value.trim();
+  sessionStorage.setItem(KEY_STORE, key);
+  exchange(key);
+});
+
+// ---- sections --------------------------------------------------------------------------------------
+function card(section) {
+  const el = document.createElement('section');
+  el.className = `card ${section.type}`;
+  el.dataset.type = section.type;
+  el.innerHTML = `<h2>${esc(section.title || section.type)}</h2>`;
+  $('#sections').appendChild(el);
+  return el;
+}
+
+// green (best) .. red (worst) by rank of |value| within a row, like the paper's Table 2
+function rankColours(values) {
+  const idx = values.map((v, i) => [v === null ? Infinity : Math.abs(v), i]).sort((a, b) => a[0] - b[0]);
+  const out = new Array(values.length);
+  idx.forEach(([, i], r) => {
+    const t = values.length > 1 ? r / (values.length - 1) : 0;
+    out[i] = `hsl(${Math.round(120 * (1 - t))}, 65%, 78%)`;
+  });
+  return out;
+}
+
+window.greybenchView.rankColours = rankColours;
+
+const RENDER = {
+  ranking(section, el) {
+    const poses = section.ranking.map((e) => e.pose);
+    const head = section.ranking.map((e) => `<th data-pose="${esc(e.pose)}">${esc(e.pose)}<br><small>rank ${e.rank}</small></th>`).join('');
+    const rows = section.rows.map((r) => {
+      const vals = poses.map((p) => r.deviation_mm[p]);
+      const colours = rankColours(vals);
+      const cells = vals.map((v, j) => {
+        const ok = v !== null && Math.abs(v) <= r.tolerance_mm;
+        return `<td class="${ok ? 'in-tol' : 'out-tol'}" style="background:${colours[j]}" title="${ok ? 'in tolerance' : 'out of tolerance'}">${fmt(v, 4)}</td>`;
+      }).join('');
+      return `<tr><td>${esc(r.name)}</td><td class="text">${esc(r.nominal_text)}</td><td>${fmt(r.tolerance_mm, 3)}</td>${cells}</tr>`;
+    }).join('');
+    const score = section.ranking.map((e) => `<td>${fmt(e.score, 2)}</td>`).join('');
+    const inTol = section.ranking.map((e) => `<td>${e.in_tolerance} / ${section.rows.length}</td>`).join('');
+    el.insertAdjacentHTML('beforeend', `<table class="table2"><thead><tr><th>row</th><th>nominal</th><th>tolerance [mm]</th>${head}</tr></thead>
+      <tbody>${rows}</tbody><tfoot><tr><th colspan="3">score (sum of |deviation| / tolerance, lower is better) [-]</th>${score}</tr>
+      <tr><th colspan="3">rows in tolerance</th>${inTol}</tr></tfoot></table>
+      <p class="legend-note">Deviation [mm] per pose, poses best first; colour per row from green (smallest |deviation|) to red (largest); bold with &#10003;: in tolerance.</p>`);
+    const withShares = section.poses.filter((p) => p.shares && p.shares.score);
+    if (withShares.length) {
+      const rowsS = withShares.map((p) => `<tr><td>${esc(p.pose)}</td>${['deflection', 'friction', 'switching'].map((c) => `<td>${fmt(100 * (p.shares.score[c] || 0), 0)}</td>`).join('')}</tr>`).join('');
+      el.insertAdjacentHTML('beforeend', `<h3>Share of the score per component [%]</h3><table><tr><th>pose</th><th>deflection</th><th>friction</th><th>switching (backlash)</th></tr>${rowsS}</table>`);
+    }
+  },
+
+  workpiece(section, el) {
+    if (!section.poses.length) { el.insertAdjacentHTML('beforeend', `<p>${esc(section.note)}</p>`); return; }
+    const viewer = new WorkpieceView(section, el);
+    window.greybenchView.views.push(viewer);
+    window.greybenchView.workpiece = viewer;
+    viewer.start();
+  },
+
+  files(section, el) {
+    const items = section.files.map((f) => `<li><a href="${esc(f.url)}" download>${esc(f.name)}</a> <small>(${f.bytes === null ? '?' : (f.bytes / 1024).toFixed(1)} KiB)</small></li>`).join('');
+    el.insertAdjacentHTML('beforeend', `<ul class="files">${items}</ul>`);
+  },
+
+  summary(section, el) {
+    const items = section.items.map(([k, v]) => `<tr><td>${esc(k)}</td><td>${typeof v === "number" ? (Number.isInteger(v) ? v : fmt(v, 3)) : esc(v ?? "-")}</td></tr>`).join('');
+    el.insertAdjacentHTML('beforeend', `<table>${items}</table>`);
+  },
+
+  'before-after'(section, el) {
+    const rows = section.rows.map((r) => {
+      const cls = (v) => (v !== null && Math.abs(v) <= r.tolerance_um ? 'in-tol' : 'out-tol');
+      const better = Math.abs(r.after_um) <= Math.abs(r.before_um);
+      return `<tr><td>${esc(r.name)}</td><td>${fmt(r.tolerance_um, 0)}</td><td class="${cls(r.before_um)}">${fmt(r.before_um, 1)}</td>
+        <td class="${cls(r.after_um)}" style="background:${better ? 'hsl(120,65%,80%)' : 'hsl(0,65%,80%)'}">${fmt(r.after_um, 1)}</td>
+        <td>${r.before_um ? fmt(Math.abs(r.after_um) / Math.abs(r.before_um), 2) : '-'}</td></tr>`;
+    }).join('');
+    el.insertAdjacentHTML('beforeend', `<table><tr><th>row</th><th>tolerance [µm]</th><th>before [µm]</th><th>after [µm]</th><th>|after| / |before| [-]</th></tr>${rows}</table>
+      <p class="legend-note">After: green where |deviation| did not grow, red where it did; bold with &#10003;: in tolerance.</p>`);
+  },
+
+  image(section, el) {
+    el.insertAdjacentHTML('beforeend', `<img src="${esc(section.url)}" alt="${esc(section.title)}" style="max-width:100%">`);
+  },
+
+  // a circle (ballbar) test: radial deviation over the angle; deviation scaled about the nominal circle
+  polar(section, el) {
+    const size = 420, c = size / 2, r0 = size * 0.3;
+    const all = section.series.flatMap((s) => s.deviation_um);
+    const span = Math.max(1e-9, ...all.map(Math.abs));
+    const k = (size * 0.15) / span;
+    const colours = ['#1f77b4', '#d62728', '#2ca02c', '#9467bd'];
+    const paths = section.series.map((s, i) => {
+      const pts = s.angle_deg.map((a, j) => {
+        const r = r0 + k * s.deviation_um[j];
+        const t = (a * Math.PI) / 180;
+        return `${(c + r * Math.cos(t)).toFixed(1)},${(c - r * Math.sin(t)).toFixed(1)}`;
+      });
+      return `<polyline fill="none" stroke="${colours[i % colours.length]}" stroke-width="1.2" points="${pts.join(' ')}"><title>${esc(s.label)}</title></polyline>`;
+    }).join('');
+    const rings = [-1, 0, 1].map((f) => `<circle cx="${c}" cy="${c}" r="${r0 + f * span * k}" fill="none" stroke="#bbb" stroke-dasharray="${f ? '3,3' : ''}"/>`).join('');
+    const legend = section.series.map((s, i) => `<span style="color:${colours[i % colours.length]}">&#9632; ${esc(s.label)}</span>`).join(' ');
+    el.insertAdjacentHTML('beforeend', `<svg width="${size}" height="${size}" viewBox="0 0 ${size} ${size}">${rings}${paths}</svg>
+      <p class="legend-note">${legend}; rings: nominal and &plusmn;${fmt(span, 1)} µm radial deviation.</p>`);
+  },
+};
+
+// ---- the 3D workpiece -----------------------------------------------------------------------------------
+async function binary(url) {
+  const buf = await (await api(url)).arrayBuffer();
+  const n = new DataView(buf).getUint32(0, true);
+  const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 4, n)));
+  let off = 4 + n;
+  const arrays = {};
+  for (const [name, dtype, width] of header.arrays) {
+    const count = (header.vertices !== undefined && name !== 'index' ? header.vertices : header.faces) * width;
+    const Type = dtype === 'float32' ? Float32Array : Uint32Array;
+    arrays[name] = new Type(buf, off, count);
+    off += count * 4;
+  }
+  return { header, arrays };
+}
+
+function srgbToLinear(c) { return c <= 0.04045 ? c / 12.92 : Math.pow((c + 0.055) / 1.055, 2.4); }
+
+class WorkpieceView {
+  constructor(section, el) {
+    this.section = section;
+    this.el = el;
+    this.pose = section.poses[0];
+    this.variable = section.variables[0].name;
+    this.lut = section.colormap.map((rgb) => rgb.map((v) => srgbToLinear(v / 255)));
+    this.stock = section.stock_rgb.map((v) => srgbToLinear(v / 255));
+    el.insertAdjacentHTML('beforeend', `
+      <div class="wp-controls">
+        <label>pose <select class="wp-pose">${section.poses.map((p) => `<option>${esc(p)}</option>`).join('')}</select></label>
+        <label>colour by <select class="wp-variable">${section.variables.map((v) => `<option value="${v.name}">${esc(v.label)} [${esc(v.unit)}]</option>`).join('')}</select></label>
+        <span class="legend"><span class="wp-lo"></span><canvas class="wp-bar" width="240" height="14"></canvas><span class="wp-hi"></span><span class="wp-unit"></span>
+          <span class="stock-swatch"></span> stock surface</span>
+      </div>
+      <div class="wp-layout">
+        <div class="wp-canvas"></div>
+        <div class="wp-side"><p class="legend-note">Drag: orbit; wheel: zoom; right drag: pan. Click the part: what cut that point.
+          Shift + drag: box selection, the program lines that cut it.</p><div class="panel"></div></div>
+      </div>`);
+    this.box = el.querySelector('.wp-canvas');
+    this.panel = el.querySelector('.panel');
+    el.querySelector('.wp-variable').value = this.variable;
+    el.querySelector('.wp-pose').addEventListener('change', (e) => { this.pose = e.target.value; this.loadMesh(); });
+    el.querySelector('.wp-variable').addEventListener('change', (e) => { this.variable = e.target.value; this.loadValues(); });
+    this.drawBar();
+  }
+
+  start() {
+    const w = this.box.clientWidth, h = this.box.clientHeight;
+    // preserveDrawingBuffer: the canvas can be read back (screenshots)
+    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    this.renderer.setPixelRatio(window.devicePixelRatio || 1);
+    this.renderer.setSize(w, h);
+    this.renderer.setClearColor(0xf4f4f4);
+    this.box.appendChild(this.renderer.domElement);
+    this.scene = new THREE.Scene();
+    this.camera = new THREE.PerspectiveCamera(35, w / h, 1, 1e5);
+    this.camera.up.set(0, 0, 1);
+    this.scene.add(new THREE.AmbientLight(0xffffff, 1.1));
+    const light = new THREE.DirectionalLight(0xffffff, 1.9);
+    light.position.set(0.3, 0.2, 1);
+    this.camera.add(light);
+    this.scene.add(this.camera);
+    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    this.controls.addEventListener('change', () => this.render());
+    this.raycaster = new THREE.Raycaster();
+    this.bindPointer();
+    this.loadMesh();
+  }
+
+  render() { if (this.renderer) this.renderer.render(this.scene, this.camera); }
+
+  async loadMesh() {
+    window.greybenchView.ready = false;
+    status(`loading pose ${this.pose} ...`);
+    try {
+      const { header, arrays } = await binary(this.section.urls[this.pose].mesh);
+      this.header = header;
+      if (this.mesh) { this.scene.remove(this.mesh); this.mesh.geometry.dispose(); }
+      const g = new THREE.BufferGeometry();
+      g.setAttribute('position', new THREE.BufferAttribute(arrays.position_mm, 3));
+      g.setIndex(new THREE.BufferAttribute(arrays.index, 1));
+      g.setAttribute('color', new THREE.BufferAttribute(new Float32Array(arrays.position_mm.length), 3));
+      g.computeVertexNormals();
+      g.computeBoundingBox();
+      g.computeBoundingSphere();
+      this.mesh = new THREE.Mesh(g, new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide }));
+      this.scene.add(this.mesh);
+      const [lo, hi] = header.bounds_mm.map((v) => new THREE.Vector3(...v));
+      const centre = lo.clone().add(hi).multiplyScalar(0.5);
+      const size = hi.clone().sub(lo).length();
+      this.camera.near = size / 100; this.camera.far = size * 20; this.camera.updateProjectionMatrix();
+      this.camera.position.copy(centre).add(new THREE.Vector3(-0.55, -1.0, 0.85).normalize().multiplyScalar(size * 1.35));
+      this.controls.target.copy(centre);
+      this.controls.update();
+      await this.loadValues();
+    } catch (e) { this.fail(e); }
+  }
+
+  async loadValues() {
+    window.greybenchView.ready = false;
+    try {
+      const v = this.section.variables.find((x) => x.name === this.variable);
+      const u = this.section.urls[this.pose].values;
+      const { header, arrays } = await binary(u + (u.includes('?') ? '&' : '?') + `variable=${encodeURIComponent(this.variable)}`);
+      const [lo, hi] = header.range;
+      const col = this.mesh.geometry.getAttribute('color');
+      const n = this.lut.length - 1;
+      for (let i = 0; i < arrays.value.length; i++) {
+        const x = arrays.value[i];
+        const c = Number.isNaN(x) ? this.stock : this.lut[Math.max(0, Math.min(n, Math.round(((x - lo) / (hi - lo)) * n)))];
+        col.setXYZ(i, c[0], c[1], c[2]);
+      }
+      col.needsUpdate = true;
+      const digits = Math.abs(hi - lo) >= 100 ? 0 : Math.abs(hi - lo) >= 1 ? 1 : 3;
+      this.el.querySelector('.wp-lo').textContent = fmt(lo, digits);
+      this.el.querySelector('.wp-hi').textContent = fmt(hi, digits);
+      this.el.querySelector('.wp-unit').textContent = `${v.unit}`;
+      this.range = [lo, hi];
+      this.render();
+      status(`pose ${this.pose}: ${header.vertices} vertices, lattice ${fmt(this.header.lattice_mm, 2)} mm`);
+      window.greybenchView.ready = true;
+      document.body.dataset.ready = '1';
+    } catch (e) { this.fail(e); }
+  }
+
+  drawBar() {
+    const cv = this.el.querySelector('.wp-bar');
+    const ctx = cv.getContext('2d');
+    const lut = this.section.colormap;
+    for (let x = 0; x < cv.width; x++) {
+      const c = lut[Math.round((x / (cv.width - 1)) * (lut.length - 1))];
+      ctx.fillStyle = `rgb(${c[0]},${c[1]},${c[2]})`;
+      ctx.fillRect(x, 0, 1, cv.height);
+    }
+  }
+
+  fail(e) {
+    status('');
+    this.panel.innerHTML = `<p class="error">${esc(e.message)}</p>`;
+    if (e.status === 401) showLogin('The link has expired or the key was refused: enter a key.');
+  }
+
+  // pointer: a click (little movement) traces a point; shift + drag selects a box
+  bindPointer() {
+    const dom = this.renderer.domElement;
+    let down = null;
+    let rect = null;
+    dom.addEventListener('pointerdown', (e) => {
+      down = { x: e.clientX, y: e.clientY, shift: e.shiftKey };
+      if (e.shiftKey) {
+        this.controls.enabled = false;
+        rect = document.createElement('div');
+        rect.className = 'wp-rect';
+        this.box.appendChild(rect);
+      }
+    });
+    dom.addEventListener('pointermove', (e) => {
+      if (!down || !rect) return;
+      const b = this.box.getBoundingClientRect();
+      rect.style.left = `${Math.min(down.x, e.clientX) - b.left}px`;
+      rect.style.top = `${Math.min(down.y, e.clientY) - b.top}px`;
+      rect.style.width = `${Math.abs(e.clientX - down.x)}px`;
+      rect.style.height = `${Math.abs(e.clientY - down.y)}px`;
+    });
+    dom.addEventListener('pointerup', (e) => {
+      if (!down) return;
+      const moved = Math.hypot(e.clientX - down.x, e.clientY - down.y);
+      if (down.shift) {
+        this.controls.enabled = true;
+        if (rect) rect.remove();
+        rect = null;
+        if (moved > 4) this.selectBox(down.x, down.y, e.clientX, e.clientY);
+      } else if (moved < 4) {
+        const hit = this.hitAt(e.clientX, e.clientY);
+        if (hit) this.trace(hit);
+      }
+      down = null;
+    });
+  }
+
+  hitAt(cx, cy) {
+    if (!this.mesh) return null;
+    const b = this.renderer.domElement.getBoundingClientRect();
+    const ndc = new THREE.Vector2(((cx - b.left) / b.width) * 2 - 1, -((cy - b.top) / b.height) * 2 + 1);
+    this.raycaster.setFromCamera(ndc, this.camera);
+    const hits = this.raycaster.intersectObject(this.mesh, false);
+    return hits.length ? hits[0].point.clone() : null;
+  }
+
+  // client pixel of a point [mm] (tests and scripting)
+  project(x, y, z) {
+    const v = new THREE.Vector3(x, y, z).project(this.camera);
+    const b = this.renderer.domElement.getBoundingClientRect();
+    return { x: b.left + ((v.x + 1) / 2) * b.width, y: b.top + ((1 - v.y) / 2) * b.height };
+  }
+
+  // look at a point [mm] from a direction (unit vector, from the point towards the camera) at a distance [mm]
+  lookAt(point, direction, distance) {
+    const p = new THREE.Vector3(...point);
+    this.controls.target.copy(p);
+    this.camera.position.copy(p).add(new THREE.Vector3(...direction).normalize().multiplyScalar(distance));
+    this.controls.update();
+    this.render();
+  }
+
+  marker(p) {
+    if (this.mark) this.scene.remove(this.mark);
+    const r = Math.max(0.6, this.section.click_radius_mm);
+    this.mark = new THREE.Mesh(new THREE.SphereGeometry(r, 16, 12), new THREE.MeshBasicMaterial({ color: 0xff2020, wireframe: true }));
+    this.mark.position.copy(p);
+    this.scene.add(this.mark);
+    this.render();
+  }
+
+  async trace(p) {
+    this.marker(p);
+    const u = this.section.urls[this.pose].click;
+    const q = `x_mm=${p.x}&y_mm=${p.y}&z_mm=${p.z}&radius_mm=${this.section.click_radius_mm}`;
+    try {
+      const r = await (await api(u + (u.includes('?') ? '&' : '?') + q)).json();
+      window.greybenchView.lastClick = r;
+      const comp = r.components.deflection_um === undefined ? 'none (stock surface)' :
+        `deflection ${fmt(r.components.deflection_um, 1)} µm (${fmt(100 * r.components.deflection_share, 0)} %), ` +
+        `servo tracking error (friction, backlash, dynamics) ${fmt(r.components.tracking_error_um, 1)} µm (${fmt(100 * r.components.tracking_error_share, 0)} %)`;
+      this.panel.innerHTML = `<h3>Point (${r.point_mm.map((v) => fmt(v, 2)).join(', ')}) mm</h3>
+        <p class="trace-summary" data-point="${r.point_mm.join(',')}">${r.n_ends} machined dexel ends within ${fmt(r.radius_mm, 1)} mm;
+        time ${r.t_first_s === null ? '-' : `${fmt(r.t_first_s, 3)} .. ${fmt(r.t_last_s, 3)} s`};
+        axes stopping or reversing: ${r.reversing_axes.length ? r.reversing_axes.map((a) => `A${a}`).join(', ') : 'none'};
+        error components: ${comp}.</p>` + linesTable(r.lines, 'trace-lines');
+    } catch (e) { this.fail(e); }
+  }
+
+  async selectBox(x0, y0, x1, y1) {
+    // the visible surface inside the rectangle: a grid of rays, their hit points' bounding box
+    const pts = [];
+    const n = 14;
+    for (let i = 0; i <= n; i++) {
+      for (let j = 0; j <= n; j++) {
+        const hit = this.hitAt(x0 + ((x1 - x0) * i) / n, y0 + ((y1 - y0) * j) / n);
+        if (hit) pts.push(hit);
+      }
+    }
+    if (!pts.length) { this.panel.innerHTML = '<p>No part inside the rectangle.</p>'; return; }
+    const box = new THREE.Box3().setFromPoints(pts).expandByScalar(this.header.lattice_mm / 2);
+    if (this.boxHelper) this.scene.remove(this.boxHelper);
+    this.boxHelper = new THREE.Box3Helper(box, 0xd00000);
+    this.scene.add(this.boxHelper);
+    this.render();
+    const u = this.section.urls[this.pose].box;
+    const q = `min_mm=${box.min.toArray().join(',')}&max_mm=${box.max.toArray().join(',')}`;
+    try {
+      const r = await (await api(u + (u.includes('?') ? '&' : '?') + q)).json();
+      window.greybenchView.lastBox = r;
+      this.panel.innerHTML = `<h3>Box (${r.min_mm.map((v) => fmt(v, 1)).join(', ')}) .. (${r.max_mm.map((v) => fmt(v, 1)).join(', ')}) mm</h3>
+        <p>${r.n_ends} machined dexel ends; ${r.lines.length} program lines cut it.</p>` + linesTable(r.lines, 'box-lines');
+    } catch (e) { this.fail(e); }
+  }
+}
+
+function linesTable(lines, cls) {
+  if (!lines.length) return '<p>No machined surface here (stock surface or empty space).</p>';
+  const rows = lines.map((l) => `<tr data-line="${l.line}"><td>${l.line}</td><td class="text"><code class="line">${esc(l.text)}</code></td>
+    <td>${fmt(l.t_first_s, 3)} .. ${fmt(l.t_last_s, 3)}</td><td>${l.n_ends}</td><td>${fmt(l.max_deflection_um, 1)}</td>
+    <td>${fmt(l.max_force_n, 1)}</td><td>${l.reversing_axes.map((a) => `A${a}`).join(', ') || '-'}</td></tr>`).join('');
+  return `<table class="${cls}"><tr><th>line</th><th>program</th><th>t [s]</th><th>ends</th><th>max deflection [µm]</th>
+    <th>max force [N]</th><th>axes reversing</th></tr>${rows}</table>`;
+}
+
+// ---- start ------------------------------------------------------------------------------------------------
+async function start() {
+  $('#job').textContent = jobId;
+  if (!token) {
+    const key = sessionStorage.getItem(KEY_STORE);
+    if (key) { await exchange(key); return; }
+    showLogin();
+    return;
+  }
+  try {
+    const data = await (await api(`${prefix}/${jobId}/view/data?token=${encodeURIComponent(token)}`)).json();
+    document.title = `greybench: ${data.title} ${jobId.slice(0, 8)}`;
+    $('#title').textContent = `greybench: ${data.title} job`;
+    for (const s of data.sections) {
+      const el = card(s);
+      const render = RENDER[s.type];
+      if (render) render(s, el);
+      else el.insertAdjacentHTML('beforeend', `<pre>${esc(JSON.stringify(s, null, 1))}</pre>`);
+    }
+    window.greybenchView.data = data;
+    if (!data.sections.some((s) => s.type === 'workpiece' && s.poses.length)) {
+      window.greybenchView.ready = true;
+      document.body.dataset.ready = '1';
+    }
+  } catch (e) {
+    if (e.status === 401) showLogin('The link has expired or is not valid: enter a key.');
+    else $('#sections').innerHTML = `<p class="error">${esc(e.message)}</p>`;
+  }
+}
+
+start();

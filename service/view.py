@@ -1,0 +1,594 @@
+"""The planner's view: one browser page per finished job (paper 3.8, the process-evaluation assistant).
+
+``GET /simulations/{id}/view`` serves a page (``service/static/view/``) that shows the Table-2 ranking
+(rows per pose with tolerance, in-tolerance values marked, best to worst coloured per row), the
+coloured virtual workpiece of a chosen pose in 3D (three.js, shipped in ``service/static/vendor``: no
+CDN, works offline) with the variable chosen from those the workpiece carries and a legend in units,
+the program lines, time stamps, reversing axes and error components at a clicked point, the program
+lines that cut a box-selected region, and download links for every result file. A compensation job's
+page (``GET /compensations/{id}/view``) shows the Table-2 deviations before and after.
+
+Access is the API's: the page and every data route need a valid ``X-API-Key``, or a short-lived
+signed link from ``POST /<jobs>/{id}/view-link`` (``?token=``: HMAC-SHA256 over the job id and the
+expiry with the service's secret, :func:`sign` / :func:`verify`). A browser without either gets the
+page's key form (401, no job data); the key a planner enters is kept in the tab's sessionStorage and
+exchanged for a signed link. Job missing: 404; not finished: 409 (both a short HTML page).
+
+Job kinds plug in with :func:`register`: a kind gives its URL prefix and a function returning the
+page's *sections*, each a dict with ``type`` and ``title`` rendered by ``view.js``; call it before
+:func:`add_routes`. Section types and their fields:
+
+- ``ranking``: ``ranking`` (entries pose, rank, score, in_tolerance), ``rows`` (name, nominal_text,
+  tolerance_mm, deviation_mm by pose), ``poses`` (per-pose summaries, optional ``shares``);
+- ``workpiece``: ``poses``, ``variables`` (name, label, unit), ``colormap`` (sRGB triples),
+  ``stock_rgb``, ``click_radius_mm``, ``urls`` by pose (mesh, values, click, box);
+- ``before-after``: ``rows`` (name, tolerance_um, before_um, after_um);
+- ``polar``: ``series`` (label, angle_deg, deviation_um: radial deviation from the nominal circle),
+  e.g. a circle (ballbar) test;
+- ``image``: ``url``; ``summary``: ``items`` ([label with unit, value]); ``files``: ``files``
+  (name, bytes, url; :meth:`Context.files`).
+
+The data routes are thin: the geometry and values come from :mod:`simulate.machining.surface_mesh`
+and :mod:`simulate.machining.virtual_workpiece`, a click from :func:`simulate.evaluation.trace.trace_point`.
+"""
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import html
+import json
+import os
+import struct
+import threading
+import time
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from fastapi import Body, Depends, HTTPException, Path as PathParam, Query, Request, Security
+from fastapi.responses import FileResponse, HTMLResponse, Response
+
+from identify.errors import InputError
+from service.auth import HEADER, api_key_header, key_ok
+
+STATIC = Path(__file__).parent / "static"
+#: Lifetime of a signed view link unless the request asks otherwise [s], and the longest allowed.
+LINK_SECONDS = 900
+MAX_LINK_SECONDS = 86_400
+#: Default search radius of a click [mm] (the ``trace`` command's).
+CLICK_RADIUS_MM = 1.5
+#: Most lattice nodes of the mesh sent to the browser: some 10^5 triangles for the test pieces.
+VIEW_MAX_NODES = 3_000_000
+MM = 1e-3
+
+
+# ---- signed links -------------------------------------------------------------------------------
+def secret(settings) -> bytes:
+    """The service's secret for view links: ``GREYBENCH_VIEW_SECRET``, else 32 random bytes kept in
+    ``<data dir>/view-secret`` (mode 0600, made on first use), so links survive a restart."""
+    if settings.view_secret:
+        return settings.view_secret.encode()
+    path = Path(settings.data_dir) / "view-secret"
+    try:
+        return bytes.fromhex(path.read_text().strip())
+    except (OSError, ValueError):
+        pass
+    value = os.urandom(32)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path.with_suffix(".tmp"), os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(value.hex())
+    os.replace(path.with_suffix(".tmp"), path)
+    return value
+
+
+def _b64(data: bytes) -> str:
+    return base64.urlsafe_b64encode(data).rstrip(b"=").decode()
+
+
+def sign(key: bytes, job_id: str, expires: int) -> str:
+    """Token ``<job>.<expiry unix s>.<HMAC-SHA256 hex digest, base64url>`` for one job until ``expires``."""
+    mac = hmac.new(key, f"view:{job_id}:{int(expires)}".encode(), hashlib.sha256).digest()
+    return f"{job_id}.{int(expires)}.{_b64(mac)}"
+
+
+def verify(key: bytes, token: str | None, job_id: str, now: float | None = None) -> bool:
+    """True when ``token`` was signed with ``key`` for ``job_id`` and has not expired (constant-time)."""
+    if not token or len(token) > 200:
+        return False
+    parts = token.split(".")
+    if len(parts) != 3 or parts[0] != job_id or not parts[1].isdigit():
+        return False
+    expected = sign(key, job_id, int(parts[1]))
+    if not hmac.compare_digest(expected.encode(), token.encode()):
+        return False
+    return int(parts[1]) > (time.time() if now is None else now)
+
+
+# ---- job kinds ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ViewKind:
+    """A job kind's page: its URL prefix (``/simulations``) and ``sections(ctx) -> list of dict``."""
+
+    kind: object
+    prefix: str
+    title: str
+    sections: Callable[["Context"], list[dict]]
+
+
+VIEWS: dict[str, ViewKind] = {}
+
+
+def register(kind, prefix: str, title: str, sections: Callable[["Context"], list[dict]]) -> None:
+    """Give job kind ``kind`` (a :class:`service.jobs.JobKind`) a page under ``<prefix>/{id}/view``."""
+    VIEWS[prefix] = ViewKind(kind, prefix, title, sections)
+
+
+@dataclass
+class Context:
+    """What a sections function gets: the request, the job record and URL helpers."""
+
+    request: object
+    rec: object
+    prefix: str
+    token: str | None
+
+    @property
+    def job_dir(self) -> Path:
+        return self.request.app.state.manager.job_dir(self.rec.id)
+
+    def url(self, tail: str) -> str:
+        """A data URL of this job's view (the token appended, so links work in a plain browser)."""
+        u = f"{self.prefix}/{self.rec.id}/view/{tail}"
+        return u + (("&" if "?" in u else "?") + f"token={self.token}" if self.token else "")
+
+    def read(self, name: str, read):
+        """``read(path)`` of a result file, its recorded digest checked (:func:`service.app._result`)."""
+        from service import app as svc
+
+        return svc._result(self.request, self.rec, name, read)
+
+    def files(self) -> list[dict]:
+        """Every file recorded when the job succeeded, with its size [bytes] and a download URL."""
+        digests = self.request.app.state.store.files(self.rec.id) or {}
+        out = []
+        for name in sorted(digests):
+            p = self.job_dir / name
+            out.append({"name": name, "bytes": p.stat().st_size if p.is_file() else None,
+                        "url": self.url(f"files/{name}")})
+        return out
+
+
+# ---- geometry and values --------------------------------------------------------------------
+_CACHE: OrderedDict = OrderedDict()
+_CACHE_LOCK = threading.Lock()
+_CACHE_SIZE = 4
+
+
+def _cached(key, make):
+    """An LRU of a few loaded workpieces and meshes (one page asks for several variables)."""
+    with _CACHE_LOCK:
+        if key in _CACHE:
+            _CACHE.move_to_end(key)
+            return _CACHE[key]
+    value = make()
+    with _CACHE_LOCK:
+        _CACHE[key] = value
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return value
+
+
+def load_workpiece(path: Path, digest: str | None = None):
+    """The :class:`simulate.machining.virtual_workpiece.VirtualWorkpiece` of a job file (cached by digest)."""
+    from simulate.machining.virtual_workpiece import VirtualWorkpiece
+
+    return _cached(("vw", str(path), digest), lambda: VirtualWorkpiece.load(path))
+
+
+def mesh_of(vw, key):
+    """Closed surface (:func:`simulate.machining.surface_mesh.surface_mesh`) at a lattice fine enough
+    for the page and small enough to send (:data:`VIEW_MAX_NODES`), flat quads made by one step (the
+    untouched stock faces above all) merged into rectangles
+    (:func:`simulate.machining.surface_mesh.merge_flat_quads`): every vertex keeps its creating step,
+    so each variable colours it exactly, with a third of the triangles."""
+    from simulate.machining.surface_mesh import merge_flat_quads, surface_mesh
+
+    def make():
+        sm = surface_mesh(vw.workpiece, max_nodes=VIEW_MAX_NODES)
+        return merge_flat_quads(sm, np.asarray(sm.vertex_step, np.int64))
+
+    return _cached(("mesh", key), make)
+
+
+#: Derived per-step variable of the page: the tool's deviation from the commanded path, the vector sum of
+#: the deflection and the servo tracking error (both in the workpiece frame) [m]; shown in µm.
+TOOL_DEVIATION = "tool_deviation"
+
+
+def variables() -> list[dict]:
+    """The variables the page colours by: the tool deviation (:data:`TOOL_DEVIATION`) and those the
+    virtual workpiece carries, each with its display unit and factor from SI."""
+    from simulate.machining.virtual_workpiece import DISPLAY_UNITS, VARIABLES
+
+    labels = {"deflection": "tool deflection |d|", "force": "cutting force |F|", "tracking_error":
+              "servo tracking error |e|", "time": "time stamp", "line": "program line", "switch":
+              "switching bits (axes stopping or reversing)", "peak_force": "peak cutting force"}
+    return [{"name": TOOL_DEVIATION, "label": "tool deviation |d + e|", "unit": "µm", "factor": 1e6}] + [
+        {"name": v, "label": labels.get(v, v.replace("_", " ")), "unit": DISPLAY_UNITS[v][1],
+         "factor": DISPLAY_UNITS[v][0]} for v in VARIABLES]
+
+
+def vertex_values(vw, step: np.ndarray, variable: str) -> np.ndarray:
+    """SI value of ``variable`` per vertex (NaN where no step made it: the stock surface)."""
+    from simulate.machining.virtual_workpiece import step_values
+
+    if variable != TOOL_DEVIATION:
+        return step_values(vw, step, variable)
+    dev = np.linalg.norm(np.asarray(vw.steps.deflection) + np.asarray(vw.steps.tracking_error), axis=1)
+    out = np.full(len(step), np.nan)
+    ok = step >= 0
+    out[ok] = dev[step[ok]]
+    return out
+
+
+def frame(header: dict, *arrays: np.ndarray) -> bytes:
+    """Binary answer: uint32 little-endian header length, the JSON header (padded with spaces to 4 bytes),
+    then the arrays' raw little-endian bytes one after another (their dtypes and lengths in the header)."""
+    head = json.dumps(header, separators=(",", ":")).encode()
+    head += b" " * (-len(head) % 4)
+    return struct.pack("<I", len(head)) + head + b"".join(np.ascontiguousarray(a).tobytes() for a in arrays)
+
+
+def mesh_bytes(sm) -> bytes:
+    """Vertices [mm, workpiece frame] float32 (n, 3) and triangle indices uint32 (m, 3) of a mesh."""
+    v = np.asarray(sm.vertices, np.float64) / MM
+    f = np.asarray(sm.faces, np.uint32)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    header = {"vertices": int(len(v)), "faces": int(len(f)), "bounds_mm": [lo.tolist(), hi.tolist()],
+              "lattice_mm": float(sm.pitch) / MM, "arrays": [["position_mm", "float32", 3], ["index", "uint32", 3]]}
+    return frame(header, v.astype("<f4"), f.astype("<u4"))
+
+
+def values_bytes(vw, sm, variable: str) -> bytes:
+    """Per vertex the value of ``variable`` in its display unit (float32, NaN on the stock surface) and
+    the colour scale's ends (:func:`simulate.machining.virtual_workpiece.colour_range`) in that unit."""
+    from simulate.machining.virtual_workpiece import DISPLAY_UNITS, colour_range
+
+    vals = vertex_values(vw, np.asarray(sm.vertex_step), variable)
+    lo, hi = colour_range(vals)
+    factor, unit = (1e6, "µm") if variable == TOOL_DEVIATION else DISPLAY_UNITS[variable]
+    header = {"variable": variable, "unit": unit, "range": [lo * factor, hi * factor], "vertices": int(len(vals)),
+              "arrays": [["value", "float32", 1]]}
+    return frame(header, (vals * factor).astype("<f4"))
+
+
+def viridis(n: int = 64) -> list[list[int]]:
+    """The colour map of the GLB and PNG exports (matplotlib's viridis) as ``n`` sRGB triples."""
+    import matplotlib
+
+    c = matplotlib.colormaps["viridis"](np.linspace(0.0, 1.0, n))[:, :3]
+    return np.round(c * 255).astype(int).tolist()
+
+
+def binary_response(request, data: bytes):
+    """``application/octet-stream``, gzip-compressed when the client accepts it (meshes shrink to ~half)."""
+    import gzip
+
+    headers = {"Cache-Control": "private, max-age=3600", "Vary": "Accept-Encoding"}
+    if "gzip" in request.headers.get("accept-encoding", ""):
+        data = gzip.compress(data, compresslevel=5)
+        headers["Content-Encoding"] = "gzip"
+    return Response(data, media_type="application/octet-stream", headers=headers)
+
+
+# ---- click and box ---------------------------------------------------------------------------
+def _near_steps(vw, inside_fn) -> np.ndarray:
+    """Step indices of the machined dexel ends (all three families) for which ``inside_fn(points)``."""
+    out = []
+    for axis in range(3):
+        pts, step, _ = vw.workpiece.ends(axis)
+        ok = step >= 0
+        out.append(step[ok][inside_fn(pts[ok])])
+    return np.concatenate(out).astype(np.int64)
+
+
+def components_at(vw, steps: np.ndarray) -> dict:
+    """The path error's two parts at the steps that cut a spot: tool deflection (compliance x force) and the
+    servo tracking error (friction, backlash and dynamics of the drives), as mean magnitudes [µm] and
+    shares of their sum [-]. A split by magnitude: the two are vectors and may partly cancel, so the
+    shares say which part is larger there, not how much each moved the surface."""
+    if len(steps) == 0:
+        return {}
+    d = float(np.mean(np.linalg.norm(np.asarray(vw.steps.deflection)[steps], axis=1)))
+    e = float(np.mean(np.linalg.norm(np.asarray(vw.steps.tracking_error)[steps], axis=1)))
+    total = d + e
+    return {"deflection_um": d / 1e-6, "tracking_error_um": e / 1e-6,
+            "deflection_share": d / total if total > 0 else 0.0,
+            "tracking_error_share": e / total if total > 0 else 0.0}
+
+
+def _line_rows(lines) -> list[dict]:
+    from simulate.toolpath.switching import axes_of
+
+    return [{"line": ln.line, "text": ln.text, "t_first_s": ln.t_first, "t_last_s": ln.t_last, "n_ends": ln.n_ends,
+             "max_deflection_um": ln.max_deflection / 1e-6, "max_force_n": ln.max_force,
+             "reversing_axes": axes_of(ln.switching)} for ln in lines]
+
+
+def click(vw, program: Path, point_mm, radius_mm: float) -> dict:
+    """What ``greybench trace`` answers for a point [mm]: program lines with time stamps, the axes
+    stopping or reversing there (switching bits), and the error components (:func:`components_at`)."""
+    from simulate.evaluation.trace import trace_point
+    from simulate.toolpath.switching import axes_of
+
+    p = np.asarray(point_mm, float) * MM
+    r = float(radius_mm) * MM
+    tr = trace_point(vw, p, r, program=str(program))
+    steps = _near_steps(vw, lambda pts: np.sum((pts - p) ** 2, axis=1) <= r * r)
+    bits = int(np.bitwise_or.reduce(np.asarray(vw.steps.switch)[steps].astype(np.int64))) if len(steps) else 0
+    return {"point_mm": list(map(float, point_mm)), "radius_mm": float(radius_mm), "n_ends": tr.n_ends,
+            "t_first_s": float(tr.times[0]) if len(tr.times) else None,
+            "t_last_s": float(tr.times[-1]) if len(tr.times) else None,
+            "reversing_axes": axes_of(bits), "components": components_at(vw, steps), "lines": _line_rows(tr.lines)}
+
+
+def box(vw, program: Path, lo_mm, hi_mm) -> dict:
+    """The program lines whose steps cut the machined dexel ends inside an axis-aligned box [mm],
+    grouped as :func:`simulate.evaluation.trace.trace_point` groups a point's (by first time)."""
+    from simulate.evaluation.trace import TraceLine, _program_lines
+
+    lo = np.asarray(lo_mm, float) * MM
+    hi = np.asarray(hi_mm, float) * MM
+    if lo.shape != (3,) or hi.shape != (3,) or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise InputError("a box needs 3 finite numbers for each corner (mm)", field="min_mm")
+    if np.any(hi < lo):
+        raise InputError("each max_mm coordinate must be >= the min_mm one", field="max_mm")
+    st = _near_steps(vw, lambda pts: np.all((pts >= lo) & (pts <= hi), axis=1))
+    table = vw.steps
+    text = _program_lines(str(program))
+    lines = []
+    if len(st):
+        ln = np.asarray(table.line)[st]
+        for line in np.unique(ln):
+            s = st[ln == line]
+            t = np.asarray(table.t)[s]
+            lines.append(TraceLine(line=int(line), text=text[line - 1].strip() if 0 < line <= len(text) else "",
+                                   t_first=float(t.min()), t_last=float(t.max()), n_ends=int(len(s)),
+                                   max_deflection=float(np.linalg.norm(np.asarray(table.deflection)[s], axis=1).max()),
+                                   max_force=float(np.linalg.norm(np.asarray(table.force)[s], axis=1).max()),
+                                   switching=int(np.bitwise_or.reduce(np.asarray(table.switch)[s].astype(np.int64)))))
+        lines.sort(key=lambda x: x.t_first)
+    return {"min_mm": (lo / MM).tolist(), "max_mm": (hi / MM).tolist(), "n_ends": int(len(st)),
+            "components": components_at(vw, st), "lines": _line_rows(lines)}
+
+
+# ---- sections of the job kinds --------------------------------------------------------------
+def simulation_sections(ctx: Context) -> list[dict]:
+    """Ranking (Table 2 per pose), the 3D workpiece, downloads."""
+    report = ctx.read("report.json", lambda p: json.loads(p.read_text()))
+    ranking = ctx.read("ranking.json", lambda p: json.loads(p.read_text()))["ranking"]
+    poses = [e["pose"] for e in ranking]
+    from service.schemas import feature_row
+
+    rows = []
+    for stored in report["features"]:
+        r = feature_row(stored)
+        rows.append({"name": r.name, "nominal_text": r.nominal_text, "tolerance_mm": r.tolerance_mm,
+                     "deviation_mm": {p: r.deviation_mm.get(p) for p in poses}})
+    digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
+    with_npz = [p for p in poses if f"workpiece/{p}.npz" in digests]
+    summaries = {s["pose"]: s for s in report["poses"]}
+    return [
+        {"type": "ranking", "title": "Table 2: deviation per pose [mm]", "ranking": ranking, "rows": rows,
+         "poses": [summaries.get(p, {"pose": p}) for p in poses]},
+        {"type": "workpiece", "title": "Virtual workpiece", "poses": with_npz, "variables": variables(),
+         "colormap": viridis(), "stock_rgb": [200, 200, 200], "click_radius_mm": CLICK_RADIUS_MM,
+         "urls": {p: {"mesh": ctx.url(f"workpiece/{p}/mesh"), "values": ctx.url(f"workpiece/{p}/values"),
+                      "click": ctx.url(f"workpiece/{p}/click"), "box": ctx.url(f"workpiece/{p}/box")}
+                  for p in with_npz},
+         "note": "" if with_npz else "this job was run before the service kept the virtual workpiece: "
+                                     "submit it again to see the part"},
+        {"type": "files", "title": "Result files", "files": ctx.files()},
+    ]
+
+
+def compensation_sections(ctx: Context) -> list[dict]:
+    """Table-2 deviations before and after compensation, the deviation plot, downloads."""
+    info = ctx.rec.result or {}
+    ev = info.get("evaluation") or {}
+    out = [{"type": "summary", "title": "Compensation", "items": [
+        ["sum of |deviation| before [µm]", _um(ev.get("sum_before_mm"))],
+        ["sum of |deviation| after [µm]", _um(ev.get("sum_after_mm"))],
+        ["after / before [-]", ev.get("ratio")], ["score before [-]", ev.get("score_before")],
+        ["score after [-]", ev.get("score_after")], ["chosen iteration", info.get("best_iteration")],
+        ["largest offset from the nominal path [µm]", _um(info.get("max_offset_mm"))],
+        ["program time ratio [-]", info.get("time_ratio")]]}]
+    if ev.get("rows_mm"):
+        out.append({"type": "before-after", "title": "Table 2 before / after compensation [µm]",
+                    "rows": [{"name": r["name"], "tolerance_um": _um(r["tolerance"]), "before_um": _um(r["before"]),
+                              "after_um": _um(r["after"])} for r in ev["rows_mm"]]})
+    digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
+    if "out/deviation.png" in digests:
+        out.append({"type": "image", "title": "Tool deviation from the nominal path, before and after",
+                    "url": ctx.url("files/out/deviation.png")})
+    out.append({"type": "files", "title": "Result files", "files": ctx.files()})
+    return out
+
+
+def _um(mm):
+    return None if mm is None else float(mm) * 1e3
+
+
+def _register_builtin() -> None:
+    from service.jobs import JobKind
+
+    register(JobKind.simulation, "/simulations", "pose ranking", simulation_sections)
+    register(JobKind.compensation, "/compensations", "compensation", compensation_sections)
+
+
+_register_builtin()
+
+
+# ---- pages and routes -------------------------------------------------------------------------
+def _page(status: int, title: str, message: str):
+    """A short HTML page for a refused or unfinished job (no traceback, no job data)."""
+    body = (f"<!doctype html><html lang=en><head><meta charset=utf-8><title>{html.escape(title)}</title>"
+            f"<link rel=stylesheet href=/view-static/view/view.css></head><body><main class=notice>"
+            f"<h1>{html.escape(title)}</h1><p>{html.escape(message)}</p></main></body></html>")
+    return HTMLResponse(body, status_code=status)
+
+
+def add_routes(app, settings, keyed: list) -> None:
+    """Register the view routes of every kind in :data:`VIEWS` and the static files (call last)."""
+    from fastapi.staticfiles import StaticFiles
+    from starlette.middleware.gzip import GZipMiddleware
+
+    from service import app as svc
+    from service.jobs import JobState
+    from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside
+    from service.schemas import ErrorBody
+
+    key_bytes = secret(settings)
+    job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
+    token_param = Query(None, max_length=200, description="signed view link token (from POST .../view-link)")
+    errors = {401: {"model": ErrorBody}, 404: {"model": ErrorBody}, 409: {"model": ErrorBody}}
+    # the page answers HTML; schema errors (422) stay JSON like every route's
+    html_errors = {200: {"content": {"text/html": {}}, "description": "the page"},
+                   401: {"content": {"text/html": {}}, "description": "the key form (no job data)"},
+                   404: {"content": {"text/html": {}}, "description": "no such job"},
+                   409: {"content": {"text/html": {}}, "description": "the job has not succeeded"}}
+    # the three.js build and the page's own files: public code, no job data; gzip halves the download
+    app.mount("/view-static", GZipMiddleware(StaticFiles(directory=STATIC), minimum_size=1024), name="view-static")
+    index = (STATIC / "view" / "index.html").read_text()
+
+    def allowed(request: Request, job_id: str, key: str | None, token: str | None) -> bool:
+        if key_ok(key, request.app.state.settings.keys()):
+            request.state.api_key = key
+            return True
+        return verify(key_bytes, token, job_id)
+
+    def for_kind(view: ViewKind):
+        prefix, kind = view.prefix, view.kind
+        tag = prefix.strip("/")
+
+        def access(request: Request, job_id: str = job_id_param, token: str | None = token_param,
+                   key: str | None = Security(api_key_header)) -> Context:
+            """Dependency of the data routes: 401 without a valid key or link, then the job (404)."""
+            check_job_id(job_id)
+            if not allowed(request, job_id, key, token):
+                raise HTTPException(status_code=401, detail=f"missing or invalid {HEADER} header or view link",
+                                    headers={"WWW-Authenticate": HEADER})
+            return Context(request, svc._job(request, job_id, kind), prefix, token)
+
+        @app.get(f"{prefix}/{{job_id}}/view", tags=[tag], responses=html_errors,
+                 summary=f"Planner's page of a {view.title} job (HTML)")
+        def page(request: Request, job_id: str = job_id_param, token: str | None = token_param,
+                 key: str | None = Security(api_key_header)):
+            if not allowed(request, job_id, key, token):
+                # the key form only: the page asks for a key (kept for the browser session) or a link
+                return HTMLResponse(index, status_code=401, headers={"WWW-Authenticate": HEADER})
+            check_job_id(job_id)
+            try:
+                rec = svc._job(request, job_id, kind)
+            except NotFound as exc:
+                return _page(404, "Job not found", exc.message)
+            if rec.state is not JobState.succeeded:
+                done = "" if rec.state is not JobState.running else f" ({rec.progress * 100:.0f} % done)"
+                reason = f": {rec.error['message']}" if rec.error else ""
+                return _page(409, f"Job {rec.state.value}", f"Job {job_id} is {rec.state.value}{done}{reason}; "
+                                                            "its page shows once it has succeeded.")
+            return HTMLResponse(index, headers={"Cache-Control": "no-store"})
+
+        @app.post(f"{prefix}/{{job_id}}/view-link", dependencies=keyed, tags=[tag], responses=errors,
+                  summary="A short-lived signed link to the job's page")
+        def view_link(request: Request, job_id: str = job_id_param,
+                      expires_s: int = Body(LINK_SECONDS, embed=True, ge=10, le=MAX_LINK_SECONDS,
+                                            description="lifetime of the link [s]")) -> dict:
+            svc._job(request, job_id, kind)
+            expires = int(time.time()) + int(expires_s)
+            token = sign(key_bytes, job_id, expires)
+            return {"url": f"{prefix}/{job_id}/view?token={token}", "token": token, "expires_unix_s": expires,
+                    "expires_s": int(expires_s)}
+
+        @app.get(f"{prefix}/{{job_id}}/view/data", tags=[tag], responses=errors,
+                 summary="What the page shows (sections), JSON")
+        def data(ctx: Context = Depends(access)) -> dict:
+            svc._succeeded(ctx.rec)
+            return {"job": ctx.rec.id, "kind": ctx.rec.kind.value, "title": view.title,
+                    "finished": ctx.rec.finished, "sections": view.sections(ctx)}
+
+        @app.get(f"{prefix}/{{job_id}}/view/files/{{name:path}}", tags=[tag], responses=errors,
+                 response_class=FileResponse, summary="A result file of the job (download)")
+        def file(ctx: Context = Depends(access), name: str = PathParam(max_length=300)):
+            digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
+            svc._succeeded(ctx.rec)
+            if name not in digests:
+                raise NotFound(f"no file '{name[:100]}' in job {ctx.rec.id}")
+            inside(ctx.job_dir, *name.split("/"))
+            return ctx.read(name, lambda p: FileResponse(p, filename=p.name))
+
+        if kind.value != "simulation":
+            return
+
+        def workpiece(ctx: Context, pose: str):
+            check_name(pose, "pose")
+            svc._succeeded(ctx.rec)
+            name = f"workpiece/{pose}.npz"
+            digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
+            if name not in digests:
+                raise NotFound(f"no virtual workpiece for pose '{pose}' in job {ctx.rec.id}")
+            vw = ctx.read(name, lambda p: load_workpiece(p, digests[name]))
+            return vw, (ctx.rec.id, pose, digests[name])
+
+        pose_param = PathParam(pattern=NAME_PATTERN, description="pose name")
+        binary = {200: {"content": {"application/octet-stream": {}},
+                        "description": "uint32 header length, JSON header, raw little-endian arrays"}}
+
+        @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/mesh", tags=[tag], responses={**errors, **binary},
+                 summary="Surface mesh of a pose's virtual workpiece (binary: vertices [mm], triangles)")
+        def mesh(ctx: Context = Depends(access), pose: str = pose_param):
+            vw, key = workpiece(ctx, pose)
+            return binary_response(ctx.request, mesh_bytes(mesh_of(vw, key)))
+
+        @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/values", tags=[tag], responses={**errors, **binary},
+                 summary="Per-vertex values of a variable in its display unit (binary, float32)")
+        def values(ctx: Context = Depends(access), pose: str = pose_param,
+                   variable: str = Query("deflection", max_length=40, description="a variable the workpiece carries")):
+            vw, key = workpiece(ctx, pose)
+            return binary_response(ctx.request, values_bytes(vw, mesh_of(vw, key), variable))
+
+        @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/click", tags=[tag], responses=errors,
+                 summary="Program lines, time stamps, reversing axes and error components at a point")
+        def click_point(ctx: Context = Depends(access), pose: str = pose_param,
+                        x_mm: float = Query(..., allow_inf_nan=False, description="point x [mm], workpiece frame"),
+                        y_mm: float = Query(..., allow_inf_nan=False, description="point y [mm]"),
+                        z_mm: float = Query(..., allow_inf_nan=False, description="point z [mm]"),
+                        radius_mm: float = Query(CLICK_RADIUS_MM, gt=0, le=50, allow_inf_nan=False,
+                                                 description="search radius [mm]")) -> dict:
+            vw, _ = workpiece(ctx, pose)
+            return click(vw, ctx.job_dir / "program.nc", (x_mm, y_mm, z_mm), radius_mm)
+
+        @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/box", tags=[tag], responses=errors,
+                 summary="Program lines that cut the machined surface inside a box")
+        def box_select(ctx: Context = Depends(access), pose: str = pose_param,
+                       min_mm: str = Query(..., max_length=100, description="corner x,y,z [mm]"),
+                       max_mm: str = Query(..., max_length=100, description="opposite corner x,y,z [mm]")) -> dict:
+            vw, _ = workpiece(ctx, pose)
+            return box(vw, ctx.job_dir / "program.nc", _xyz(min_mm, "min_mm"), _xyz(max_mm, "max_mm"))
+
+    for view in list(VIEWS.values()):
+        for_kind(view)
+
+
+def _xyz(text: str, field: str) -> list[float]:
+    try:
+        v = [float(s) for s in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) != 3 or not all(np.isfinite(v)):
+        raise InputError(f"expected three finite numbers x,y,z in mm, got '{text[:60]}'", field=field)
+    return v
