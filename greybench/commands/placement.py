@@ -44,7 +44,7 @@ def optimize_pose_cmd(
     from identify.errors import read_json
     from simulate.evaluation.ranking import RankSettings
     from simulate.placement.report import write_outputs
-    from simulate.placement.search import SearchSettings, search_placement
+    from simulate.placement.search import SearchSettings, plan_search, run_search
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import parse_poses
 
@@ -65,8 +65,8 @@ def optimize_pose_cmd(
     settings = SearchSettings(budget_s=budget_s, workers=workers, seed=seed,
                               rank=RankSettings(spacing=spacing * MM, size=int(size)), max_simulations=max_simulations,
                               xy_margin=xy_margin * MM, z_margin=z_margin * MM)
-    settings.validate()
     check_cost(program, None, spacing, simulations=1)
+    plan = plan_search(program, robot_path, placements, settings, poses_source=str(poses))  # every check first
     with progress("placement search", total=round(budget_s), enabled=True) as advance:
         done = [0]
 
@@ -77,12 +77,9 @@ def optimize_pose_cmd(
                 done[0] += step
             advance.describe(text)
 
-        result = search_placement(program, robot_path, placements, settings, progress=report,
-                                  ray_address=os.environ.get("RAY_ADDRESS") or None, poses_source=str(poses))
+        result = run_search(plan, progress=report, ray_address=os.environ.get("RAY_ADDRESS") or None)
         advance.describe("writing the report and the heat map")
-        from simulate.pipeline import load_program
-        prog = load_program(program, require_spindle=True)
-        info = write_outputs(result, out_dir, given_doc=doc, robot=load_robot(robot_path), interp=prog.interp,
+        info = write_outputs(result, out_dir, given_doc=doc, robot=plan.robot, interp=plan.program.interp,
                              program=str(program), robot_name=robot, poses=str(poses), size=int(size))
     if as_json:
         from simulate.placement.report import finite

@@ -137,8 +137,7 @@ def heatmap(result: SearchResult, robot, interp, path: Path, grid: int = HEATMAP
         label = "compliance, largest eigenvalue, path mean [µm/N]"
         what = "compliance proxy (fewer than four simulations to fit a score prediction)"
     fig, ax = plt.subplots(figsize=(7.5, 6.0))
-    cmap = plt.get_cmap("viridis").copy()
-    cmap.set_bad("lightgrey")
+    cmap = plt.get_cmap("viridis").with_extremes(bad="lightgrey")
     X, Y = np.meshgrid(xs / MM, ys / MM)
     m = ax.pcolormesh(X, Y, np.ma.masked_invalid(value), cmap=cmap, shading="nearest")
     fig.colorbar(m, ax=ax, label=label)

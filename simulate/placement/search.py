@@ -31,6 +31,7 @@ lower-bound estimate (:data:`SECONDS_PER_SAMPLE`).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -335,36 +336,41 @@ def _unique(name: str, taken: set) -> str:
     return f"{name}_{k}"
 
 
-def search_placement(program: str | Path, robot: str | Path, placements: list[Placement], settings: SearchSettings,
-                     *, progress: Callable[[float, str], None] | None = None, ray_address: str | None = None,
-                     poses_source: str = "--poses") -> SearchResult:
-    """Search the placement (module docstring).
+@dataclass
+class SearchPlan:
+    """A search checked and ready to run (:func:`plan_search`): nothing simulated yet.
 
-    Parameters
+    Attributes
     ----------
-    program : path
-        G-code; its stock ``<stem>.stock.json`` next to it.
-    robot : path
-        Robot TOML.
+    program : simulate.pipeline.ProgramSetup
+    robot : simulate.robot.model.Robot
+    robot_file : str
     placements : list of Placement
-        The given poses (the baseline, and where the search box lies).
+        The given poses.
+    given : list of Candidate
+        The given poses, screened.
+    space : SearchSpace
     settings : SearchSettings
-    progress : callable(elapsed [s], text), optional
-        Called after every simulation with the best score so far.
-    ray_address : str, optional
-        Simulate on this Ray cluster instead of ``settings.workers`` processes.
-    poses_source : str
-        The pose file, named in messages.
-
-    Raises
-    ------
-    InputError
-        Before any simulation: a bad setting, a given pose that cannot be machined, no reachable candidate
-        at all, or a budget too short for the given poses plus one candidate.
+    estimate_s : float
+        Lower-bound wall time of one simulation [s].
     """
-    import optuna
 
-    from simulate.parallel import ProcessBackend, RayBackend
+    program: object
+    robot: object
+    robot_file: str
+    placements: list
+    given: list
+    space: SearchSpace
+    settings: SearchSettings
+    estimate_s: float
+
+
+def plan_search(program: str | Path, robot: str | Path, placements: list[Placement], settings: SearchSettings, *,
+                poses_source: str = "--poses") -> SearchPlan:
+    """Check everything before any simulation (raises ``InputError``): the settings, the program and its
+    stock, the given poses (each must machine the program, as ``rank-poses`` will simulate it again beside
+    the best), that some placement is reachable at all, and that the budget fits the given poses plus one
+    candidate."""
     from simulate.pipeline import load_program
     from simulate.robot.model import load_robot
 
@@ -380,15 +386,13 @@ def search_placement(program: str | Path, robot: str | Path, placements: list[Pl
     rob = load_robot(robot)
     src = str(program)
     space = SearchSpace.around(placements, settings.xy_margin, settings.z_margin)
-    kw = dict(limit_margin=settings.limit_margin, wrist_margin=settings.wrist_margin, source=src)
-
-    # the given poses: screened (rank-poses must be able to rank them again beside the best found)
-    candidates = [Candidate(i, "given", p, screen(rob, prog.interp, p, **kw), CandidateStatus.simulated)
-                  for i, p in enumerate(placements)]
-    failing = [c for c in candidates if c.screen.status.name == "IK_FAILED"]
+    given = [Candidate(i, "given", p, screen(rob, prog.interp, p, limit_margin=settings.limit_margin,
+                                             wrist_margin=settings.wrist_margin, source=src),
+                       CandidateStatus.simulated) for i, p in enumerate(placements)]
+    failing = [c for c in given if c.screen.status.name == "IK_FAILED"]
     if failing:
-        if len(failing) == len(candidates) and not _prescan(rob, prog.interp, space, settings, src):
-            raise InputError(f"no reachable candidate at all: none of the {len(candidates)} given poses nor "
+        if len(failing) == len(given) and not _prescan(rob, prog.interp, space, settings, src):
+            raise InputError(f"no reachable candidate at all: none of the {len(given)} given poses nor "
                              f"{PRESCAN} placements sampled around them can machine the program "
                              f"(pose '{failing[0].name}': {failing[0].screen.message})",
                              source=poses_source, field="poses")
@@ -397,14 +401,45 @@ def search_placement(program: str | Path, robot: str | Path, placements: list[Pl
                          field="poses")
     estimate = estimate_simulation_s(prog)
     check_budget(settings.budget_s, len(placements), settings.workers, estimate)
+    return SearchPlan(prog, rob, str(robot), list(placements), given, space, settings, estimate)
 
+
+def search_placement(program: str | Path, robot: str | Path, placements: list[Placement], settings: SearchSettings,
+                     *, progress: Callable[[float, str], None] | None = None, ray_address: str | None = None,
+                     poses_source: str = "--poses") -> SearchResult:
+    """Check (:func:`plan_search`) and run (:func:`run_search`) a search; parameters as there."""
+    return run_search(plan_search(program, robot, placements, settings, poses_source=poses_source),
+                      progress=progress, ray_address=ray_address)
+
+
+def run_search(plan: SearchPlan, *, progress: Callable[[float, str], None] | None = None,
+               ray_address: str | None = None) -> SearchResult:
+    """Run a planned search (module docstring).
+
+    Parameters
+    ----------
+    plan : SearchPlan
+    progress : callable(elapsed [s], text), optional
+        Called after every simulation with the best score so far.
+    ray_address : str, optional
+        Simulate on this Ray cluster instead of ``settings.workers`` processes.
+    """
+    import optuna
+
+    from simulate.parallel import ProcessBackend, RayBackend
+
+    settings, prog, rob, space = plan.settings, plan.program, plan.robot, plan.space
+    kw = dict(limit_margin=settings.limit_margin, wrist_margin=settings.wrist_margin, source=str(prog.program))
+    candidates = [dataclasses.replace(c) for c in plan.given]
+    placements = plan.placements
+    estimate = plan.estimate_s
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     sampler = optuna.samplers.TPESampler(seed=settings.seed, n_startup_trials=STARTUP_TRIALS, multivariate=True,
                                          constant_liar=True)
     study = optuna.create_study(direction="minimize", sampler=sampler)
     dists = space.distributions()
     taken = {p.name for p in placements}
-    robot_s = str(robot)
+    robot_s = plan.robot_file
     t0 = time.monotonic()
     deadline = t0 + settings.budget_s
     walls: list[float] = []
