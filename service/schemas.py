@@ -188,10 +188,18 @@ class ExplainJobStatus(JobStatus):
     kind: Literal[JobKind.explain] = Field(description="'explain'")
 
 
+class PlacementSearchJobStatus(JobStatus):
+    """Status of a placement search (``POST /placement-searches``); result: best pose [m, rad] and score, every
+    given pose's score, improvement [-], candidates, stop reason (``optimize-pose --json``)."""
+
+    kind: Literal[JobKind.placement_search] = Field(description="'placement_search'")
+
+
 #: Any job's status: one of the kinds, told apart by ``kind`` (OpenAPI ``oneOf`` with a discriminator).
-AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus], Field(discriminator="kind")]
+AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus, PlacementSearchJobStatus],
+                         Field(discriminator="kind")]
 STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: DiagnoseJobStatus,
-                  JobKind.explain: ExplainJobStatus}
+                  JobKind.explain: ExplainJobStatus, JobKind.placement_search: PlacementSearchJobStatus}
 
 
 class RankingEntry(BaseModel):

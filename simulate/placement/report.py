@@ -147,10 +147,12 @@ def heatmap(result: SearchResult, robot, interp, path: Path, grid: int = HEATMAP
     for c in result.given:
         ax.plot(c.placement.xyz[0] / MM, c.placement.xyz[1] / MM, "o", mfc="white", mec="black", ms=8)
         ax.annotate(f"{c.name} ({c.score:.2f})", (c.placement.xyz[0] / MM, c.placement.xyz[1] / MM),
-                    textcoords="offset points", xytext=(6, 6), fontsize=8)
+                    textcoords="offset points", xytext=(6, 6), fontsize=8,
+                    bbox=dict(boxstyle="round", fc="white", alpha=0.7))
     ax.plot(b.placement.xyz[0] / MM, b.placement.xyz[1] / MM, "*", color="red", mec="black", ms=16)
     ax.annotate(f"best ({b.score:.2f})", (b.placement.xyz[0] / MM, b.placement.xyz[1] / MM),
-                textcoords="offset points", xytext=(8, -12), fontsize=8, color="darkred")
+                textcoords="offset points", xytext=(8, -12), fontsize=8, color="darkred",
+                bbox=dict(boxstyle="round", fc="white", alpha=0.7))
     ax.set_xlabel("workpiece origin x, robot base frame [mm]")
     ax.set_ylabel("workpiece origin y, robot base frame [mm]")
     ax.set_title(f"yaw {math.degrees(params['yaw_rad']):.1f} deg, z {params['z_m'] / MM:.0f} mm; grey: fails the "
@@ -230,10 +232,14 @@ def report_text(result: SearchResult, *, program: str, robot: str, poses: str, s
                   f"`rank-poses --shares` on `best.json`.)", ""]
     lines += ["## Heat map", "", f"![score over x-y](heatmap.png)", "",
               f"{heat['shows']}; {heat['feasible_cells']} of {heat['cells']} grid placements pass the screen.", ""]
-    lines += ["## Search history", "", "All candidates in the order drawn (`history.csv` has every column).", "",
+    n_skip = counts.get("skipped", 0)
+    lines += ["## Search history", "", "The candidates in the order drawn, the skipped ones left out here (" + str(n_skip)
+              + " dominated on both proxies; `history.csv` has every candidate and column).", "",
               "| # | name | status | x [mm] | y [mm] | z [mm] | yaw [deg] | score | switching | compliance [µm/N] | "
               "note |", "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     for c in result.candidates:
+        if c.status is CandidateStatus.skipped:
+            continue
         sc = _f(c.score, ".4f") if c.status is CandidateStatus.simulated else (
             f"≥ {c.predicted:.3f} (predicted)" if c.status is CandidateStatus.skipped else "-")
         note = c.message if c.status is not CandidateStatus.skipped else "dominated on both proxies"

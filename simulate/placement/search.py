@@ -401,7 +401,7 @@ def plan_search(program: str | Path, robot: str | Path, placements: list[Placeme
                          field="poses")
     estimate = estimate_simulation_s(prog)
     check_budget(settings.budget_s, len(placements), settings.workers, estimate)
-    return SearchPlan(prog, rob, str(robot), list(placements), given, space, settings, estimate)
+    return SearchPlan(prog, rob, str(Path(robot).resolve()), list(placements), given, space, settings, estimate)
 
 
 def search_placement(program: str | Path, robot: str | Path, placements: list[Placement], settings: SearchSettings,
