@@ -18,7 +18,8 @@ Cheap proxies of the score for the candidates that pass (no cutting simulated):
   deflection per newton of cutting force.
 
 A candidate whose two proxies are both no better than those of a candidate already simulated
-is predicted to score no better than that one (:func:`dominated_by`).
+is predicted to score no better than that one (:func:`dominated_by`); when that one scored clearly
+worse than the best so far, the candidate is hopeless.
 """
 from __future__ import annotations
 
@@ -133,14 +134,18 @@ def screen(robot, interp, placement, *, limit_margin: float = LIMIT_MARGIN, wris
     return ScreenResult(ScreenStatus.OK, lim, wrist, switching, comp, 0.0)
 
 
-def dominated_by(candidate: ScreenResult, simulated: list[tuple[ScreenResult, float]]) -> float | None:
-    """The largest score among the simulated candidates that dominate ``candidate`` (at most its switching
-    points and at most its compliance); None when none does. The candidate is predicted to score at least that.
+def dominated_by(candidate: ScreenResult, simulated: list[tuple[ScreenResult, float]],
+                 floor: float = -math.inf) -> float | None:
+    """The largest score, at least ``floor``, among the simulated candidates that dominate ``candidate`` (at most
+    its switching points and at most its compliance); None when none does. The candidate is predicted to score
+    at least that.
 
-    ``simulated``: (screen result, score) of each simulated candidate.
+    ``simulated``: (screen result, score) of each simulated candidate. ``floor``: dominators scoring below it do
+    not count (the search passes 1.1 x the best score: a candidate dominated only by good ones is worth a look).
     """
     best = None
     for res, score in simulated:
-        if res.switching <= candidate.switching and res.compliance <= candidate.compliance and math.isfinite(score):
+        if (res.switching <= candidate.switching and res.compliance <= candidate.compliance and math.isfinite(score)
+                and score >= floor):
             best = score if best is None else max(best, score)
     return best

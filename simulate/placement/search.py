@@ -18,13 +18,14 @@ One batch at a time, so the history depends on the seed alone, not on which work
    limits with a margin, wrist singularity along the whole program; 0.05 s). A failing candidate is
    told its violation as a constraint (and a penalty value) and never simulated;
 2. a candidate whose proxies (switching points, compliance) are both no better than those of one
-   already simulated is *skipped*: it is told that one's score as its predicted value;
+   already simulated that scored at least 1.1 x the best so far is *hopeless* and skipped: it is told
+   that score as its predicted value;
 3. until the batch holds one candidate per worker; then all are simulated in parallel
    (:mod:`simulate.parallel`: processes, or Ray tasks with a Ray address) and told in ask order.
 
 The given poses are simulated first (the baseline every result is compared with). The budget
 covers every simulation, the given poses included: a batch starts only when its simulations are
-expected to end before the deadline (the estimate: 1.25 x the slowest simulation so far), and a
+expected to end before the deadline (the estimate: 1.25 x the slowest of the recent simulations), and a
 batch still running at the deadline is waited for until its own estimate has passed, then ended.
 A budget too small for the given poses plus one candidate is refused before any work, with a
 lower-bound estimate (:data:`SECONDS_PER_SAMPLE`).
@@ -61,6 +62,12 @@ PRESCAN = 48
 #: Half-width of the searched box around the given poses, x and y [m] and z [m] (defaults).
 XY_MARGIN = 0.4
 Z_MARGIN = 0.1
+#: A candidate is skipped when a simulated candidate that dominates it on both proxies scored at least this
+#: factor times the best score so far [-] (dominated only by near-best ones, it may refine the best).
+HOPELESS_FACTOR = 1.1
+#: The estimate of one simulation follows the slowest of this many recent simulations per worker [-]
+#: (a shared machine's load changes; the first ones also load the compiled kernels).
+RECENT_PER_SLOT = 2
 #: Poll interval [s] while a batch runs.
 POLL_S = 0.2
 
@@ -496,7 +503,7 @@ def run_search(plan: SearchPlan, *, progress: Callable[[float, str], None] | Non
                 raise _Deadline()
             time.sleep(POLL_S)
         if walls:
-            estimate = ESTIMATE_FACTOR * max(walls)
+            estimate = ESTIMATE_FACTOR * max(walls[-RECENT_PER_SLOT * len(batch):])
 
     # processes even for one worker: a simulation still running at the deadline can then be ended
     backend = RayBackend(ray_address, settings.workers) if ray_address else ProcessBackend(settings.workers)
@@ -540,10 +547,12 @@ def run_search(plan: SearchPlan, *, progress: Callable[[float, str], None] | Non
                     study.tell(trial, 2.0 * worst + res.violation)
                     continue
                 sims = [(s.screen, s.score) for s in candidates if s.status is CandidateStatus.simulated]
-                pred = dominated_by(res, sims)
+                best = min((sc for _, sc in sims if math.isfinite(sc)), default=math.inf)
+                pred = dominated_by(res, sims, floor=HOPELESS_FACTOR * best)
                 if pred is not None:
                     c.status, c.predicted = CandidateStatus.skipped, pred
-                    c.message = "no better than a simulated candidate on switching points and compliance"
+                    c.message = ("no better on switching points and compliance than a simulated candidate scoring "
+                                 f"{pred:.3f}")
                     trial.set_constraint("violation_deg", 0.0)
                     study.tell(trial, _finite(pred))
                     continue

@@ -68,3 +68,5 @@ def test_dominance():
     assert dominated_by(r(10, 5e-6), sims) == 50.0          # equal proxies: predicted as good as that one
     assert dominated_by(r(25, 6e-6), sims) == 60.0          # dominated by both: the larger score bounds it
     assert dominated_by(r(15, 4.5e-6), sims) is None
+    assert dominated_by(r(25, 6e-6), sims, floor=55.0) == 60.0   # only dominators scoring at least the floor count
+    assert dominated_by(r(10, 5e-6), sims, floor=55.0) is None
