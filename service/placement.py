@@ -79,7 +79,8 @@ class PlacementSearchRequest(Strict):
 
 #: Option names of :class:`simulate.placement.search.SearchSettings` errors -> request fields.
 _FIELDS = {"budget-s": "options.budget_s", "workers": "options.workers", "max-simulations": "options.max_simulations",
-           "xy-margin-mm": "options.xy_margin_mm", "z-margin-mm": "options.z_margin_mm", "spacing": "options.spacing_mm"}
+           "xy-margin-mm": "options.xy_margin_mm", "z-margin-mm": "options.z_margin_mm",
+           "spacing": "options.spacing_mm"}
 
 
 def _settings(opts: dict, size: int):
@@ -169,7 +170,8 @@ def add_routes(app: FastAPI, settings, keyed: list) -> None:
         rec = svc._job(request, job_id, kind)
         if name not in FILES:
             raise NotFound(f"no file '{name}' (known: {', '.join(FILES)})")
-        return svc._result(request, rec, f"out/{name}", lambda p: FileResponse(p, media_type=FILES[name], filename=name))
+        return svc._result(request, rec, f"out/{name}",
+                           lambda p: FileResponse(p, media_type=FILES[name], filename=name))
 
 
 def run(request: dict, job_dir: Path, progress, ray_address: str | None = None) -> dict:

@@ -131,7 +131,8 @@ def heatmap(result: SearchResult, robot, interp, path: Path, grid: int = HEATMAP
         coef, r2, n = fit
         value = coef[0] + coef[1] * sw + coef[2] * comp
         label = f"predicted score [-] (fit R² {r2:.2f}, {n} simulations)"
-        what = f"predicted score: least-squares fit on switching points and compliance of {n} simulations (R² {r2:.2f})"
+        what = (f"predicted score: least-squares fit on switching points and compliance of {n} simulations "
+                f"(R² {r2:.2f})")
     else:
         value = comp
         label = "compliance, largest eigenvalue, path mean [µm/N]"
@@ -223,7 +224,8 @@ def report_text(result: SearchResult, *, program: str, robot: str, poses: str, s
                   f"| RMS deflection [µm] | {_f(bd / UM, '.2f')} | {_f(gd / UM, '.2f')} |",
                   f"| RMS servo tracking error [µm] | {_f(bt / UM, '.2f')} | {_f(gt / UM, '.2f')} |",
                   f"| switching points [-] | {b.screen.switching} | {g.screen.switching} |",
-                  f"| compliance, path mean [µm/N] | {_f(b.screen.compliance / UM)} | {_f(g.screen.compliance / UM)} |",
+                  f"| compliance, path mean [µm/N] | {_f(b.screen.compliance / UM)} | "
+                  f"{_f(g.screen.compliance / UM)} |",
                   f"| smallest joint-limit margin [deg] | {_f(math.degrees(b.screen.limit_margin), '.1f')} | "
                   f"{_f(math.degrees(g.screen.limit_margin), '.1f')} |",
                   f"| smallest wrist angle from singular [deg] | {_f(math.degrees(b.screen.wrist_angle), '.1f')} | "
@@ -233,8 +235,8 @@ def report_text(result: SearchResult, *, program: str, robot: str, poses: str, s
     lines += ["## Heat map", "", f"![score over x-y](heatmap.png)", "",
               f"{heat['shows']}; {heat['feasible_cells']} of {heat['cells']} grid placements pass the screen.", ""]
     n_skip = counts.get("skipped", 0)
-    lines += ["## Search history", "", "The candidates in the order drawn, the skipped ones left out here (" + str(n_skip)
-              + " dominated on both proxies; `history.csv` has every candidate and column).", "",
+    lines += ["## Search history", "", f"The candidates in the order drawn, the skipped ones left out here ({n_skip} "
+              "dominated on both proxies; `history.csv` has every candidate and column).", "",
               "| # | name | status | x [mm] | y [mm] | z [mm] | yaw [deg] | score | switching | compliance [µm/N] | "
               "note |", "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     for c in result.candidates:
@@ -245,7 +247,8 @@ def report_text(result: SearchResult, *, program: str, robot: str, poses: str, s
         note = c.message if c.status is not CandidateStatus.skipped else "dominated on both proxies"
         lines.append(f"| {c.index} | {c.name} | {c.status.value} | {c.placement.xyz[0] / MM:.1f} | "
                      f"{c.placement.xyz[1] / MM:.1f} | {c.placement.xyz[2] / MM:.1f} | "
-                     f"{math.degrees(c.placement.rpy[2]):.1f} | {sc} | {c.screen.switching if c.screen.switching >= 0 else '-'} | "
+                     f"{math.degrees(c.placement.rpy[2]):.1f} | {sc} | "
+                     f"{c.screen.switching if c.screen.switching >= 0 else '-'} | "
                      f"{_f(c.screen.compliance / UM)} | {note.replace('|', '/')[:120]} |")
     lines += ["", "Method: `docs/placement-search.md`.", ""]
     return "\n".join(lines)

@@ -20,7 +20,9 @@ One batch at a time, so the history depends on the seed alone, not on which work
 2. a candidate whose proxies (switching points, compliance) are both no better than those of one
    already simulated that scored at least 1.1 x the best so far is *hopeless* and skipped: it is told
    that score as its predicted value;
-3. until the batch holds one candidate per worker; then all are simulated in parallel
+3. until the batch holds one candidate per worker, or 8 per worker were drawn (then the skipped ones
+   predicted best fill it: the screen never takes more than its share of the budget); then all are
+   simulated in parallel
    (:mod:`simulate.parallel`: processes, or Ray tasks with a Ray address) and told in ask order.
 
 The given poses are simulated first (the baseline every result is compared with). The budget
@@ -53,8 +55,8 @@ from simulate.toolpath.placement import Placement
 SECONDS_PER_SAMPLE = 0.5e-3
 #: A batch is expected to take this many times the slowest simulation so far [-].
 ESTIMATE_FACTOR = 1.25
-#: Candidates drawn per worker and batch before the batch starts with what passed [-].
-SCREENS_PER_SLOT = 12
+#: Candidates drawn per worker and batch; a batch still not full then takes the skipped ones predicted best [-].
+SCREENS_PER_SLOT = 8
 #: Random candidates before TPE models the history (the given poses count) [-].
 STARTUP_TRIALS = 6
 #: Placements sampled to tell "no reachable candidate at all" when every given pose fails the screen [-].
@@ -448,7 +450,6 @@ def run_search(plan: SearchPlan, *, progress: Callable[[float, str], None] | Non
     taken = {p.name for p in placements}
     robot_s = plan.robot_file
     t0 = time.monotonic()
-    deadline = t0 + settings.budget_s
     walls: list[float] = []
     stop = "budget"
 
@@ -532,6 +533,7 @@ def run_search(plan: SearchPlan, *, progress: Callable[[float, str], None] | Non
                 break
             room = slots if settings.max_simulations is None else min(slots, settings.max_simulations - n_sim)
             batch: list[tuple[Candidate, object]] = []
+            held: list[tuple[Candidate, object]] = []   # skipped this round, told at its end
             asks = 0
             while len(batch) < room and asks < SCREENS_PER_SLOT * room and elapsed() + estimate <= settings.budget_s:
                 asks += 1
@@ -553,11 +555,22 @@ def run_search(plan: SearchPlan, *, progress: Callable[[float, str], None] | Non
                     c.status, c.predicted = CandidateStatus.skipped, pred
                     c.message = ("no better on switching points and compliance than a simulated candidate scoring "
                                  f"{pred:.3f}")
-                    trial.set_constraint("violation_deg", 0.0)
-                    study.tell(trial, _finite(pred))
+                    held.append((c, trial))
                     continue
                 c.status = CandidateStatus.abandoned   # until simulated
                 batch.append((c, trial))
+            # the screen never spends more than its share: a batch the round could not fill takes the skipped
+            # candidates predicted best instead of drawing on
+            held.sort(key=lambda ct: (ct[0].predicted, ct[0].index))
+            while len(batch) < room and held and elapsed() + estimate <= settings.budget_s:
+                c, trial = held.pop(0)
+                c.status = CandidateStatus.abandoned
+                c.message = "simulated although dominated (the round found none better)"
+                batch.append((c, trial))
+            for c, trial in held:
+                trial.set_constraint("violation_deg", 0.0)
+                study.tell(trial, _finite(c.predicted))
+            held.clear()
             if not batch:
                 continue
             for c, _ in batch:
