@@ -192,6 +192,12 @@ def report_text(result: SearchResult, *, program: str, robot: str, poses: str, s
                   f"**{b.score:.4f}** against {g.score:.4f} of the best given pose `{g.name}` "
                   f"(**{100 * result.improvement:.2f} %** lower), {b.in_tolerance}/10 rows in tolerance "
                   f"({g.in_tolerance}/10).", ""]
+    edges = [f"{ax} {'lower' if v - lo < hi - v else 'upper'}" for ax, v, (lo, hi) in
+             zip("xyz", b.placement.xyz, (result.space.x, result.space.y, result.space.z))
+             if min(v - lo, hi - v) < 0.02 * (hi - lo)]
+    if b.origin != "given" and edges:
+        lines += [f"The best lies at the edge of the searched box ({', '.join(edges)}): a wider box "
+                  f"(`--xy-margin-mm`, `--z-margin-mm`) may hold a better placement.", ""]
     lines += ["Check it (the same simulation, so the same scores):", "", "```",
               f"greybench rank-poses --program {program} --robot {robot} --poses best.json --size {size} "
               f"--spacing {st.rank.spacing / MM:g}", "```", ""]
