@@ -22,7 +22,7 @@ bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Bench
 app.add_typer(bench_app, name="bench")
 
 # Areas, in the order of the workflow. Each module defines register(app, bench_app).
-_AREAS = ["friction", "diagnose", "robot", "toolpath", "machining", "evaluation", "circle", "compensate",
+_AREAS = ["friction", "diagnose", "robot", "toolpath", "machining", "evaluation", "placement", "circle", "compensate",
           "explain", "serve"]
 for _name in _AREAS:
     try:

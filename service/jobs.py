@@ -73,6 +73,7 @@ class JobKind(str, Enum):
     diagnose = "diagnose"
     explain = "explain"
     compensation = "compensation"
+    placement_search = "placement_search"
 
 
 class QueueFull(RuntimeError):

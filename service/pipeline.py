@@ -415,4 +415,6 @@ def run_job(kind: JobKind, request: dict, job_dir: Path, progress: Progress, *, 
         return run_explain(request, job_dir, progress)
     if kind is JobKind.compensation:
         return _import_stage("service.compensation", "the compensation").run(request, job_dir, progress)
+    if kind is JobKind.placement_search:
+        return _import_stage("service.placement", "the placement search").run(request, job_dir, progress, ray_address)
     raise ValueError(f"unknown job kind {kind}")

@@ -194,11 +194,19 @@ class CompensationJobStatus(JobStatus):
     kind: Literal[JobKind.compensation] = Field(description="'compensation'")
 
 
+class PlacementSearchJobStatus(JobStatus):
+    """Status of a placement search (``POST /placement-searches``); result: best pose [m, rad] and score, every
+    given pose's score, improvement [-], candidates, stop reason (``optimize-pose --json``)."""
+
+    kind: Literal[JobKind.placement_search] = Field(description="'placement_search'")
+
+
 #: Any job's status: one of the kinds, told apart by ``kind`` (OpenAPI ``oneOf`` with a discriminator).
-AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus,
-                                   CompensationJobStatus], Field(discriminator="kind")]
+AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus, CompensationJobStatus,
+                               PlacementSearchJobStatus], Field(discriminator="kind")]
 STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: DiagnoseJobStatus,
-                  JobKind.explain: ExplainJobStatus, JobKind.compensation: CompensationJobStatus}
+                  JobKind.explain: ExplainJobStatus, JobKind.compensation: CompensationJobStatus,
+                  JobKind.placement_search: PlacementSearchJobStatus}
 
 
 class RankingEntry(BaseModel):

@@ -1,6 +1,7 @@
 """Evaluation commands: ``rank-poses``, ``trace``; ``bench ranking`` (paper 3.8, 4, Table 2)."""
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 from typing import Optional
@@ -90,7 +91,8 @@ def rank_poses_cmd(
                                                                      "and switching off in turn (4x the time)."),
     ideal: bool = typer.Option(False, "--ideal", help="Ideal robot: no deflection and no tracking error."),
     size: int = typer.Option(320, "--size", help="Test piece size [mm]: 160 or 320."),
-    workers: int = typer.Option(2, "--workers", help="Parallel processes [-] (at most 2)."),
+    workers: int = typer.Option(2, "--workers", help="Parallel processes [-] (at most 2); Ray tasks instead when "
+                                                     "RAY_ADDRESS is set."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object: ranking and feature deviations "
                                                        "[mm]."),
 ) -> None:
@@ -115,7 +117,7 @@ def rank_poses_cmd(
     n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
     with progress("simulating poses", total=n_jobs, enabled=not as_json) as advance:
         r = rank_poses(program, robot_path, placements, settings=settings, components=comps, shares=shares,
-                       out_dir=out_dir, workers=workers, advance=advance)
+                       out_dir=out_dir, workers=workers, advance=advance, ray_address=os.environ.get("RAY_ADDRESS"))
     if out_dir is not None:
         from simulate.evaluation.report import write_report
 

@@ -1,7 +1,8 @@
 """Pose ranking (paper 3.8 and 4): simulate the program in every workpiece placement, measure the
 virtual part like a CMM, score the Table-2 deviations and rank the placements.
 
-Per pose (one worker process each, at most ``workers`` at a time) one run of the machining pipeline
+Per pose (one worker process each, at most ``workers`` at a time, or one Ray task each with a Ray address:
+:mod:`simulate.parallel`) one run of the machining pipeline
 (:func:`simulate.pipeline.run_job`; the program is interpolated once for all poses): inverse kinematics
 for the placement with switching points, the coupled loop with the axis servos and each joint's friction
 model inside it, the translational compliance in the workpiece frame and the robot file's cutter, then
@@ -28,7 +29,6 @@ import json
 import math
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -38,6 +38,7 @@ from identify.errors import InputError
 from simulate import defaults
 from simulate.evaluation.cmm import Scan, write_scan
 from simulate.evaluation.features import FeatureTable
+from simulate.parallel import run_all
 from simulate.pipeline import Components, MachiningJob, MachiningSettings, ProgramSetup, run_job
 from simulate.toolpath.placement import Placement
 
@@ -245,7 +246,7 @@ def _run_job(job: _Job) -> PoseResult:
 def rank_poses(program: str | Path, robot: str | Path, placements: list[Placement], *,
                settings: RankSettings | None = None, components: Components | None = None,
                shares: bool = False, out_dir: str | Path | None = None, workers: int = 2,
-               advance=None, friction: dict | None = None) -> Ranking:
+               advance=None, friction: dict | None = None, ray_address: str | None = None) -> Ranking:
     """Simulate, measure and rank every placement (module docstring).
 
     Parameters
@@ -269,6 +270,8 @@ def rank_poses(program: str | Path, robot: str | Path, placements: list[Placemen
     friction : dict of int to str, optional
         Per joint (1..6) a friction model reference (saved folder, ``runs:/``, ``models:/``) replacing the
         robot file's (:class:`simulate.pipeline.MachiningJob`).
+    ray_address : str, optional
+        Run the simulations as Ray tasks on this cluster (``RAY_ADDRESS``) instead of ``workers`` processes.
     """
     from simulate.pipeline import load_program
 
@@ -289,20 +292,9 @@ def rank_poses(program: str | Path, robot: str | Path, placements: list[Placemen
         for pl in placements:
             for c in COMPONENTS:
                 jobs.append(_Job(prog, str(robot), pl, replace(components, **{c: False}), settings, fr, None, False))
-    results: list[PoseResult] = []
-    workers = max(1, min(int(workers), 2, len(jobs)))
-    if workers == 1:
-        for j in jobs:
-            results.append(_run_job(j))
-            if advance:
-                advance(1)
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as ex:
-            futs = [ex.submit(_run_job, j) for j in jobs]
-            for f in futs:
-                results.append(f.result())
-                if advance:
-                    advance(1)
+    # worker processes on this machine, or Ray tasks when a Ray address is given (simulate.parallel)
+    results: list[PoseResult] = run_all(_run_job, jobs, workers=max(1, min(int(workers), 2, len(jobs))),
+                                        ray_address=ray_address, advance=advance)
     n = len(placements)
     main = {r.pose: r for r in results[:n]}
     variants = {}
