@@ -113,7 +113,7 @@ def rank_poses_cmd(
                             size=size)
     comps = Components(deflection=False, servo=False) if ideal else Components()
     n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
-    with progress("simulating poses", total=n_jobs, enabled=not as_json) as advance:
+    with progress("simulating poses", total=n_jobs) as advance:
         r = rank_poses(program, robot_path, placements, settings=settings, components=comps, shares=shares,
                        out_dir=out_dir, workers=workers, advance=advance)
     if out_dir is not None:

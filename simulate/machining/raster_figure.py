@@ -17,6 +17,10 @@ from numba import njit
 #: Background and ink colours (RGB).
 WHITE = (255, 255, 255)
 INK = (30, 30, 30)
+#: Smallest panel [px]: a smaller raster is enlarged by whole pixels.
+MIN_PANEL_PX = 400
+#: Smallest colour bar height [px].
+MIN_BAR_PX = 240
 
 
 def viridis(norm) -> np.ndarray:
@@ -122,19 +126,22 @@ def figure(panel: Panel, bar: ColourBar, title: str, size: int = 14):
 
     fnt, small = font(size + 2), font(size)
     img = Image.fromarray(np.ascontiguousarray(panel.rgb[..., :3]), "RGB")
+    k = MIN_PANEL_PX // max(img.width, img.height, 1)
+    if k > 1:   # a small part: whole pixels enlarged, not interpolated
+        img = img.resize((img.width * k, img.height * k), Image.NEAREST)
     left, top = (70 if panel.extent_mm else 20), 40
-    bottom = 60 if panel.extent_mm else 20
-    cb = colour_bar_image(bar, img.height, size)
+    bottom = 60 if panel.extent_mm else 20 + 10 * bool(bar.note)
+    cb = colour_bar_image(bar, max(img.height, MIN_BAR_PX), size)
     note_w = _text_size(bar.note, small)[0] if bar.note else 0
     W = left + img.width + 20 + max(cb.width, note_w) + 10
-    H = top + img.height + bottom
+    H = top + max(img.height, cb.height) + bottom
     fig = Image.new("RGB", (W, H), WHITE)
     fig.paste(img, (left, top))
     fig.paste(cb, (left + img.width + 20, top))
     d = ImageDraw.Draw(fig)
     d.text((left + img.width / 2, top / 2), title, font=fnt, fill=INK, anchor="mm")
     if bar.note:
-        d.text((left + img.width + 20, top + img.height + 6), bar.note, font=small, fill=INK, anchor="la")
+        d.text((left + img.width + 20, top + cb.height + 4), bar.note, font=small, fill=INK, anchor="la")
     if panel.extent_mm:
         x0, x1, y0, y1 = panel.extent_mm
         d.rectangle([left - 1, top - 1, left + img.width, top + img.height], outline=INK)

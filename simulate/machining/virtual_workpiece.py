@@ -25,6 +25,17 @@ from .simulation import StepTable
 VARIABLES = ("deflection", "force", "tracking_error", "time", "line", "switch", "peak_force")
 
 
+def _savez_fast(path, arrays: dict) -> None:
+    """``numpy.savez_compressed`` at zlib level 1: about a third of the time of its default level 6
+    for the dexel arrays, a slightly larger file, the same arrays read back by ``numpy.load``."""
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1, allowZip64=True) as zf:
+        for name, a in arrays.items():
+            with zf.open(name + ".npy", "w", force_zip64=True) as fh:
+                np.lib.format.write_array(fh, np.asanyarray(a), allow_pickle=False)
+
+
 @dataclass
 class VirtualWorkpiece:
     workpiece: TriDexel
@@ -42,7 +53,7 @@ class VirtualWorkpiece:
         fd, tmp = tempfile.mkstemp(dir=p.parent, suffix=".npz")
         os.close(fd)
         try:
-            np.savez_compressed(tmp, **arrays)
+            _savez_fast(tmp, arrays)
             as_created(tmp)
             os.replace(tmp, p)
         finally:
@@ -154,17 +165,25 @@ def colour_range(values) -> tuple[float, float]:
     return (lo, hi) if hi > lo else (lo, lo + 1.0)
 
 
+def _viridis_table() -> np.ndarray:
+    """viridis as 256 RGBA uint8 (sRGB) colours."""
+    import matplotlib
+
+    return np.round(matplotlib.colormaps["viridis"](np.arange(256)) * 255).astype(np.uint8)
+
+
 def _colours(values, lo: float | None = None, hi: float | None = None):
     """RGBA (uint8, sRGB) viridis colours of ``values`` over ``lo..hi`` (default:
     :func:`colour_range`); NaN (stock surface) -> light grey. Returns ``(colours, lo, hi)``."""
-    import matplotlib
-
     v = np.asarray(values, float)
     ok = np.isfinite(v)
     if lo is None or hi is None:
         lo, hi = colour_range(v)
     norm = np.clip(np.where(ok, (np.nan_to_num(v) - lo) / (hi - lo), 0.0), 0.0, 1.0)
-    cols = np.round(matplotlib.colormaps["viridis"](norm) * 255).astype(np.uint8)
+    # the 256-entry table indexed as matplotlib's Colormap does (int(x * N), x = 1 -> N - 1):
+    # the same colours as calling the colormap on every value, in a tenth of the time
+    idx = np.minimum((norm * 256).astype(np.intp), 255)
+    cols = _viridis_table()[idx]
     cols[~ok] = STOCK_GREY
     return cols, lo, hi
 

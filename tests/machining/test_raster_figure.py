@@ -43,3 +43,34 @@ def test_ticks_are_round_and_inside():
     assert list(t) == [0, 100, 200, 300, 400]
     t = nice_ticks(-0.013, 0.027)
     assert t[0] >= -0.013 and t[-1] <= 0.027 and np.allclose(np.diff(t), 0.01)
+
+
+def test_colour_table_lookup_matches_the_colormap():
+    import matplotlib
+
+    from simulate.machining.virtual_workpiece import STOCK_GREY, _colours
+
+    rng = np.random.default_rng(0)
+    v = np.r_[rng.normal(size=20000), 0.0, 1.0, np.nan, -5.0, 5.0]
+    cols, lo, hi = _colours(v)
+    ok = np.isfinite(v)
+    norm = np.clip(np.where(ok, (np.nan_to_num(v) - lo) / (hi - lo), 0.0), 0.0, 1.0)
+    ref = np.round(matplotlib.colormaps["viridis"](norm) * 255).astype(np.uint8)
+    ref[~ok] = STOCK_GREY
+    np.testing.assert_array_equal(cols, ref)
+
+
+def test_saved_workpiece_reads_back(tmp_path):
+    from simulate.machining.dexel import TriDexel
+    from simulate.machining.simulation import StepTable
+    from simulate.machining.virtual_workpiece import VirtualWorkpiece
+
+    wp = TriDexel.box([0, 0, 0], [0.01, 0.01, 0.005], 1e-3)
+    n = 4
+    st = StepTable(*(np.zeros((n, 3)) if k in ("deflection", "tracking_error") else np.arange(n)
+                     for k in StepTable.__dataclass_fields__))
+    back = VirtualWorkpiece.load(VirtualWorkpiece(wp, st).save(tmp_path / "w.npz"))
+    for a, b in zip(wp.families, back.workpiece.families):
+        np.testing.assert_array_equal(a.lo, b.lo)
+        np.testing.assert_array_equal(a.count, b.count)
+    np.testing.assert_array_equal(back.steps.t, st.t)
