@@ -12,7 +12,7 @@ from greybench.support import check_cost, emit_json, err, guarded, out, progress
 from identify.errors import InputError
 from simulate import defaults as DEFAULTS
 from simulate.evaluation.features import MM
-from simulate.evaluation.ranking import COMPONENTS, Components, Ranking, RankSettings, rank_poses
+from simulate.evaluation.ranking import COMPONENTS, Components, Ranking, RankSettings, rank_poses, ranking_json
 
 _COLOURS = ["green", "chartreuse3", "yellow", "dark_orange", "red"]
 
@@ -23,26 +23,14 @@ def _colour(rank: int, n: int) -> str:
     return _COLOURS[round(rank * (len(_COLOURS) - 1) / (n - 1))]
 
 
-def ranking_json(r: Ranking) -> dict:
-    """``{"ranking": [{"pose", "score"}], "features": [{"name", "nominal", "tolerance", "deviation": {pose: v}}]}``,
-    lengths in mm as in the paper's Table 2 (nominal of ``slope angle`` in deg, of ``angles 30/60 deg`` null)."""
-    poses = [p.name for p in r.placements]
-    first = r.results[poses[0]].table
-    feats = []
-    for row in first.rows:
-        feats.append({"name": row.name, "nominal": row.nominal_display(), "tolerance": row.tolerance / MM,
-                      "deviation": {p: r.results[p].table[row.name].deviation / MM for p in poses}})
-    return {"ranking": [{"pose": e.pose, "score": e.score} for e in r.entries], "features": feats, "unit": "mm"}
-
-
 def print_ranking(r: Ranking) -> None:
     poses = [p.name for p in r.placements]
     n = len(poses)
     t = Table(title="Feature deviations \\[mm] (ISO 10791-7, paper Table 2); green best .. red worst per row, "
                     "bold: in tolerance")
     t.add_column("feature")
-    t.add_column("nominal", justify="right")
-    t.add_column("tol", justify="right")
+    t.add_column("nominal \\[mm]", justify="right")
+    t.add_column("tolerance \\[mm]", justify="right")
     for p in poses:
         t.add_column(p, justify="right")
     for row in r.results[poses[0]].table.rows:
@@ -91,8 +79,8 @@ def rank_poses_cmd(
     ideal: bool = typer.Option(False, "--ideal", help="Ideal robot: no deflection and no tracking error."),
     size: int = typer.Option(320, "--size", help="Test piece size [mm]: 160 or 320."),
     workers: int = typer.Option(2, "--workers", help="Parallel processes [-] (at most 2)."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object: ranking and feature deviations "
-                                                       "[mm]."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object: ranking (score [-]) and feature "
+                                                       "rows (nominal_mm, tolerance_mm, deviation_mm per pose)."),
 ) -> None:
     """Simulate the program in every pose, measure the virtual parts (ISO 10791-7 features) and rank the poses."""
     from simulate.robot.model import load_robot
