@@ -79,6 +79,10 @@ def rank_poses_cmd(
     ideal: bool = typer.Option(False, "--ideal", help="Ideal robot: no deflection and no tracking error."),
     size: int = typer.Option(320, "--size", help="Test piece size [mm]: 160 or 320."),
     workers: int = typer.Option(2, "--workers", help="Parallel processes [-] (at most 2)."),
+    friction: Optional[list[str]] = typer.Option(None, "--friction",
+                                                 help="AXIS=MODEL: friction model reference for a joint (saved "
+                                                      "folder, runs:/, models:/<name>@<alias>), repeatable; others "
+                                                      "keep the robot file's."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object: ranking (score [-]) and feature "
                                                        "rows (nominal_mm, tolerance_mm, deviation_mm per pose)."),
 ) -> None:
@@ -88,8 +92,17 @@ def rank_poses_cmd(
 
     if not program.exists():
         raise InputError("program not found", source=str(program))
+    from greybench.commands.compensate import _friction as friction_refs   # the one AXIS=MODEL parser
+    from simulate.robot.friction import joint_rows
+
     robot_path = resolve_robot(robot)
-    load_robot(robot_path)  # validate before any worker starts
+    rob = load_robot(robot_path)  # validate before any worker starts
+    refs = friction_refs(friction)
+    try:
+        joint_rows(rob, refs)   # every model reference resolves, for its axis, before any work
+    except InputError as exc:
+        raise InputError(exc.message, source=exc.source, field="--friction" if refs and exc.field and
+                         exc.field.startswith("friction[") else exc.field) from None
     placements = load_poses(poses)
     # refused before anything is written: the poses, and with --shares the component re-runs, run in turn
     check_cost(program, None, spacing, simulations=len(placements) * (1 + (len(COMPONENTS) if shares else 0)))
@@ -103,7 +116,7 @@ def rank_poses_cmd(
     n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
     with progress("simulating poses", total=n_jobs) as advance:
         r = rank_poses(program, robot_path, placements, settings=settings, components=comps, shares=shares,
-                       out_dir=out_dir, workers=workers, advance=advance)
+                       out_dir=out_dir, workers=workers, advance=advance, friction=refs)
     if out_dir is not None:
         from simulate.evaluation.report import write_report
 

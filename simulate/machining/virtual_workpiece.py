@@ -165,13 +165,6 @@ def colour_range(values) -> tuple[float, float]:
     return (lo, hi) if hi > lo else (lo, lo + 1.0)
 
 
-def _viridis_table() -> np.ndarray:
-    """viridis as 256 RGBA uint8 (sRGB) colours."""
-    import matplotlib
-
-    return np.round(matplotlib.colormaps["viridis"](np.arange(256)) * 255).astype(np.uint8)
-
-
 def _colours(values, lo: float | None = None, hi: float | None = None):
     """RGBA (uint8, sRGB) viridis colours of ``values`` over ``lo..hi`` (default:
     :func:`colour_range`); NaN (stock surface) -> light grey. Returns ``(colours, lo, hi)``."""
@@ -180,10 +173,10 @@ def _colours(values, lo: float | None = None, hi: float | None = None):
     if lo is None or hi is None:
         lo, hi = colour_range(v)
     norm = np.clip(np.where(ok, (np.nan_to_num(v) - lo) / (hi - lo), 0.0), 0.0, 1.0)
-    # the 256-entry table indexed as matplotlib's Colormap does (int(x * N), x = 1 -> N - 1):
-    # the same colours as calling the colormap on every value, in a tenth of the time
-    idx = np.minimum((norm * 256).astype(np.intp), 255)
-    cols = _viridis_table()[idx]
+    from .raster_figure import viridis
+
+    # matplotlib's 256-entry table, indexed as its Colormap does: the same colours in a tenth of the time
+    cols = viridis(norm)
     cols[~ok] = STOCK_GREY
     return cols, lo, hi
 
@@ -222,27 +215,23 @@ def legend_png(variable: str, lo: float, hi: float) -> bytes:
 
 
 def _legend_quad(png: bytes, bounds: np.ndarray):
-    """A textured rectangle showing the legend, standing beside the part (+x side, facing -y),
-    as tall as the part is deep in y (at least 40 mm)."""
+    """A rectangle showing the legend, standing beside the part (+x side, facing -y), as tall as
+    the part is deep in y (at least 40 mm): (vertices (4, 3) [m], faces (2, 3), uv (4, 2))."""
     import io
 
-    import trimesh
     from PIL import Image
 
-    image = Image.open(io.BytesIO(png)).convert("RGBA")
+    w_px, h_px = Image.open(io.BytesIO(png)).size
     size = bounds[1] - bounds[0]
     height = max(float(size[1]) * 0.8, 0.04)
-    width = height * image.width / image.height
+    width = height * w_px / h_px
     x0 = float(bounds[1][0]) + 0.05 * max(float(size[0]), 0.02)
     y0 = float(bounds[0][1]) + 0.1 * float(size[1])
     z0 = float(bounds[0][2])
     vertices = np.array([[x0, y0, z0], [x0 + width, y0, z0], [x0 + width, y0, z0 + height], [x0, y0, z0 + height]])
     faces = np.array([[0, 1, 2], [0, 2, 3]])
-    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
-    material = trimesh.visual.material.PBRMaterial(name="legend", baseColorTexture=image, doubleSided=True,
-                                                   metallicFactor=0.0, roughnessFactor=1.0)
-    visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
-    return trimesh.Trimesh(vertices, faces, visual=visual, process=False)
+    uv = np.array([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]])   # glTF: v = 0 at the image's top row
+    return vertices, faces, uv
 
 
 def step_values(vw: VirtualWorkpiece, step: np.ndarray, variable: str = "deflection") -> np.ndarray:
@@ -257,13 +246,13 @@ def step_values(vw: VirtualWorkpiece, step: np.ndarray, variable: str = "deflect
     return out
 
 
-def coloured_mesh(vw: VirtualWorkpiece, variable: str = "deflection", stride: int | None = None,
-                  merge: bool = True):
-    """The closed surface (:func:`simulate.machining.surface_mesh.surface_mesh`) as a trimesh with
-    sRGB vertex colours of ``variable`` over :func:`colour_range` (stock surface grey); with
-    ``merge``, flat quads of one colour are merged into rectangles
-    (:func:`simulate.machining.surface_mesh.merge_flat_quads`: same surface and colours, a fraction
-    of the triangles). Returns ``(mesh, values per vertex, (lo, hi))``."""
+def coloured_surface(vw: VirtualWorkpiece, variable: str = "deflection", stride: int | None = None,
+                     merge: bool = True):
+    """The closed surface (:func:`simulate.machining.surface_mesh.surface_mesh`) with sRGB vertex
+    colours of ``variable`` over :func:`colour_range` (stock surface grey); with ``merge``, flat quads
+    of one colour are merged into rectangles (:func:`simulate.machining.surface_mesh.merge_flat_quads`:
+    same surface and colours, a fraction of the triangles). Returns ``(SurfaceMesh, RGBA (V, 4) uint8,
+    values per vertex, (lo, hi))``."""
     from .surface_mesh import merge_flat_quads, surface_mesh
 
     sm = surface_mesh(vw.workpiece, stride=stride)
@@ -274,7 +263,15 @@ def coloured_mesh(vw: VirtualWorkpiece, variable: str = "deflection", stride: in
         sm = merge_flat_quads(sm, packed)
         vals = step_values(vw, sm.vertex_step, variable)
         cols, _, _ = _colours(vals, lo, hi)
-    return sm.trimesh(cols), vals, (lo, hi)
+    return sm, cols, vals, (lo, hi)
+
+
+def coloured_mesh(vw: VirtualWorkpiece, variable: str = "deflection", stride: int | None = None,
+                  merge: bool = True):
+    """:func:`coloured_surface` as a trimesh with its vertex colours. Returns ``(mesh, values per
+    vertex, (lo, hi))``."""
+    sm, cols, vals, scale = coloured_surface(vw, variable, stride, merge)
+    return sm.trimesh(cols), vals, scale
 
 
 def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", max_points: int = 2_000_000,
@@ -282,31 +279,29 @@ def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", m
     """Write ``surface_<variable>.ply``, ``surface_<variable>.glb`` and the colour legend
     ``surface_<variable>_legend.png``: the closed triangle surface of the part with vertex colours of
     ``variable`` (viridis over the range of the machined surface, stock surface grey), flat
-    single-coloured regions merged (:func:`coloured_mesh`). The GLB holds two nodes: ``part`` (linear
+    single-coloured regions merged (:func:`coloured_surface`). The GLB holds two nodes: ``part`` (linear
     vertex colours, as glTF defines them) and ``legend``, a rectangle beside the part textured with
-    the legend image. Each file is written to a temp file and renamed. ``max_points`` is kept for
-    compatibility (the mesh size is set by ``stride``, see
+    the legend image (:mod:`simulate.machining.mesh_files`). Each file is written to a temp file and
+    renamed. ``max_points`` is kept for compatibility (the mesh size is set by ``stride``, see
     :func:`simulate.machining.surface_mesh.choose_stride`). Returns the paths."""
-    import trimesh
+    from .mesh_files import GlbMesh, glb_bytes, ply_bytes
 
-    mesh, _, (lo, hi) = coloured_mesh(vw, variable, stride)
+    sm, cols, _, (lo, hi) = coloured_surface(vw, variable, stride)
     png = legend_png(variable, lo, hi)
-    part = trimesh.Trimesh(mesh.vertices, mesh.faces,
-                           vertex_colors=srgb_to_linear(np.asarray(mesh.visual.vertex_colors)), process=False)
-    scene = trimesh.Scene()
-    scene.add_geometry(part, geom_name="part", node_name="part")
-    scene.add_geometry(_legend_quad(png, mesh.bounds), geom_name="legend", node_name="legend")
+    v = sm.vertices
+    bounds = np.array([v.min(axis=0), v.max(axis=0)]) if len(v) else np.zeros((2, 3))
+    lv, lf, luv = _legend_quad(png, bounds)
     out_dir = Path(out_dir)
-    contents = {f"surface_{variable}.ply": lambda: mesh.export(file_type="ply"),
-                f"surface_{variable}.glb": lambda: scene.export(file_type="glb"),
+    contents = {f"surface_{variable}.ply": lambda: ply_bytes(v, sm.faces, cols),
+                f"surface_{variable}.glb": lambda: glb_bytes([GlbMesh("part", v, sm.faces, rgba=srgb_to_linear(cols)),
+                                                              GlbMesh("legend", lv, lf, uv=luv, texture=png)]),
                 f"surface_{variable}_legend.png": lambda: png}
     paths = []
     for name, make in contents.items():
         p = out_dir / name
         tmp = p.with_name(p.name + ".tmp")
         try:
-            data = make()
-            tmp.write_bytes(data if isinstance(data, bytes) else data.encode())
+            tmp.write_bytes(make())
             os.replace(tmp, p)
         finally:
             if tmp.exists():

@@ -74,3 +74,14 @@ def test_saved_workpiece_reads_back(tmp_path):
         np.testing.assert_array_equal(a.lo, b.lo)
         np.testing.assert_array_equal(a.count, b.count)
     np.testing.assert_array_equal(back.steps.t, st.t)
+
+
+def test_viridis_table_is_matplotlibs():
+    import matplotlib
+
+    from simulate.machining.raster_figure import viridis, viridis_table
+
+    ref = np.round(matplotlib.colormaps["viridis"](np.arange(256)) * 255).astype(np.uint8)
+    np.testing.assert_array_equal(viridis_table(), ref)
+    x = np.r_[np.linspace(0, 1, 1001), 0.99999999, 1.0]
+    np.testing.assert_array_equal(viridis(x), np.round(matplotlib.colormaps["viridis"](x) * 255).astype(np.uint8))
