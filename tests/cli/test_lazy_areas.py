@@ -41,3 +41,27 @@ def test_machine_help_does_not_import_torch_or_mlflow():
             "print(sorted(m for m in ('torch', 'mlflow', 'pandas') if m in sys.modules))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert res.stdout.strip().splitlines()[-1] == "[]"
+
+
+SLOT = "%\nG21 G90 G17\nT1 M6\nS12000 M3\nG0 X-8 Y10 Z5\nG1 Z-1 F600\nG1 X28 F1200\nG0 Z5\nM30\n%\n"
+
+
+def test_machine_with_a_lugre_robot_imports_no_torch_mlflow_trimesh_or_pyplot(tmp_path):
+    import json
+
+    prog = tmp_path / "slot.nc"
+    prog.write_text(SLOT)
+    (tmp_path / "slot.stock.json").write_text(json.dumps({"units": "mm", "box": {"min": [0, 0, -6], "max": [20, 20, 0]}}))
+    pose = tmp_path / "poses.json"
+    pose.write_text(json.dumps({"poses": [{"name": "near", "xyz": [1.45, 0.0, -0.1], "rpy": [0.0, 0.0, 0.0]}]}))
+    seen = tmp_path / "modules.json"
+    code = ("import sys, json, runpy, atexit\n"
+            f"atexit.register(lambda: open({str(seen)!r}, 'w').write(json.dumps(sorted(m for m in "
+            "('torch', 'mlflow', 'trimesh', 'matplotlib.pyplot', 'pandas', 'scipy.optimize') if m in sys.modules))))\n"
+            f"sys.argv = ['greybench', 'machine', '--program', {str(prog)!r}, '--pose', {str(pose)!r}, '--out', "
+            f"{str(tmp_path / 'out')!r}, '--spacing', '1', '--json']\n"
+            "runpy.run_module('greybench.cli', run_name='__main__')\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(seen.read_text()) == []
+    assert (tmp_path / "out" / "surface_deflection.glb").exists()
