@@ -195,6 +195,15 @@ class _Silent(Advance):
     pass
 
 
+def _bar_on_stderr() -> bool:
+    """A live bar only where stderr really is a terminal: rich also says "terminal" under
+    FORCE_COLOR (set by many CI systems), where a bar would fill the log with cursor codes."""
+    try:
+        return err.is_terminal and sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
 @contextmanager
 def progress(description: str, total: float | None = None, enabled: bool = True) -> Iterator[Advance]:
     """Progress of a long step on stderr; yields an :class:`Advance` (``advance(n)``,
@@ -208,7 +217,7 @@ def progress(description: str, total: float | None = None, enabled: bool = True)
     if not enabled:
         yield _Silent()
         return
-    if err.is_terminal:
+    if _bar_on_stderr():
         with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
                       TimeElapsedColumn(), TimeRemainingColumn(), console=err, transient=True) as bar:
             task = bar.add_task(description, total=total)

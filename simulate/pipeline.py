@@ -396,7 +396,6 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
     scan = table = None
     if size is not None:
         from simulate.evaluation.cmm import probe
-        from simulate.evaluation.features import evaluate_scan
         from simulate.toolpath.testpiece import iso_test_piece
 
         c0 = time.perf_counter()
@@ -408,6 +407,8 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
             raise InputError(f"not the {size} mm test piece for the virtual CMM: {exc.message}",
                              source=str(prog.stock), field="size") from None
         if s.features:
+            from simulate.evaluation.features import evaluate_scan   # scipy.optimize: only when evaluated
+
             table = evaluate_scan(scan, piece)
         timings["cmm + features"] = time.perf_counter() - c0
     return MachiningOutcome(program=prog, robot=robot, trajectory=jt, workpiece=wp, result=res, cutter=cutter,

@@ -56,7 +56,7 @@ def circle(
                       center=_centre(center_mm), ccw=not cw)
     placement = select_pose(load_poses(pose), name, source=str(pose))
     rob = load_robot(resolve_robot(robot))
-    with progress("circle: simulating", total=None, enabled=not as_json):
+    with progress("circle: simulating", total=None):
         run = simulate_circle(rob, placement, spec, friction=not no_friction, backlash=not no_backlash,
                               friction_scale=friction_scale, ff_friction=ff_friction)
         result = evaluate_run(run)

@@ -90,7 +90,7 @@ def compensate_cmd(
     # progress in simulated 2 ms steps: the original, the iterations, two runs per extra stiffness
     n = len(load_program(program, require_spindle=True).interp.t)
     scales = {float(stiffness_scale), *map(float, check_scale or ())} - {1.0}
-    with progress("compensating", total=n * (iterations + 1 + 2 * len(scales)), enabled=not as_json) as adv:
+    with progress("compensating", total=n * (iterations + 1 + 2 * len(scales))) as adv:
         info = run_compensation(program, resolve_robot(robot), pose, name, out_dir, iterations=iterations,
                                 stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
                                 spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,

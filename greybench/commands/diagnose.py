@@ -50,7 +50,7 @@ def diagnose(
     test_rec = load_record(test, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
     if (train_rec.tau_rb is None) != (test_rec.tau_rb is None):
         raise InputError("both records need a 'tau_rb' column, or neither", source=str(test), field="tau_rb")
-    with progress("diagnosing (baseline fit, held-out tests, extended refit)", total=None, enabled=not as_json):
+    with progress("diagnosing (baseline fit, held-out tests, extended refit)", total=None):
         result = run_diagnosis(train_rec, test_rec, seed=seed, generations=generations, threshold=threshold)
         saved = save_diagnosis(result, train_rec, test_rec, out_dir, track=track,
                                extra_params=record_params(train_rec))

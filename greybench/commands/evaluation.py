@@ -13,7 +13,7 @@ from greybench.support import check_cost, emit_json, err, guarded, out, progress
 from identify.errors import InputError
 from simulate import defaults as DEFAULTS
 from simulate.evaluation.features import MM
-from simulate.evaluation.ranking import COMPONENTS, Components, Ranking, RankSettings, rank_poses
+from simulate.evaluation.ranking import COMPONENTS, Components, Ranking, RankSettings, rank_poses, ranking_json
 
 _COLOURS = ["green", "chartreuse3", "yellow", "dark_orange", "red"]
 
@@ -24,26 +24,14 @@ def _colour(rank: int, n: int) -> str:
     return _COLOURS[round(rank * (len(_COLOURS) - 1) / (n - 1))]
 
 
-def ranking_json(r: Ranking) -> dict:
-    """``{"ranking": [{"pose", "score"}], "features": [{"name", "nominal", "tolerance", "deviation": {pose: v}}]}``,
-    lengths in mm as in the paper's Table 2 (nominal of ``slope angle`` in deg, of ``angles 30/60 deg`` null)."""
-    poses = [p.name for p in r.placements]
-    first = r.results[poses[0]].table
-    feats = []
-    for row in first.rows:
-        feats.append({"name": row.name, "nominal": row.nominal_display(), "tolerance": row.tolerance / MM,
-                      "deviation": {p: r.results[p].table[row.name].deviation / MM for p in poses}})
-    return {"ranking": [{"pose": e.pose, "score": e.score} for e in r.entries], "features": feats, "unit": "mm"}
-
-
 def print_ranking(r: Ranking) -> None:
     poses = [p.name for p in r.placements]
     n = len(poses)
     t = Table(title="Feature deviations \\[mm] (ISO 10791-7, paper Table 2); green best .. red worst per row, "
                     "bold: in tolerance")
     t.add_column("feature")
-    t.add_column("nominal", justify="right")
-    t.add_column("tol", justify="right")
+    t.add_column("nominal \\[mm]", justify="right")
+    t.add_column("tolerance \\[mm]", justify="right")
     for p in poses:
         t.add_column(p, justify="right")
     for row in r.results[poses[0]].table.rows:
@@ -93,8 +81,12 @@ def rank_poses_cmd(
     size: int = typer.Option(320, "--size", help="Test piece size [mm]: 160 or 320."),
     workers: int = typer.Option(2, "--workers", help="Parallel processes [-] (at most 2); Ray tasks instead when "
                                                      "RAY_ADDRESS is set."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object: ranking and feature deviations "
-                                                       "[mm]."),
+    friction: Optional[list[str]] = typer.Option(None, "--friction",
+                                                 help="AXIS=MODEL: friction model reference for a joint (saved "
+                                                      "folder, runs:/, models:/<name>@<alias>), repeatable; others "
+                                                      "keep the robot file's."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object: ranking (score [-]) and feature "
+                                                       "rows (nominal_mm, tolerance_mm, deviation_mm per pose)."),
 ) -> None:
     """Simulate the program in every pose, measure the virtual parts (ISO 10791-7 features) and rank the poses."""
     from simulate.robot.model import load_robot
@@ -102,8 +94,17 @@ def rank_poses_cmd(
 
     if not program.exists():
         raise InputError("program not found", source=str(program))
+    from greybench.commands.compensate import _friction as friction_refs   # the one AXIS=MODEL parser
+    from simulate.robot.friction import joint_rows
+
     robot_path = resolve_robot(robot)
-    load_robot(robot_path)  # validate before any worker starts
+    rob = load_robot(robot_path)  # validate before any worker starts
+    refs = friction_refs(friction)
+    try:
+        joint_rows(rob, refs)   # every model reference resolves, for its axis, before any work
+    except InputError as exc:
+        raise InputError(exc.message, source=exc.source, field="--friction" if refs and exc.field and
+                         exc.field.startswith("friction[") else exc.field) from None
     placements = load_poses(poses)
     # refused before anything is written: the poses, and with --shares the component re-runs, run in turn
     check_cost(program, None, spacing, simulations=len(placements) * (1 + (len(COMPONENTS) if shares else 0)))
@@ -115,9 +116,10 @@ def rank_poses_cmd(
                             size=size)
     comps = Components(deflection=False, servo=False) if ideal else Components()
     n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
-    with progress("simulating poses", total=n_jobs, enabled=not as_json) as advance:
+    with progress("simulating poses", total=n_jobs) as advance:
         r = rank_poses(program, robot_path, placements, settings=settings, components=comps, shares=shares,
-                       out_dir=out_dir, workers=workers, advance=advance, ray_address=os.environ.get("RAY_ADDRESS"))
+                       out_dir=out_dir, workers=workers, advance=advance, friction=refs,
+                       ray_address=os.environ.get("RAY_ADDRESS"))
     if out_dir is not None:
         from simulate.evaluation.report import write_report
 

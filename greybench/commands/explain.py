@@ -53,7 +53,7 @@ def explain(
                          "cannot separate the candidate causes; give the CMM scan (scan.csv)", source=str(measured))
     meas = read_measured_scan(measured, setup.piece)
     setup.trajectory(rob)  # reachability errors before the long part
-    with progress("explaining (simulate, compare, calibrate)", total=None, enabled=not as_json):
+    with progress("explaining (simulate, compare, calibrate)", total=None):
         ex = explain_part(meas, rob, setup, max_sims=max_sims)
     if out_dir is not None:
         import json

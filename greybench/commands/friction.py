@@ -809,8 +809,7 @@ def bench_realdata(
         raise InputError("must be >= 1", field="--epochs")
     results = []
     t0 = time.perf_counter()
-    with progress(f"bench realdata: {len(names)} models x {len(found)} joints", total=len(names) * len(found),
-                  enabled=not as_json) as advance:
+    with progress(f"bench realdata: {len(names)} models x {len(found)} joints", total=len(names) * len(found)) as advance:
         for j in found:
             results.append(rd.run_joint(data, j, names, seed=seed, epochs=epochs, advance=advance))
     wall = time.perf_counter() - t0

@@ -63,30 +63,54 @@ def machining_job(program: Path, robot: str, pose: Path, name, *, ideal=False, s
                         stock=stock)
 
 
-def write_outputs(wp, res, out_dir: Path, variable: str = "deflection", scan=None) -> list[Path]:
+#: Files :func:`write_outputs` writes besides the optional scan (its progress total).
+OUTPUT_STAGES = ("virtual workpiece (npz)", "surface meshes (PLY, GLB, legend)", "top view (PNG)",
+                 "oblique view (PNG)")
+
+
+def write_outputs(wp, res, out_dir: Path, variable: str = "deflection", scan=None, advance=None) -> list[Path]:
     """Write ``virtual_workpiece.npz``, ``surface_<variable>.ply/.glb``, ``render_<variable>.png`` (top
     view of the machined surface points), ``render3d_<variable>.png`` (oblique view of the mesh) and,
     when ``scan`` is given, the virtual CMM's ``scan.csv`` (:func:`simulate.evaluation.cmm.write_scan`)
     into ``out_dir``: all are written into a temporary folder next to it first and moved in only
-    when every one succeeded, so a failure leaves nothing half-written."""
+    when every one succeeded, so a failure leaves nothing half-written. ``advance`` (a
+    :func:`greybench.support.progress` handle) counts the files of :data:`OUTPUT_STAGES` (+ scan).
+
+    The npz is compressed in a second thread while the meshes and pictures are made (zlib releases
+    the GIL), so on two cores its time is hidden."""
     import shutil
     import tempfile
+    from concurrent.futures import ThreadPoolExecutor
 
+    from greybench.support import Advance
     from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes, render_mesh_png, render_png
 
+    adv = advance if advance is not None else Advance()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".machine-"))
     try:
         vw = VirtualWorkpiece(wp, res.steps)
-        vw.save(tmp / "virtual_workpiece.npz")
-        export_meshes(vw, tmp, variable)
-        render_png(vw, tmp / f"render_{variable}.png", variable)
-        render_mesh_png(vw, tmp / f"render3d_{variable}.png", variable)
-        if scan is not None:
-            from simulate.evaluation.cmm import write_scan
+        with ThreadPoolExecutor(1, thread_name_prefix="greybench-npz") as pool:
+            saved = pool.submit(vw.save, tmp / "virtual_workpiece.npz")
+            adv.describe(OUTPUT_STAGES[1])
+            export_meshes(vw, tmp, variable)
+            adv(1)
+            adv.describe(OUTPUT_STAGES[2])
+            render_png(vw, tmp / f"render_{variable}.png", variable)
+            adv(1)
+            adv.describe(OUTPUT_STAGES[3])
+            render_mesh_png(vw, tmp / f"render3d_{variable}.png", variable)
+            adv(1)
+            if scan is not None:
+                from simulate.evaluation.cmm import write_scan
 
-            write_scan(scan, tmp / "scan.csv")
+                adv.describe("scan.csv")
+                write_scan(scan, tmp / "scan.csv")
+                adv(1)
+            adv.describe(OUTPUT_STAGES[0])
+            saved.result()
+            adv(1)
         paths = []
         for f in sorted(tmp.iterdir()):
             dest = out_dir / f.name
@@ -152,10 +176,12 @@ def machine(
                         material=material, stock=stock, spindle_rpm=spindle_rpm, size=size,
                         probe_spacing_mm=probe_spacing)
     pj = prepare(job)
-    with progress("machining", total=pj.steps, enabled=not as_json) as adv:
+    # progress on stderr also with --json (stdout carries only the JSON object)
+    with progress("machining", total=pj.steps) as adv:
         mo = run_job(job, prepared=pj, advance=adv)
     res = mo.result
-    write_outputs(mo.workpiece, res, out_dir, variable, scan=mo.scan)
+    with progress("writing outputs", total=len(OUTPUT_STAGES) + (mo.scan is not None)) as adv:
+        write_outputs(mo.workpiece, res, out_dir, variable, scan=mo.scan, advance=adv)
     info = summary(res)
     if as_json:
         emit_json(info)

@@ -160,7 +160,7 @@ def bench_robot(
     T = fk(r, q)
     ik_nearest(r, T[:100], q[0])   # compile / load cache
     box = {}
-    with progress("batch IK", enabled=not as_json):
+    with progress("batch IK"):
         ik_w, ik_c = _timed(lambda: box.update(res=ik_nearest(r, T, q[0])))
     res = box["res"]
     err = float(np.max(np.abs(fk(r, res.q[res.ok])[:, :3, 3] - T[res.ok, :3, 3])))
@@ -172,7 +172,7 @@ def bench_robot(
         rob = po.Robot(km, degrees=False)
         n_ref = min(ref_poses, poses)
         P = RigidTransform.from_matrix(fk(r, q[:n_ref], tool=False))
-        with progress("py-opw-kinematics batch_inverse", enabled=not as_json):
+        with progress("py-opw-kinematics batch_inverse"):
             ref = _timed(lambda: rob.batch_inverse(P, current_joints=q[0]))
         ref = (n_ref / ref[0], n_ref / ref[1])
     except ImportError:
@@ -181,12 +181,12 @@ def bench_robot(
     qdd = rng.uniform(-1, 1, size=(samples, 6)) * r.amax
     qs = rng.uniform(r.lower, r.upper, size=(samples, 6))
     rnea(r, qs[:10], qd[:10], qdd[:10])
-    with progress("RNEA", enabled=not as_json):
+    with progress("RNEA"):
         rn_w, rn_c = _timed(lambda: rnea(r, qs, qd, qdd))
     t = np.arange(0.0, servo_seconds, CYCLE)
     qc = (0.5 * (r.lower + r.upper) + 0.3 * np.sin(2 * np.pi * 0.4 * t)[:, None] * np.ones(6))
     simulate_servo(r, t[:100], qc[:100])
-    with progress("servo", enabled=not as_json):
+    with progress("servo"):
         sv_w, sv_c = _timed(lambda: simulate_servo(r, t, qc, friction=True, backlash=True, substeps=8))
     ik_rate = (poses / ik_w, poses / ik_c)
     rn_rate = (samples / rn_w, samples / rn_c)

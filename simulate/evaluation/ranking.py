@@ -304,3 +304,33 @@ def rank_poses(program: str | Path, robot: str | Path, placements: list[Placemen
     entries = [RankEntry(r.pose, r.score, r.table.n_in_tolerance, i + 1) for i, r in enumerate(ordered)]
     return Ranking(entries=entries, results=main, variants=variants, placements=list(placements),
                    wall_time=time.perf_counter() - t0, settings=settings)
+
+
+# ----------------------------------------------------------------------------- JSON
+
+
+def feature_json(row) -> dict:
+    """One Table-2 row (:class:`simulate.evaluation.features.FeatureRow`) with its unit in every
+    field name: ``nominal_mm`` (a length) or ``nominal_deg`` (the slope angle), both null for form
+    rows (roundness, straightness: no nominal size) and the 30/60 deg row (two nominals; see
+    ``nominal_text``); ``tolerance_mm``. The deviations are added per pose by :func:`ranking_json`."""
+    nominal = row.nominal_display()
+    deg = row.nominal_unit == "rad"
+    return {"name": row.name, "nominal_mm": None if deg else nominal, "nominal_deg": nominal if deg else None,
+            "nominal_text": row.nominal_text(), "tolerance_mm": row.tolerance / 1e-3}
+
+
+def ranking_json(r: Ranking) -> dict:
+    """The ``rank-poses --json`` object: ``{"ranking": [{"rank", "pose", "score", "in_tolerance"}],
+    "features": [{"name", "nominal_mm", "nominal_deg", "nominal_text", "tolerance_mm",
+    "deviation_mm": {pose: value}, "in_tolerance": {pose: bool}}]}``. Lengths in mm as in the paper's
+    Table 2 (the angle rows' deviations and tolerances are lengths too); ``score`` is dimensionless
+    (sum of |deviation| / tolerance), ``in_tolerance`` a count of rows."""
+    poses = [p.name for p in r.placements]
+    feats = []
+    for row in r.results[poses[0]].table.rows:
+        rows = {p: r.results[p].table[row.name] for p in poses}
+        feats.append({**feature_json(row), "deviation_mm": {p: x.deviation / 1e-3 for p, x in rows.items()},
+                      "in_tolerance": {p: x.in_tolerance for p, x in rows.items()}})
+    return {"ranking": [{"rank": e.rank, "pose": e.pose, "score": e.score, "in_tolerance": e.in_tolerance}
+                        for e in r.entries], "features": feats}

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from simulate.evaluation.features import MM, ROW_SURFACES, FeatureTable
-from simulate.evaluation.ranking import COMPONENTS, Ranking
+from simulate.evaluation.ranking import COMPONENTS, Ranking, ranking_json
 from simulate.evaluation.trace import trace_point
 from simulate.toolpath.switching import axes_of
 from simulate.toolpath.testpiece import TestPiece, iso_test_piece
@@ -101,7 +101,7 @@ def table2_image(ranking: Ranking, path: Path) -> str:
         colours.append(["white"] * 3 + _rank_colours(vals))
     fig, ax = plt.subplots(figsize=(3 + 1.6 * len(poses) + 3, 0.45 * len(rows) + 1))
     ax.axis("off")
-    t = ax.table(cellText=cell, cellColours=colours, colLabels=["feature", "nominal [mm]", "tol [mm]"] + poses,
+    t = ax.table(cellText=cell, cellColours=colours, colLabels=["feature", "nominal [mm]", "tolerance [mm]"] + [f"{p} [mm]" for p in poses],
                  loc="center")
     t.auto_set_font_size(False)
     t.set_fontsize(9)
@@ -204,7 +204,7 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
     for e in ranking.entries:
         md.append(f"| {e.rank} | {e.pose} | {e.score:.2f} | {e.in_tolerance}/10 |")
     md += ["", "## Table 2: feature deviations [mm]", "", f"![table 2]({img.name}/{table2_image(ranking, img / 'table2.png')})", ""]
-    md.append("| feature | nominal | tol | " + " | ".join(poses) + " |")
+    md.append("| feature | nominal [mm] | tolerance [mm] | " + " | ".join(f"{p} [mm]" for p in poses) + " |")
     md.append("|---|---|---|" + "---|" * len(poses))
     rows = ranking.results[poses[0]].table.rows
     for r in rows:
@@ -284,7 +284,7 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
     tmp = out / ".report.md.tmp"
     tmp.write_text("\n".join(md) + "\n", encoding="utf-8")
     os.replace(tmp, path)
-    summary = {"ranking": [{"pose": e.pose, "score": e.score} for e in ranking.entries]}
+    summary = ranking_json(ranking)   # what `rank-poses --json` prints: unit-named fields
     (out / "ranking.json.tmp").write_text(json.dumps(summary, indent=1))
     os.replace(out / "ranking.json.tmp", out / "ranking.json")
     return path

@@ -6,9 +6,11 @@ point per row, workpiece frame, metres. It is read with :func:`simulate.evaluati
 one the virtual CMM knows, and every point must lie within :data:`~simulate.explain.comparison.SEARCH`
 of its nominal surface; errors name the file, line and field.
 
-Feature table: the ``--json`` output of ``greybench rank-poses`` (``{"features": [{"name", "nominal",
-"tolerance", "deviation": {pose: value}}], "unit": "mm"}``); the column of the pose given with
-``--name`` is used (or the only one). Only a feature-by-feature comparison is possible then.
+Feature table: the ``--json`` output of ``greybench rank-poses`` or its ``ranking.json``
+(``{"features": [{"name", "nominal_mm", "tolerance_mm", "deviation_mm": {pose: value}}]}``, mm); the
+column of the pose given with ``--name`` is used (or the only one). Files of older versions, with
+``"deviation"`` per row and a top-level ``"unit"`` (``"mm"`` or ``"m"``), are read too. Only a
+feature-by-feature comparison is possible then.
 """
 from __future__ import annotations
 
@@ -104,10 +106,8 @@ def read_measured_table(path: str | Path, pose: str | None) -> MeasuredTable:
     feats = doc.get("features") if isinstance(doc, dict) else None
     if not isinstance(feats, list) or not feats:
         raise InputError("expected an object with a non-empty 'features' list", source=src, field="features")
-    unit = doc.get("unit", "mm")
-    scale = {"mm": 1e-3, "m": 1.0}.get(unit)
-    if scale is None:
-        raise InputError(f"unit must be 'mm' or 'm', got {unit!r}", source=src, field="unit")
+    unit = doc.get("unit", "mm")   # older files: unit-less "deviation" plus this key
+    legacy_scale = {"mm": 1e-3, "m": 1.0}.get(unit)
     known = dict(TABLE2)
     text_lines = text.splitlines()
 
@@ -128,19 +128,25 @@ def read_measured_table(path: str | Path, pose: str | None) -> MeasuredTable:
         if name not in known:
             raise InputError(f"unknown feature row '{name}' (known: {', '.join(known)})", source=src, line=ln,
                              field=f"{where}.name")
-        dv = f.get("deviation")
+        if "deviation_mm" in f:
+            key, scale = "deviation_mm", 1e-3
+        else:
+            key, scale = "deviation", legacy_scale
+            if scale is None:
+                raise InputError(f"unit must be 'mm' or 'm', got {unit!r}", source=src, field="unit")
+        dv = f.get(key)
         if isinstance(dv, dict):
             if pose is None:
                 if len(dv) != 1:
                     raise InputError(f"several poses ({', '.join(dv)}); give --name", source=src, line=ln,
-                                     field=f"{where}.deviation")
+                                     field=f"{where}.{key}")
                 pose = next(iter(dv))
             if pose not in dv:
-                raise InputError(f"no deviation for pose '{pose}'", source=src, line=ln, field=f"{where}.deviation")
+                raise InputError(f"no deviation for pose '{pose}'", source=src, line=ln, field=f"{where}.{key}")
             dv = dv[pose]
         if isinstance(dv, bool) or not isinstance(dv, (int, float)) or not np.isfinite(dv):
-            raise InputError(f"deviation must be a finite number, got {dv!r}", source=src, line=ln,
-                             field=f"{where}.deviation")
+            raise InputError(f"{key} must be a finite number, got {dv!r}", source=src, line=ln,
+                             field=f"{where}.{key}")
         out[name] = float(dv) * scale
         lines[name] = ln or 0
     return MeasuredTable(deviations=out, source=src, pose=pose or "", lines=lines)

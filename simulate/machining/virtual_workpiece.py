@@ -25,6 +25,17 @@ from .simulation import StepTable
 VARIABLES = ("deflection", "force", "tracking_error", "time", "line", "switch", "peak_force")
 
 
+def _savez_fast(path, arrays: dict) -> None:
+    """``numpy.savez_compressed`` at zlib level 1: about a third of the time of its default level 6
+    for the dexel arrays, a slightly larger file, the same arrays read back by ``numpy.load``."""
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1, allowZip64=True) as zf:
+        for name, a in arrays.items():
+            with zf.open(name + ".npy", "w", force_zip64=True) as fh:
+                np.lib.format.write_array(fh, np.asanyarray(a), allow_pickle=False)
+
+
 @dataclass
 class VirtualWorkpiece:
     workpiece: TriDexel
@@ -42,7 +53,7 @@ class VirtualWorkpiece:
         fd, tmp = tempfile.mkstemp(dir=p.parent, suffix=".npz")
         os.close(fd)
         try:
-            np.savez_compressed(tmp, **arrays)
+            _savez_fast(tmp, arrays)
             as_created(tmp)
             os.replace(tmp, p)
         finally:
@@ -157,14 +168,15 @@ def colour_range(values) -> tuple[float, float]:
 def _colours(values, lo: float | None = None, hi: float | None = None):
     """RGBA (uint8, sRGB) viridis colours of ``values`` over ``lo..hi`` (default:
     :func:`colour_range`); NaN (stock surface) -> light grey. Returns ``(colours, lo, hi)``."""
-    import matplotlib
-
     v = np.asarray(values, float)
     ok = np.isfinite(v)
     if lo is None or hi is None:
         lo, hi = colour_range(v)
     norm = np.clip(np.where(ok, (np.nan_to_num(v) - lo) / (hi - lo), 0.0), 0.0, 1.0)
-    cols = np.round(matplotlib.colormaps["viridis"](norm) * 255).astype(np.uint8)
+    from .raster_figure import viridis
+
+    # matplotlib's 256-entry table, indexed as its Colormap does: the same colours in a tenth of the time
+    cols = viridis(norm)
     cols[~ok] = STOCK_GREY
     return cols, lo, hi
 
@@ -182,51 +194,44 @@ def srgb_to_linear(rgba: np.ndarray) -> np.ndarray:
 
 def legend_png(variable: str, lo: float, hi: float) -> bytes:
     """The colour legend of a coloured part as PNG bytes: viridis from ``lo`` to ``hi`` (SI) labelled
-    in the variable's display unit, and the stock-surface grey."""
+    in the variable's display unit, and the stock-surface grey
+    (:func:`simulate.machining.raster_figure.colour_bar_image`)."""
     import io
 
-    import matplotlib
+    from PIL import Image, ImageDraw
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import Normalize
-    from matplotlib.patches import Patch
+    from .raster_figure import INK, ColourBar, colour_bar_image, font
 
     factor, unit = DISPLAY_UNITS[variable]
-    fig, ax = plt.subplots(figsize=(2.4, 5.0), dpi=100)
-    sm = plt.cm.ScalarMappable(norm=Normalize(lo * factor, hi * factor), cmap=matplotlib.colormaps["viridis"])
-    fig.colorbar(sm, cax=ax, label=f"{variable.replace('_', ' ')} [{unit}]")
-    fig.legend(handles=[Patch(color=np.array(STOCK_GREY) / 255.0, label="stock surface")], loc="lower center",
-               fontsize=8, frameon=False)
-    fig.subplots_adjust(left=0.15, right=0.45, top=0.95, bottom=0.12)
+    bar = colour_bar_image(ColourBar(lo * factor, hi * factor, f"{variable.replace('_', ' ')} [{unit}]"), 440)
+    im = Image.new("RGB", (max(bar.width, 150) + 20, 500), (255, 255, 255))
+    im.paste(bar, (10, 10))
+    d = ImageDraw.Draw(im)
+    d.rectangle([18, 462, 40, 480], fill=STOCK_GREY[:3], outline=INK)
+    d.text((48, 471), "stock surface", font=font(13), fill=INK, anchor="lm")
     buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    plt.close(fig)
+    im.save(buf, format="PNG")
     return buf.getvalue()
 
 
 def _legend_quad(png: bytes, bounds: np.ndarray):
-    """A textured rectangle showing the legend, standing beside the part (+x side, facing -y),
-    as tall as the part is deep in y (at least 40 mm)."""
+    """A rectangle showing the legend, standing beside the part (+x side, facing -y), as tall as
+    the part is deep in y (at least 40 mm): (vertices (4, 3) [m], faces (2, 3), uv (4, 2))."""
     import io
 
-    import trimesh
     from PIL import Image
 
-    image = Image.open(io.BytesIO(png)).convert("RGBA")
+    w_px, h_px = Image.open(io.BytesIO(png)).size
     size = bounds[1] - bounds[0]
     height = max(float(size[1]) * 0.8, 0.04)
-    width = height * image.width / image.height
+    width = height * w_px / h_px
     x0 = float(bounds[1][0]) + 0.05 * max(float(size[0]), 0.02)
     y0 = float(bounds[0][1]) + 0.1 * float(size[1])
     z0 = float(bounds[0][2])
     vertices = np.array([[x0, y0, z0], [x0 + width, y0, z0], [x0 + width, y0, z0 + height], [x0, y0, z0 + height]])
     faces = np.array([[0, 1, 2], [0, 2, 3]])
-    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
-    material = trimesh.visual.material.PBRMaterial(name="legend", baseColorTexture=image, doubleSided=True,
-                                                   metallicFactor=0.0, roughnessFactor=1.0)
-    visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
-    return trimesh.Trimesh(vertices, faces, visual=visual, process=False)
+    uv = np.array([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]])   # glTF: v = 0 at the image's top row
+    return vertices, faces, uv
 
 
 def step_values(vw: VirtualWorkpiece, step: np.ndarray, variable: str = "deflection") -> np.ndarray:
@@ -241,13 +246,13 @@ def step_values(vw: VirtualWorkpiece, step: np.ndarray, variable: str = "deflect
     return out
 
 
-def coloured_mesh(vw: VirtualWorkpiece, variable: str = "deflection", stride: int | None = None,
-                  merge: bool = True):
-    """The closed surface (:func:`simulate.machining.surface_mesh.surface_mesh`) as a trimesh with
-    sRGB vertex colours of ``variable`` over :func:`colour_range` (stock surface grey); with
-    ``merge``, flat quads of one colour are merged into rectangles
-    (:func:`simulate.machining.surface_mesh.merge_flat_quads`: same surface and colours, a fraction
-    of the triangles). Returns ``(mesh, values per vertex, (lo, hi))``."""
+def coloured_surface(vw: VirtualWorkpiece, variable: str = "deflection", stride: int | None = None,
+                     merge: bool = True):
+    """The closed surface (:func:`simulate.machining.surface_mesh.surface_mesh`) with sRGB vertex
+    colours of ``variable`` over :func:`colour_range` (stock surface grey); with ``merge``, flat quads
+    of one colour are merged into rectangles (:func:`simulate.machining.surface_mesh.merge_flat_quads`:
+    same surface and colours, a fraction of the triangles). Returns ``(SurfaceMesh, RGBA (V, 4) uint8,
+    values per vertex, (lo, hi))``."""
     from .surface_mesh import merge_flat_quads, surface_mesh
 
     sm = surface_mesh(vw.workpiece, stride=stride)
@@ -258,7 +263,15 @@ def coloured_mesh(vw: VirtualWorkpiece, variable: str = "deflection", stride: in
         sm = merge_flat_quads(sm, packed)
         vals = step_values(vw, sm.vertex_step, variable)
         cols, _, _ = _colours(vals, lo, hi)
-    return sm.trimesh(cols), vals, (lo, hi)
+    return sm, cols, vals, (lo, hi)
+
+
+def coloured_mesh(vw: VirtualWorkpiece, variable: str = "deflection", stride: int | None = None,
+                  merge: bool = True):
+    """:func:`coloured_surface` as a trimesh with its vertex colours. Returns ``(mesh, values per
+    vertex, (lo, hi))``."""
+    sm, cols, vals, scale = coloured_surface(vw, variable, stride, merge)
+    return sm.trimesh(cols), vals, scale
 
 
 def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", max_points: int = 2_000_000,
@@ -266,31 +279,29 @@ def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", m
     """Write ``surface_<variable>.ply``, ``surface_<variable>.glb`` and the colour legend
     ``surface_<variable>_legend.png``: the closed triangle surface of the part with vertex colours of
     ``variable`` (viridis over the range of the machined surface, stock surface grey), flat
-    single-coloured regions merged (:func:`coloured_mesh`). The GLB holds two nodes: ``part`` (linear
+    single-coloured regions merged (:func:`coloured_surface`). The GLB holds two nodes: ``part`` (linear
     vertex colours, as glTF defines them) and ``legend``, a rectangle beside the part textured with
-    the legend image. Each file is written to a temp file and renamed. ``max_points`` is kept for
-    compatibility (the mesh size is set by ``stride``, see
+    the legend image (:mod:`simulate.machining.mesh_files`). Each file is written to a temp file and
+    renamed. ``max_points`` is kept for compatibility (the mesh size is set by ``stride``, see
     :func:`simulate.machining.surface_mesh.choose_stride`). Returns the paths."""
-    import trimesh
+    from .mesh_files import GlbMesh, glb_bytes, ply_bytes
 
-    mesh, _, (lo, hi) = coloured_mesh(vw, variable, stride)
+    sm, cols, _, (lo, hi) = coloured_surface(vw, variable, stride)
     png = legend_png(variable, lo, hi)
-    part = trimesh.Trimesh(mesh.vertices, mesh.faces,
-                           vertex_colors=srgb_to_linear(np.asarray(mesh.visual.vertex_colors)), process=False)
-    scene = trimesh.Scene()
-    scene.add_geometry(part, geom_name="part", node_name="part")
-    scene.add_geometry(_legend_quad(png, mesh.bounds), geom_name="legend", node_name="legend")
+    v = sm.vertices
+    bounds = np.array([v.min(axis=0), v.max(axis=0)]) if len(v) else np.zeros((2, 3))
+    lv, lf, luv = _legend_quad(png, bounds)
     out_dir = Path(out_dir)
-    contents = {f"surface_{variable}.ply": lambda: mesh.export(file_type="ply"),
-                f"surface_{variable}.glb": lambda: scene.export(file_type="glb"),
+    contents = {f"surface_{variable}.ply": lambda: ply_bytes(v, sm.faces, cols),
+                f"surface_{variable}.glb": lambda: glb_bytes([GlbMesh("part", v, sm.faces, rgba=srgb_to_linear(cols)),
+                                                              GlbMesh("legend", lv, lf, uv=luv, texture=png)]),
                 f"surface_{variable}_legend.png": lambda: png}
     paths = []
     for name, make in contents.items():
         p = out_dir / name
         tmp = p.with_name(p.name + ".tmp")
         try:
-            data = make()
-            tmp.write_bytes(data if isinstance(data, bytes) else data.encode())
+            tmp.write_bytes(make())
             os.replace(tmp, p)
         finally:
             if tmp.exists():
@@ -299,49 +310,43 @@ def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", m
     return paths
 
 
-def render_png(vw: VirtualWorkpiece, path, variable: str = "deflection", max_points: int = 400_000) -> Path:
-    """Top view of the machined surface coloured by ``variable`` with a colour bar (matplotlib, Agg)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def render_png(vw: VirtualWorkpiece, path, variable: str = "deflection", max_pixels: int = 900) -> Path:
+    """Top view of the machined surface coloured by ``variable`` (the highest machined point of
+    each pixel; white: not machined), with axes in mm and a colour bar
+    (:mod:`simulate.machining.raster_figure`). One pixel is one dexel spacing, or coarser so that
+    the picture is at most ``max_pixels`` wide and high."""
+    from .raster_figure import ColourBar, figure, save_png, top_view
 
     pts, vals = machined_points(vw, variable)
-    if len(pts) > max_points:
-        sel = np.random.default_rng(0).choice(len(pts), max_points, replace=False)
-        pts, vals = pts[sel], vals[sel]
-    unit = DISPLAY_UNITS[variable]
-    fig, ax = plt.subplots(figsize=(8, 7), dpi=110)
-    sc = ax.scatter(pts[:, 0] * 1e3, pts[:, 1] * 1e3, c=vals * unit[0], s=0.3, cmap="viridis")
-    fig.colorbar(sc, ax=ax, label=f"{variable.replace('_', ' ')} [{unit[1]}]")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("y [mm]")
-    ax.set_title(f"virtual workpiece: {variable.replace('_', ' ')}")
-    p = Path(path)
-    tmp = p.with_name(p.stem + ".tmp.png")
-    fig.savefig(tmp)
-    plt.close(fig)
-    os.replace(tmp, p)
-    return p
+    factor, unit = DISPLAY_UNITS[variable]
+    label = f"{variable.replace('_', ' ')} [{unit}]"
+    title = f"virtual workpiece: {variable.replace('_', ' ')}"
+    if not len(pts):   # nothing machined: an empty panel over the stock's outline
+        from .raster_figure import Panel
+
+        wp = vw.workpiece
+        panel = Panel(np.full((200, 200, 3), 255, np.uint8),
+                      (wp.lower[0] * 1e3, wp.upper[0] * 1e3, wp.lower[1] * 1e3, wp.upper[1] * 1e3))
+        save_png(figure(panel, ColourBar(0.0, 1.0, label), title + " (nothing machined)"), path)
+        return Path(path)
+    cols, lo, hi = _colours(vals)
+    span = float(np.ptp(pts[:, :2], axis=0).max())
+    panel = top_view(pts, cols, max(vw.workpiece.spacing, span / max_pixels))
+    save_png(figure(panel, ColourBar(lo * factor, hi * factor, label), title), path)
+    return Path(path)
 
 
 def render_mesh_png(vw: VirtualWorkpiece, path, variable: str = "deflection", max_nodes: int = 300_000,
-                    azimuth_deg: float = -60.0, elevation_deg: float = 35.0) -> Path:
+                    azimuth_deg: float = -60.0, elevation_deg: float = 35.0, width_px: int = 900) -> Path:
     """Oblique view of the closed surface coloured by ``variable`` (stock surface grey), with a
-    colour bar (matplotlib, Agg).
+    colour bar (:mod:`simulate.machining.raster_figure`).
 
     A coarse lattice (:func:`simulate.machining.surface_mesh.choose_stride` under ``max_nodes``)
     keeps it to some 10^5 triangles; faces turned away from the viewer are dropped and the rest
-    drawn far to near (painter's algorithm) with Lambert shading from the view direction.
+    rasterised with a z-buffer, each face flat-coloured by the mean of its vertices' values and
+    Lambert-shaded from the view direction.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import PolyCollection
-    from matplotlib.colors import Normalize
-
+    from .raster_figure import ColourBar, Panel, figure, raster_triangles, save_png
     from .surface_mesh import choose_stride, surface_mesh
 
     sm = surface_mesh(vw.workpiece, stride=choose_stride(vw.workpiece.shape, max_nodes))
@@ -357,34 +362,25 @@ def render_mesh_png(vw: VirtualWorkpiece, path, variable: str = "deflection", ma
     tri, n = tri[facing], n[facing]
     fv = vals[sm.faces[facing]]
     cnt = np.isfinite(fv).sum(axis=1)
-    fval = np.where(cnt > 0, np.nansum(fv, axis=1) / np.maximum(cnt, 1), np.nan)   # NaN: stock surface
-    order = np.argsort(tri.mean(axis=1) @ view)   # far first
-    tri, n, fval = tri[order], n[order], fval[order]
-    xy = np.stack([tri @ right, tri @ up], axis=-1) * 1e3
-    unit = DISPLAY_UNITS[variable]
-    v = fval * unit[0]
-    ok = np.isfinite(v)
-    lo, hi = (float(v[ok].min()), float(v[ok].max())) if ok.any() else (0.0, 1.0)
-    norm = Normalize(lo, hi if hi > lo else lo + 1.0)
-    cmap = matplotlib.colormaps["viridis"]
-    rgba = np.where(ok[:, None], cmap(norm(np.nan_to_num(v))), (0.78, 0.78, 0.78, 1.0))
+    with np.errstate(invalid="ignore"):
+        fval = np.where(cnt > 0, np.nansum(fv, axis=1) / np.maximum(cnt, 1), np.nan)   # NaN: stock surface
+    factor, unit = DISPLAY_UNITS[variable]
+    cols, lo, hi = _colours(fval)
     shade = 0.35 + 0.65 * np.clip(n @ view, 0.0, 1.0)
-    rgba[:, :3] *= shade[:, None]
-    fig, ax = plt.subplots(figsize=(9, 7), dpi=110)
-    ax.add_collection(PolyCollection(xy, facecolors=rgba, edgecolors="none"))
-    ax.autoscale_view()
-    ax.set_aspect("equal")
-    ax.set_axis_off()
-    sc = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
-    fig.colorbar(sc, ax=ax, shrink=0.7, label=f"{variable.replace('_', ' ')} [{unit[1]}] (grey: stock surface)")
-    ax.set_title(f"virtual workpiece: {variable.replace('_', ' ')} (lattice {sm.pitch * 1e3:.2g} mm)")
-    p = Path(path)
-    tmp = p.with_name(p.stem + ".tmp.png")
-    try:
-        fig.savefig(tmp)
-        os.replace(tmp, p)
-    finally:
-        plt.close(fig)
-        if tmp.exists():
-            tmp.unlink()
-    return p
+    rgb = np.round(cols[:, :3] * shade[:, None]).astype(np.uint8)
+    xy = np.stack([tri @ right, -(tri @ up)], axis=-1)     # image y grows downwards
+    depth = -(tri @ view)
+    if len(xy):
+        lo_xy = xy.reshape(-1, 2).min(axis=0)
+        span = float(np.ptp(xy.reshape(-1, 2), axis=0).max()) or 1.0
+    else:
+        lo_xy, span = np.zeros(2), 1.0
+    scale = (width_px - 20) / span
+    px = (xy - lo_xy) * scale + 10.0
+    w = int(np.ceil(px[..., 0].max())) + 10 if len(px) else width_px
+    h = int(np.ceil(px[..., 1].max())) + 10 if len(px) else width_px
+    image = raster_triangles(px, depth, rgb, w, h)
+    bar = ColourBar(lo * factor, hi * factor, f"{variable.replace('_', ' ')} [{unit}]", "grey: stock surface")
+    title = f"virtual workpiece: {variable.replace('_', ' ')} (lattice {sm.pitch * 1e3:.2g} mm)"
+    save_png(figure(Panel(image), bar, title), path)
+    return Path(path)
