@@ -9,15 +9,13 @@ and PNG renderings with a colour bar.
 """
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from identify.errors import InputError
-from identify.files import as_created
+from identify.files import atomic_file
 
 from .dexel import RayFamily, TriDexel
 from .simulation import StepTable
@@ -50,15 +48,8 @@ class VirtualWorkpiece:
             for name in ("lo", "hi", "lo_step", "hi_step", "count"):
                 arrays[f"f{f.axis}_{name}"] = getattr(f, name)
         arrays.update(self.steps.as_arrays())
-        fd, tmp = tempfile.mkstemp(dir=p.parent, suffix=".npz")
-        os.close(fd)
-        try:
+        with atomic_file(p) as tmp:
             _savez_fast(tmp, arrays)
-            as_created(tmp)
-            os.replace(tmp, p)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
         return p
 
     @classmethod
@@ -279,34 +270,41 @@ def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", m
     """Write ``surface_<variable>.ply``, ``surface_<variable>.glb`` and the colour legend
     ``surface_<variable>_legend.png``: the closed triangle surface of the part with vertex colours of
     ``variable`` (viridis over the range of the machined surface, stock surface grey), flat
-    single-coloured regions merged (:func:`coloured_surface`). The GLB holds two nodes: ``part`` (linear
-    vertex colours, as glTF defines them) and ``legend``, a rectangle beside the part textured with
-    the legend image (:mod:`simulate.machining.mesh_files`). Each file is written to a temp file and
-    renamed. ``max_points`` is kept for compatibility (the mesh size is set by ``stride``, see
+    single-coloured regions merged (:func:`coloured_surface`). The GLB (written by trimesh) holds two
+    nodes: ``part`` (linear vertex colours, as glTF defines them) and ``legend``, a rectangle beside
+    the part textured with the legend image. Each file is written atomically. ``max_points`` is kept
+    for compatibility (the mesh size is set by ``stride``, see
     :func:`simulate.machining.surface_mesh.choose_stride`). Returns the paths."""
-    from .mesh_files import GlbMesh, glb_bytes, ply_bytes
+    import io
+
+    import trimesh
+    from PIL import Image
+
+    from identify.files import atomic_file
 
     sm, cols, _, (lo, hi) = coloured_surface(vw, variable, stride)
     png = legend_png(variable, lo, hi)
     v = sm.vertices
     bounds = np.array([v.min(axis=0), v.max(axis=0)]) if len(v) else np.zeros((2, 3))
     lv, lf, luv = _legend_quad(png, bounds)
+    material = trimesh.visual.material.PBRMaterial(name="legend", baseColorTexture=Image.open(io.BytesIO(png)),
+                                                   doubleSided=True, metallicFactor=0.0, roughnessFactor=1.0)
+    # trimesh flips v on export (glTF's v = 0 is the image's top row)
+    legend = trimesh.Trimesh(lv, lf, visual=trimesh.visual.TextureVisuals(uv=np.c_[luv[:, 0], 1.0 - luv[:, 1]],
+                                                                          material=material), process=False)
+    scene = trimesh.Scene()
+    scene.add_geometry(trimesh.Trimesh(v, sm.faces, vertex_colors=srgb_to_linear(cols), process=False),
+                       geom_name="part", node_name="part")
+    scene.add_geometry(legend, geom_name="legend", node_name="legend")
     out_dir = Path(out_dir)
-    contents = {f"surface_{variable}.ply": lambda: ply_bytes(v, sm.faces, cols),
-                f"surface_{variable}.glb": lambda: glb_bytes([GlbMesh("part", v, sm.faces, rgba=srgb_to_linear(cols)),
-                                                              GlbMesh("legend", lv, lf, uv=luv, texture=png)]),
+    contents = {f"surface_{variable}.ply": lambda: sm.trimesh(cols).export(file_type="ply"),
+                f"surface_{variable}.glb": lambda: scene.export(file_type="glb"),
                 f"surface_{variable}_legend.png": lambda: png}
     paths = []
     for name, make in contents.items():
-        p = out_dir / name
-        tmp = p.with_name(p.name + ".tmp")
-        try:
+        with atomic_file(out_dir / name) as tmp:
             tmp.write_bytes(make())
-            os.replace(tmp, p)
-        finally:
-            if tmp.exists():
-                tmp.unlink()
-        paths.append(p)
+        paths.append(out_dir / name)
     return paths
 
 
