@@ -169,7 +169,7 @@ def simulate_circle(robot, placement, spec: CircleSpec, *, friction: bool = True
     InputError
         The circle leaves the robot's reach or joint limits at this pose (``field="radius-mm"``).
     """
-    from simulate.robot.drive import drive_params, simulate_drive
+    from simulate.robot.drive import simulate_drive
     from simulate.robot.kinematics import fk
     from simulate.toolpath.interpolation import interpolate
     from simulate.toolpath.placement import joint_trajectory
@@ -183,9 +183,8 @@ def simulate_circle(robot, placement, spec: CircleSpec, *, friction: bool = True
     except InputError as exc:
         raise InputError(f"the circle (R {spec.radius * 1e3:g} mm, plane {spec.plane.value}) is not feasible at "
                          f"pose '{placement.name}': {exc.message}", field="radius-mm") from None
-    params = drive_params(robot, friction_scale=friction_scale)
     res = simulate_drive(robot, jt.t, jt.q, friction=friction, backlash=backlash, ff_friction=ff_friction,
-                         params=params)
+                         friction_scale=friction_scale)
     T_wb = np.linalg.inv(placement.T)
     p_base = fk(robot, res.q)[:, :3, 3]
     xyz = p_base @ T_wb[:3, :3].T + T_wb[:3, 3]

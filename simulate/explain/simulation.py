@@ -179,13 +179,13 @@ def cutter_of(robot: Robot):
 
 
 def servo_error(robot: Robot, setup: PartSetup) -> np.ndarray:
-    """Servo tracking error ``p(q_act) - p(q_cmd)`` (N, 3), workpiece frame, m, of the servo alone on the
-    commanded path (friction and play on, no process force): for sensitivities of the servo's
+    """Drive tracking error ``p(q_link) - p(q_cmd)`` (N, 3), workpiece frame, m, of the drives alone on the
+    commanded path (friction and play on, no process force): for sensitivities of the drive's
     parameters (:mod:`simulate.explain.causes`)."""
-    from simulate.robot.servo import simulate_servo
+    from simulate.robot.drive import simulate_drive
 
     jt = setup.trajectory(robot)
-    sv = simulate_servo(robot, jt.t, jt.q, friction=True, backlash=True)
+    sv = simulate_drive(robot, jt.t, jt.q, friction=True, backlash=True)
     return sv.tcp_error(robot) @ setup.rotation  # base -> workpiece: R^T e, row-wise
 
 
