@@ -74,8 +74,12 @@ class MachiningSettings:
     stiffness_scale : float
         Multiplies every joint stiffness [-].
     substeps : int or None
-        Drive substeps per 2 ms cycle [-]; None: what the stiffest mode needs
+        Drive substeps per 2 ms cycle [-]; None: per joint what its fastest mode needs
         (:func:`simulate.robot.drive.substeps_for`).
+    friction_scale : float
+        Factor on every joint's Coulomb and static friction levels [-] (1: as fitted).
+    ff_friction : bool
+        The NC's friction feed-forward (off: the controller does not know the friction).
     stock_floor : float or None
         Leave out the stock this far [m] below the lowest programmed cutting height; None: whole stock.
     capacity : tuple of int or None
@@ -94,6 +98,8 @@ class MachiningSettings:
     require_spindle: bool = False
     stiffness_scale: float = 1.0
     substeps: int | None = None
+    friction_scale: float = 1.0
+    ff_friction: bool = False
     stock_floor: float | None = None
     capacity: tuple | None = None
     size: int | None = None
@@ -110,6 +116,9 @@ class MachiningSettings:
                              f"6 mm features", field="spacing")
         if self.spindle_rpm is not None and not (math.isfinite(self.spindle_rpm) and self.spindle_rpm > 0):
             raise InputError(f"spindle speed must be > 0 rev/min, got {self.spindle_rpm}", field="spindle")
+        fs = self.friction_scale
+        if isinstance(fs, bool) or not (isinstance(fs, (int, float)) and math.isfinite(fs) and fs >= 0):
+            raise InputError(f"must be finite and >= 0, got {fs!r}", field="friction-scale")
         if self.substeps is not None and not (isinstance(self.substeps, int) and not isinstance(self.substeps, bool)
                                               and self.substeps >= 1):
             raise InputError(f"drive substeps must be an integer >= 1, got {self.substeps!r}", field="substeps")
@@ -127,8 +136,9 @@ class ProgramSetup:
     parsed : simulate.toolpath.gcode.Program
     interp : simulate.toolpath.interpolation.Interpolation
         The program at the 2 ms cycle (workpiece frame, m).
-    stock : Path
-        Stock description JSON.
+    stock : Path or None
+        Stock description JSON; None: no stock, nothing is cut (the drives and the path only, e.g. a
+        circular test).
     stock_doc : dict
         The stock JSON as read.
     spindle_rpm : float
@@ -284,6 +294,11 @@ def stock_workpiece(program: ProgramSetup, settings: MachiningSettings):
     from simulate.machining.dexel import DEFAULT_CAPACITY, TriDexel, raise_floor, read_stock_solids
 
     cap = settings.capacity or DEFAULT_CAPACITY
+    if program.stock is None:
+        # no stock: a block of 2^3 dexel cells 1 m below the path, which no tool reaches (the loop's
+        # removal rejects it by its bounding box)
+        lo = program.interp.xyz.min(axis=0) - np.array([0.0, 0.0, 1.0])
+        return TriDexel.box(lo, lo + 2 * settings.spacing, settings.spacing, capacity=cap)
     if settings.stock_floor is None:
         return TriDexel.from_stock_file(program.stock, settings.spacing, capacity=cap)
     floor = float(program.interp.xyz[:, 2].min()) - settings.stock_floor
@@ -377,12 +392,13 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
     drive = None
     if comp.servo:
         from simulate.machining.simulation import loop_drive
-        from simulate.robot.drive import drive_flags
+        from simulate.robot.drive import drive_flags, drive_friction
         from simulate.robot.friction import loop_friction
 
+        flags = drive_flags(friction=comp.friction, backlash=comp.switching, ff_friction=s.ff_friction)
         fp, fr = loop_friction(robot, job.friction, enabled=comp.friction)
-        drive = loop_drive(robot, jt.q, jt.t, R, fp, substeps=s.substeps,
-                           flags=drive_flags(friction=comp.friction, backlash=comp.switching))
+        fp = drive_friction(robot, fp, scale=s.friction_scale, flags=flags)
+        drive = loop_drive(robot, jt.q, jt.t, R, fp, substeps=s.substeps, flags=flags)
     else:
         fr = [{"joint": j, "kind": "none", "source": "no drives"} for j in range(1, 7)]
     n = len(jt.t)
@@ -393,7 +409,7 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
     timings["stock"] = time.perf_counter() - c0
     res = simulate_machining(wp, cutter, jt.t, jt.line, jt.xyz, mat, Spindle.from_rpm(rpm), compliance=C,
                              tracking_error=offset, switch=jt.switch if comp.switching else None,
-                             advance=advance, profile=profile, drive=drive)
+                             forces=prog.stock is not None, advance=advance, profile=profile, drive=drive)
     err = res.steps.tracking_error
     timings["coupled loop"] = res.wall_time
     scan = table = None

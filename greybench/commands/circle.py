@@ -128,7 +128,7 @@ def bench_circle(
 
     n = len(jt.t)
     print_summary("bench circle (CPU time, one thread)", {escape(k): v for k, v in {
-        "cycles [-]": n, "substeps per 2 ms cycle [-]": res.substeps,
+        "cycles [-]": n, "substeps per 2 ms cycle, A1-A6 [-]": "/".join(str(k) for k in res.substeps),
         "drive cycles per CPU second [1/s]": n / best, "drive per cycle [µs]": best / n * 1e6,
         "interpolation + IK [s]": c1 - c0, "load torques (Newton-Euler) [s]": c2 - c1,
         "whole simulation [s]": c4 - c3, "evaluation [s]": c5 - c4}.items()})

@@ -305,10 +305,10 @@ def bench_machining(
     table.add_row(escape(f"steps/s, grey-box LuGre joints 1-3 ({grey_note})"), f"{n / grey.wall_time:,.0f}",
                   f"{n / grey.cpu_time:,.0f}", f"{grey.cpu_time / cpu:.2f}x the LuGre CPU time")
     # the drives' share: the loop's own clock split (ticks of drive_cycle) of the profiled runs
-    nsd = servo_of(fp_lugre).n_sub
+    nsd = "/".join(str(n) for n in servo_of(fp_lugre).n_sub)
     for label, pr in (("conventional LuGre", prof), ("grey-box joints 1-3", grey_prof)):
         d = pr.timings.get("drive", 0.0)
-        table.add_row(escape(f"drive share of the loop, {label} ({nsd} substeps)"),
+        table.add_row(escape(f"drive share of the loop, {label} ({nsd} substeps per joint)"),
                       f"{d:.2f} s", "", f"{d / max(pr.wall_time, 1e-12) * 100:.1f} % of the profiled loop")
     table.add_row(escape("simulated / loop time"), f"{res.simulated_time / wall:.1f}", f"{res.simulated_time / cpu:.1f}",
                   ">= 10")

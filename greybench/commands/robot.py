@@ -185,7 +185,7 @@ def bench_robot(
         rn_w, rn_c = _timed(lambda: rnea(r, qs, qd, qdd))
     t = np.arange(0.0, servo_seconds, CYCLE)
     qc = (0.5 * (r.lower + r.upper) + 0.3 * np.sin(2 * np.pi * 0.4 * t)[:, None] * np.ones(6))
-    sv_n = simulate_drive(r, t[:100], qc[:100]).substeps
+    sv_n = "/".join(str(n) for n in simulate_drive(r, t[:100], qc[:100]).substeps)
     with progress("drives", enabled=not as_json):
         sv_w, sv_c = _timed(lambda: simulate_drive(r, t, qc, friction=True, backlash=True))
     ik_rate = (poses / ik_w, poses / ik_c)

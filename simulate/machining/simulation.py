@@ -95,6 +95,8 @@ class MachiningResult:
     cpu_time : float  s, CPU time of this process during the loop (all threads)
     joint_error : (N, 6) rad or None, joint error ``q_cmd - q_link`` per step (drives in the loop)
     joint_friction : (N, 6) Nm or None, each joint's friction torque at the end of each step
+    joint_contact : (N, 6) int8 or None, each gear's flank at the end of each step
+        (:class:`simulate.robot.drive.Contact`: +1 / -1, 0 in the play)
     """
 
     steps: StepTable
@@ -104,6 +106,7 @@ class MachiningResult:
     cpu_time: float = 0.0
     joint_error: np.ndarray | None = None
     joint_friction: np.ndarray | None = None
+    joint_contact: np.ndarray | None = None
 
     @property
     def simulated_time(self) -> float:
@@ -167,7 +170,7 @@ DriveLoop = namedtuple("DriveLoop", [
     "st",        # simulate.robot.drive.DriveState, updated
     "fst",       # (6, S) friction state, updated
     "flags",     # int, simulate.robot.drive.DriveFlags
-    "n_sub",     # int, drive substeps per cycle
+    "n_sub",     # (6,) int64, drive substeps per cycle and joint
     "dyn",       # simulate.robot.drive.DynParams (Newton-Euler of the load, work arrays)
     "q",         # (N, 6) commanded joints [rad]
     "v",         # (N, 6) commanded joint velocities [rad/s]
@@ -177,6 +180,7 @@ DriveLoop = namedtuple("DriveLoop", [
     "scratch",   # (4, 6): the cycle's process torque, load at its start and end [Nm], link inertia [kg m^2]
     "dq",        # (N, 6) out: joint error q_cmd - q_link [rad]
     "tf",        # (N, 6) out: friction torque at the end of the step [Nm]
+    "contact",   # (N, 6) int8 out: gear flank at the end of the step (Contact)
 ])
 
 
@@ -190,7 +194,7 @@ def drive_cycle(dr, k, dt, force):
     one-cycle-old measured acceleration fed back through the off-diagonal inertia would be an
     explicit coupling that rings), and the process force of step k-1, ``-J^T F`` (the same one-step
     lag as the deflection). Within the cycle the load follows the NC model's change,
-    ``load1 = load0 + model_k - model_(k-1)``. Fills ``dr.dq[k]``, ``dr.tf[k]``.
+    ``load1 = load0 + model_k - model_(k-1)``. Fills ``dr.dq[k]``, ``dr.tf[k]``, ``dr.contact[k]``.
     """
     tp, l0, l1, jl = dr.scratch[0], dr.scratch[1], dr.scratch[2], dr.scratch[3]
     for jj in range(6):
@@ -205,6 +209,7 @@ def drive_cycle(dr, k, dt, force):
     for jj in range(6):
         dr.dq[k, jj] = dr.q[k, jj] - dr.st.q[jj]
         dr.tf[k, jj] = dr.st.tau_f[jj]
+        dr.contact[k, jj] = dr.st.contact[jj]
 
 
 @njit(cache=True)
@@ -501,9 +506,9 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
                    "robot": ticks[3] * sec, "removal, z-rays": ticks[4] * sec, "drive": ticks[5] * sec}
         timings = {k: float(v) for k, v in timings.items()}
     st.tracking_error[:] = err
-    joint_error = sv.dq if sv.on else None
-    joint_friction = sv.tf if sv.on else None
-    return MachiningResult(st, float(state[6]), wall, timings, cpu, joint_error, joint_friction)
+    on = sv.on
+    return MachiningResult(st, float(state[6]), wall, timings, cpu, sv.dq if on else None, sv.tf if on else None,
+                           sv.contact if on else None)
 
 
 @njit(cache=False)   # the intrinsic cannot be cached
@@ -535,8 +540,8 @@ def _no_drive():
     p = DriveParams(jm=np.ones(6), c=np.ones(6), d=z6, b=z6, kv=z6, kp=z6, ki=z6, ffv=z6, fft=z6,
                     side=np.zeros(6, np.int64))
     z = np.zeros((1, 6))
-    return DriveLoop(False, p, fp, drive_state(), new_state(fp), 0, 1, dyn_params_empty(), z, z, z, z,
-                     np.zeros((1, 3, 6)), np.zeros((4, 6)), z, z)
+    return DriveLoop(False, p, fp, drive_state(), new_state(fp), 0, np.ones(6, np.int64), dyn_params_empty(), z, z,
+                     z, z, np.zeros((1, 3, 6)), np.zeros((4, 6)), z, z, np.zeros((1, 6), np.int8))
 
 
 def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substeps: int | None = None,
@@ -546,14 +551,14 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
     ``friction`` is the joints' :data:`~simulate.robot.loop_friction.LoopFriction`
     (:func:`simulate.robot.friction.loop_friction`); ``placement_rotation`` the workpiece-to-base
     rotation (3, 3); ``flags`` :class:`~simulate.robot.drive.DriveFlags` (default: friction, play,
-    velocity/torque feed-forward, windup compensation); ``substeps`` per 2 ms cycle (default
+    velocity/torque feed-forward, windup compensation); ``substeps`` per 2 ms cycle, one or per joint (default
     :func:`~simulate.robot.drive.substeps_for`). The NC's feed-forward knows gravity and inertia along
     the command (not the process force: an unmeasured disturbance its velocity integrator rejects).
     The Jacobian (tracking error and ``-J^T F``) is taken at the commanded joints, for all steps at once.
     The state starts at equilibrium on the first command.
     """
-    from simulate.robot.drive import (DriveFlags, command_velocity, drive_init, drive_params, dyn_params,
-                                      load_torques, new_state as drive_state, substeps_for)
+    from simulate.robot.drive import (DriveFlags, as_substeps, command_velocity, drive_init, drive_params,
+                                      dyn_params, load_torques, new_state as drive_state, substeps_for)
     from simulate.robot.kinematics import jacobian
     from simulate.robot.loop_friction import new_state
 
@@ -569,12 +574,12 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
     model = np.ascontiguousarray(model)
     p = drive_params(robot)
     T = float(np.max(np.diff(t))) if n > 1 else 0.002
-    n_sub = int(substeps) if substeps is not None else substeps_for(p, jl, T, flags, friction)
-    if n_sub < 1:
-        raise ValueError("substeps must be >= 1")
+    n_sub = as_substeps(substeps) if substeps is not None else substeps_for(p, jl, T, flags, friction)
     st, fst = drive_state(), new_state(friction)
     drive_init(p, st, fst, q[0], v[0], model[0], model[0], jl[0], flags)
     dq = np.zeros((n, 6))
     dq[0] = q[0] - st.q   # the gear's play and windup at the start (the loop steps from k = 1)
+    contact = np.zeros((n, 6), np.int8)
+    contact[0] = st.contact
     return DriveLoop(True, p, friction, st, fst, flags, n_sub, dyn_params(robot, payload), q, v, a, model, jac,
-                     np.zeros((4, 6)), dq, np.zeros((n, 6)))
+                     np.zeros((4, 6)), dq, np.zeros((n, 6)), contact)

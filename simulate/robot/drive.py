@@ -35,15 +35,17 @@ gear ratio ``N``; equations and sources in ``docs/drive-model.md``)::
   difference velocities); the feed-forward torque is evaluated at substep midpoints.
 
 Integration (the gear is stiff: ``f_r = sqrt(c (1/J_m' + 1/J_l)) / 2 pi`` is 25-200 Hz): each
-cycle ``T`` is cut into ``n_sub`` substeps of ``h = T / n_sub``. The control torque is held over a
-substep (zero-order hold, as a digital current loop), friction is held at its start velocity
-with the exact bristle update, and the two masses are advanced by velocity Verlet
-(kick-drift-kick; second order, symplectic: no numerical damping of the gear mode, stable for
-``omega h < 2``). :func:`substeps_for` picks ``n_sub`` so that ``omega_max h <= 0.1`` where
-``omega_max`` bounds the gear mode, the bristle mode ``sqrt(s0 / J_side)``, the damping rates and
-the velocity-loop rate ``kp / J_m'``; the phase error of the gear mode is then below
-``(omega h)^2 / 24 = 0.04 %`` per period. At a 2 ms cycle the shipped robot needs 36 substeps
-(A1's velocity loop, ``kp / J_m' = 1780 1/s``, sets the rate; A6's gear mode at 200 Hz needs 26).
+cycle ``T`` is cut, per joint, into ``n_sub[j]`` substeps of ``h = T / n_sub[j]`` (the joints are
+independent within a cycle, their load being given, so each runs at its own rate). The control
+torque is held over a substep (zero-order hold, as a digital current loop), friction (the model's
+own discretisation) is evaluated at the substep's start and held, and the two masses are advanced
+by velocity Verlet (kick-drift-kick; second order, symplectic: no numerical damping of the gear
+mode, stable for ``omega h < 2``). :func:`substeps_for` picks ``n_sub[j]`` so that
+``omega_max h <= 0.1`` where ``omega_max`` bounds joint j's gear mode, bristle mode
+``sqrt(s0 / J_side)``, damping rates and velocity-loop rate ``kp / J_m'``; the phase error of the
+gear mode is then below ``(omega h)^2 / 24 = 0.04 %`` per period. At a 2 ms cycle the shipped
+robot needs 36, 36, 28, 9, 8, 26 substeps (A1, A2: the velocity loop, ``kp / J_m' = 1780 1/s``;
+A6: its gear mode at 200 Hz), 143 joint-substeps per cycle instead of 6 x 36 = 216.
 """
 from __future__ import annotations
 
@@ -155,17 +157,6 @@ def _contact(delta, b2):
 
 
 @njit(cache=True)
-def _hermite(s, T, p0, p1, v0, v1):
-    """Cubic Hermite reference at s in [0, 1]: position [rad], velocity [rad/s]."""
-    s2 = s * s
-    s3 = s2 * s
-    r = (2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * T * v0 + (-2 * s3 + 3 * s2) * p1 + (s3 - s2) * T * v1
-    rd = ((6 * s2 - 6 * s) * p0 + (3 * s2 - 4 * s + 1) * T * v0 + (-6 * s2 + 6 * s) * p1
-          + (3 * s2 - 2 * s) * T * v1) / T
-    return r, rd
-
-
-@njit(cache=True)
 def drive_init(p, st, fst, r, v, load, model, jl, flags):
     """Put ``st`` at rest-equilibrium (velocity ``v``) on the reference ``r`` [rad] under ``load`` [Nm].
 
@@ -195,7 +186,7 @@ def drive_init(p, st, fst, r, v, load, model, jl, flags):
 
 @njit(cache=True)
 def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
-    """Advance the six drives by one cycle of ``T`` [s] in ``n_sub`` substeps; updates ``st`` in place.
+    """Advance the six drives by one cycle of ``T`` [s], joint j in ``n_sub[j]`` substeps; updates ``st`` in place.
 
     Parameters
     ----------
@@ -213,14 +204,16 @@ def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
         Reference, load and link inertia of this cycle.
     T : float
         Cycle time [s].
-    n_sub : int
-        Substeps (see :func:`substeps_for`).
+    n_sub : ndarray (6,) of int64
+        Substeps per joint (see :func:`substeps_for`): the joints are independent within a cycle
+        (the load is given), so each runs at the rate its own fastest mode needs.
     flags : int
         :class:`DriveFlags`.
     """
-    h = T / n_sub
     fr_on = flags & F_FRICTION
     for j in range(N_AXES):
+        ns = n_sub[j]
+        h = T / ns
         b2 = 0.5 * p.b[j] if flags & F_BACKLASH else 0.0
         ffv = p.ffv[j] if flags & F_FF_VEL else 0.0
         fft = p.fft[j] if flags & F_FF_TAU else 0.0
@@ -238,11 +231,16 @@ def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
         # feed-forward acceleration linear in the cycle: the cubic Hermite's own jerk would amplify
         # the error of difference velocities (it is 3x the true jerk for central differences)
         jerk = (cy.a1[j] - cy.a0[j]) / T
-        for i in range(n_sub):
-            sa = i / n_sub
-            sm = (i + 0.5) / n_sub
-            r, rd = _hermite(sa, T, cy.r0[j], cy.r1[j], cy.v0[j], cy.v1[j])
-            _, rdm = _hermite(sm, T, cy.r0[j], cy.r1[j], cy.v0[j], cy.v1[j])
+        # cubic Hermite reference r(s) = h0 + h1 s + h2 s^2 + h3 s^3, s = (time in the cycle) / T
+        h0, h1 = cy.r0[j], T * cy.v0[j]
+        h2 = 3.0 * (cy.r1[j] - h0) - 2.0 * h1 - T * cy.v1[j]
+        h3 = 2.0 * (h0 - cy.r1[j]) + h1 + T * cy.v1[j]
+        for i in range(ns):
+            sa = i / ns
+            sm = (i + 0.5) / ns
+            r = h0 + sa * (h1 + sa * (h2 + sa * h3))
+            rd = (h1 + sa * (2.0 * h2 + 3.0 * sa * h3)) / T
+            rdm = (h1 + sm * (2.0 * h2 + 3.0 * sm * h3)) / T
             rdd = cy.a0[j] + jerk * sa * T
             rddm = cy.a0[j] + jerk * sm * T
             mod_a = cy.model0[j] + dmod * sa * T
@@ -328,8 +326,9 @@ def new_state() -> DriveState:
 
 
 def substeps_for(p: DriveParams, jl, T: float = CYCLE, flags: int = int(DriveFlags.default()),
-                 friction=None) -> int:
-    """Substeps per cycle ``T`` [s] so that ``omega_max h <= OMEGA_H`` (module docstring).
+                 friction=None) -> np.ndarray:
+    """Substeps per cycle ``T`` [s] per joint, (6,) int64, so that ``omega_max h <= OMEGA_H`` for each
+    joint's own fastest rate (module docstring).
 
     ``jl`` [kg m^2] (6,) or (M, 6): the smallest link inertia per joint along the motion is used;
     ``friction`` the LoopFriction whose bristle stiffness and damping must be resolved too (with
@@ -344,8 +343,16 @@ def substeps_for(p: DriveParams, jl, T: float = CYCLE, flags: int = int(DriveFla
         s0, damp = bristle_rates(friction)
         j_side = np.where(p.side == FrictionSide.MOTOR, p.jm, jl_min)
         cand += [np.sqrt(s0 / j_side), damp / j_side]
-    w = float(np.max(np.concatenate(cand)))
-    return max(1, int(math.ceil(w * T / OMEGA_H)))
+    w = np.max(np.stack(cand), axis=0)
+    return np.maximum(1, np.ceil(w * T / OMEGA_H)).astype(np.int64)
+
+
+def as_substeps(substeps) -> np.ndarray:
+    """Substeps per joint (6,) int64 from an int or six ints; ``ValueError`` below 1."""
+    n = np.broadcast_to(np.asarray(substeps), (N_AXES,))
+    if not np.all(n == np.floor(n)) or np.any(n < 1):
+        raise ValueError(f"substeps must be integers >= 1, got {substeps!r}")
+    return np.ascontiguousarray(n, dtype=np.int64)
 
 
 def drive_params(robot, *, gains=None) -> DriveParams:
@@ -516,8 +523,8 @@ class DriveResult:
         :class:`Contact` per sample: +1/-1 flank, 0 in the play.
     tau_load : ndarray
         Load torque on the link that was applied [Nm].
-    substeps : int
-        Substeps per cycle used.
+    substeps : ndarray (6,) of int
+        Substeps per cycle used, per joint.
     flags : DriveFlags
     """
 
@@ -530,7 +537,7 @@ class DriveResult:
     tau_motor: np.ndarray
     contact: np.ndarray
     tau_load: np.ndarray
-    substeps: int
+    substeps: np.ndarray
     flags: DriveFlags
 
     @property
@@ -581,8 +588,8 @@ def simulate_drive(robot, t, q_cmd, *, tau_load=None, tau_model=None, link_inert
         Each joint's friction model; default the robot file's (:func:`drive_friction`).
     friction_scale : float
         Factor on every joint's Coulomb and static levels [-].
-    substeps : int, optional
-        Substeps per cycle; default :func:`substeps_for`.
+    substeps : int or array_like (6,), optional
+        Substeps per cycle (per joint); default :func:`substeps_for`.
 
     Returns
     -------
@@ -613,9 +620,7 @@ def simulate_drive(robot, t, q_cmd, *, tau_load=None, tau_model=None, link_inert
     if not np.all(jl > 0):
         raise ValueError("link inertia must be > 0")
     T = float(np.max(np.diff(t)))
-    n_sub = int(substeps) if substeps is not None else substeps_for(p, jl, T, int(flags), fp)
-    if n_sub < 1:
-        raise ValueError("substeps must be >= 1")
+    n_sub = as_substeps(substeps) if substeps is not None else substeps_for(p, jl, T, int(flags), fp)
     m = t.shape[0]
     out = np.empty((5, m, N_AXES))
     oc = np.empty((m, N_AXES), dtype=np.int8)

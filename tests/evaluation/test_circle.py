@@ -217,7 +217,7 @@ def test_gravity_holds_a2_a3_on_their_flanks_while_a1_crosses_its_play(runs):
     """On the circle A2 and A3 reverse (spikes listed) but gravity keeps their gears on one flank;
     unloaded A1 changes flank at each of its two reversals."""
     run, res = runs["base"]
-    c = run.drive.contact[run.segment == 1]
+    c = run.contact[run.segment == 1]
     changes = [int(np.sum((c[1:, j] != c[:-1, j]) & (c[1:, j] != 0))) for j in range(6)]
     assert {2, 3} <= {s.joint for s in res.spikes}
     assert changes[1] == changes[2] == 0 and len(np.unique(c[:, 1])) == 1
