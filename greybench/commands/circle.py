@@ -41,7 +41,8 @@ def circle(
     ff_friction: bool = typer.Option(False, "--ff-friction", help="NC friction feed-forward on (off: the NC does not know the friction)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
-    """Simulate a circle through the drives and evaluate it as a ballbar test.
+    """Simulate a circle through the machining pipeline (drives, friction models, no cutting) and
+    evaluate it as a ballbar test.
 
     Writes circle.csv (angle_deg, radial_deviation_um, q1_rad..q6_rad) and circle.png (polar plot,
     deviation magnified, reversal spikes marked with the joint), prints roundness_um,
@@ -68,7 +69,8 @@ def circle(
     png = out_dir / polar_plot(result, out_dir / "circle.png", title)
     summary = {"robot": rob.name, "pose": placement.name, "radius_mm": radius_mm, "feed_mm_min": feed_mm_min,
                "plane": spec.plane.value, "friction": not no_friction, "backlash": not no_backlash,
-               "friction_scale": friction_scale, **result.summary(), "csv": str(csv), "png": str(png)}
+               "friction_scale": friction_scale, "friction": run.friction, **result.summary(), "csv": str(csv),
+               "png": str(png)}
     if as_json:
         emit_json(summary)
         return

@@ -231,11 +231,13 @@ def test_load_torques_split_own_inertia(robot):
 
 
 def test_substeps_resolve_the_fastest_mode(params):
-    """Per joint: its gear mode and its velocity loop resolved at omega h <= 0.1, and no finer."""
+    """Per joint: its gear mode and its velocity loop resolved at omega h <= OMEGA_H, and no finer."""
+    from simulate.robot.drive import OMEGA_H
+
     n = substeps_for(params, JL, T)
     w = np.maximum(np.sqrt(params.c * (1 / params.jm + 1 / JL)), params.kp / params.jm)
-    assert np.all(w * T / n <= 0.1) and np.all(n >= 1)
-    assert np.all(w * T / (n - 1) > 0.1) or np.any(n == 1)
+    assert np.all(w * T / n <= OMEGA_H) and np.all(n >= 1)
+    assert np.all(w * T / (n - 1) > OMEGA_H) or np.any(n == 1)
 
 
 def test_elasto_backlash_law():
