@@ -182,9 +182,11 @@ class AnswerOptions:
 
 # ---- helpers --------------------------------------------------------------------------------
 def _status(rec: JobRecord) -> JobStatus:
-    return STATUS_BY_KIND[rec.kind](id=rec.id, kind=rec.kind, state=rec.state, progress=rec.progress,
-                                    message=rec.message, created=rec.created, started=rec.started,
-                                    finished=rec.finished, error=rec.error, result=rec.result)
+    # kinds with routes of their own (compensation, circle) answer with the plain JobStatus
+    return STATUS_BY_KIND.get(rec.kind, JobStatus)(id=rec.id, kind=rec.kind, state=rec.state,
+                                                   progress=rec.progress, message=rec.message, created=rec.created,
+                                                   started=rec.started, finished=rec.finished, error=rec.error,
+                                                   result=rec.result)
 
 
 def _job(request: Request, job_id: str, kind: JobKind | None = None) -> JobRecord:
@@ -586,6 +588,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
     from service.compensation import add_routes as add_compensation_routes
     add_compensation_routes(app, settings, keyed)
+    from service.circle import add_routes as add_circle_routes
+    add_circle_routes(app, settings, keyed)
     return app
 
 

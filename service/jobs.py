@@ -73,6 +73,7 @@ class JobKind(str, Enum):
     diagnose = "diagnose"
     explain = "explain"
     compensation = "compensation"
+    circle = "circle"
 
 
 class QueueFull(RuntimeError):

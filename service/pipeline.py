@@ -410,4 +410,6 @@ def run_job(kind: JobKind, request: dict, job_dir: Path, progress: Progress, *, 
         return run_explain(request, job_dir, progress)
     if kind is JobKind.compensation:
         return _import_stage("service.compensation", "the compensation").run(request, job_dir, progress)
+    if kind is JobKind.circle:
+        return _import_stage("service.circle", "the circle").run(request, job_dir, progress)
     raise ValueError(f"unknown job kind {kind}")

@@ -162,26 +162,22 @@ class CircleRun:
     spec: CircleSpec
 
 
-def simulate_circle(robot, placement, spec: CircleSpec, *, friction: bool = True, backlash: bool = True,
-                    friction_scale: float = 1.0, ff_friction: bool = False, friction_models: dict | None = None,
-                    limits=None) -> CircleRun:
-    """Simulate the circle through the machining pipeline without stock (module docstring).
+def circle_job(robot, placement, spec: CircleSpec, *, friction: bool = True, backlash: bool = True,
+               friction_scale: float = 1.0, ff_friction: bool = False, friction_models: dict | None = None,
+               limits=None):
+    """The circle as a machining job without stock, prepared (interpolation, inverse kinematics).
 
-    The drives get the load from the simulated state every cycle (gravity, inertial coupling; no
-    process force, nothing is cut) and each joint's friction model of the robot file, or of
-    ``friction_models`` (joint 1..6 -> model reference, as a machining job's ``friction``).
-    ``friction_scale`` multiplies every joint's Coulomb and static levels [-]; ``ff_friction``
-    switches the NC's friction feed-forward on.
+    Returns ``(job, prepared)`` for :func:`simulate.pipeline.run_job`. ``friction_models``: joint
+    1..6 -> model reference replacing the robot file's (as a machining job's ``friction``).
 
     Raises
     ------
     InputError
         The circle leaves the robot's reach or joint limits at this pose (``field="radius-mm"``),
-        a bad friction model reference (naming the robot file key or the job field), a bad scale.
+        or a bad friction scale (``friction-scale``).
     """
     from simulate import defaults
-    from simulate.pipeline import Components, MachiningJob, MachiningSettings, ProgramSetup, prepare, run_job
-    from simulate.robot.kinematics import fk
+    from simulate.pipeline import Components, MachiningJob, MachiningSettings, ProgramSetup, prepare
     from simulate.toolpath.interpolation import interpolate
 
     prog = circle_program(spec)
@@ -193,18 +189,42 @@ def simulate_circle(robot, placement, spec: CircleSpec, *, friction: bool = True
                        settings=MachiningSettings(size=0, friction_scale=friction_scale, ff_friction=ff_friction))
     job.settings.validate()
     try:
-        pj = prepare(job)
+        return job, prepare(job)
     except InputError as exc:
         raise InputError(f"the circle (R {spec.radius * 1e3:g} mm, plane {spec.plane.value}) is not feasible at "
                          f"pose '{placement.name}': {exc.message}", field="radius-mm") from None
-    out = run_job(job, prepared=pj)
+
+
+def simulate_circle(robot, placement, spec: CircleSpec, *, friction: bool = True, backlash: bool = True,
+                    friction_scale: float = 1.0, ff_friction: bool = False, friction_models: dict | None = None,
+                    limits=None, advance=None) -> CircleRun:
+    """Simulate the circle through the machining pipeline without stock (module docstring).
+
+    The drives get the load from the simulated state every cycle (gravity, inertial coupling; no
+    process force, nothing is cut) and each joint's friction model of the robot file, or of
+    ``friction_models`` (joint 1..6 -> model reference, as a machining job's ``friction``).
+    ``friction_scale`` multiplies every joint's Coulomb and static levels [-]; ``ff_friction``
+    switches the NC's friction feed-forward on; ``advance(n)`` gets the loop's progress in steps.
+
+    Raises
+    ------
+    InputError
+        As :func:`circle_job`; a bad friction model reference (naming the robot file key or the job
+        field).
+    """
+    from simulate.pipeline import run_job
+    from simulate.robot.kinematics import fk
+
+    job, pj = circle_job(robot, placement, spec, friction=friction, backlash=backlash, friction_scale=friction_scale,
+                         ff_friction=ff_friction, friction_models=friction_models, limits=limits)
+    out = run_job(job, prepared=pj, advance=advance)
     jt, res = out.trajectory, out.result
     q = jt.q - res.joint_error
     T_wb = np.linalg.inv(placement.T)
     p_base = fk(out.robot, q)[:, :3, 3]
     xyz = p_base @ T_wb[:3, :3].T + T_wb[:3, 3]
-    return CircleRun(t=jt.t, segment=np.asarray(ip.segment), xyz_cmd=np.asarray(ip.xyz), xyz=xyz, q_cmd=jt.q,
-                     q=q, contact=res.joint_contact, friction=out.friction, spec=spec)
+    return CircleRun(t=jt.t, segment=np.asarray(out.program.interp.segment), xyz_cmd=np.asarray(out.program.interp.xyz),
+                     xyz=xyz, q_cmd=jt.q, q=q, contact=res.joint_contact, friction=out.friction, spec=spec)
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -414,3 +434,20 @@ def polar_plot(result: CircleResult, path: str | Path, title: str = "") -> str:
     ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.12), fontsize=8)
     fig.text(0.98, 0.02, "o spike peak, | joint reversal; label: joint, height [µm]", ha="right", fontsize=8)
     return _save(fig, Path(path))
+
+
+def write_outputs(result: CircleResult, out_dir: str | Path, *, title: str = "", info: dict | None = None) -> dict:
+    """Write ``circle.csv`` (:func:`circle_table`), ``circle.png`` (:func:`polar_plot`) and
+    ``summary.json`` into ``out_dir``; returns the summary (``info`` + :meth:`CircleResult.summary` +
+    the file paths). Everything is computed before this is called: only writing happens here."""
+    import json
+
+    from identify.records import write_table
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    csv = write_table(circle_table(result), out_dir / "circle.csv")
+    png = out_dir / polar_plot(result, out_dir / "circle.png", title)
+    summary = {**(info or {}), **result.summary(), "csv": str(csv), "png": str(png)}
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
+    return summary

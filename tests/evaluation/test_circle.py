@@ -272,6 +272,6 @@ def test_cli_circle_with_fitted_greybox_and_lstm_models(tmp_path):
                                 str(tmp_path / key), "--json"])
         assert r.exit_code == 0, r.output
         docs[key] = json.loads(r.stdout)
-    assert [f["kind"] for f in docs["models"]["friction"][:3]] == ["greybox", "lstm", "lugre"]
+    assert [f["kind"] for f in docs["models"]["friction_models"][:3]] == ["greybox", "lstm", "lugre"]
     assert docs["models"]["roundness_um"] > 0
     assert abs(docs["models"]["largest_spike_um"] - docs["inline"]["largest_spike_um"]) > 1.0
