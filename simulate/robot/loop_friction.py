@@ -91,6 +91,12 @@ class Extension(IntFlag):
     TEMPERATURE = 8
 
 
+# the members as plain ints for the compiled code (numba does not type IntFlag arithmetic)
+EXT_LOAD = int(Extension.LOAD)
+EXT_ASYMMETRY = int(Extension.ASYMMETRY)
+EXT_POSITION = int(Extension.POSITION)
+
+
 # scalar parameter slots (columns of LoopFriction.scal)
 S0, S1, NU, FC, FS, VS, DELTA, MU = range(8)
 K_LOAD, LOAD_REF, ASYM, RIP_SIN, RIP_COS, RIP_ORDER, EXT_FLAGS, K_DRY_TEMP = range(8, 16)
@@ -235,14 +241,14 @@ def _extended(p, j, st, v, q, load, dt):
     sc = p.scal[j]
     flags = int(sc[EXT_FLAGS])
     mult = 1.0
-    if flags & 1:
+    if flags & EXT_LOAD:
         mult *= max(1.0 + sc[K_LOAD] * (abs(load) - sc[LOAD_REF]), LEVEL_FLOOR)
     # temperature (flag 8): at the model's reference temperature, dT = 0: factors 1 (module docstring)
-    if (flags & 2) and v < 0.0:
+    if (flags & EXT_ASYMMETRY) and v < 0.0:
         mult *= 1.0 + sc[ASYM]
     g = _stribeck(v, sc[FC], sc[FS], sc[VS], sc[DELTA]) * mult
     f = _lugre_step(p, j, st, v, g, dt, sc[NU])
-    if flags & 4:
+    if flags & EXT_POSITION:
         n = sc[RIP_ORDER]
         f += sc[RIP_SIN] * math.sin(n * q) + sc[RIP_COS] * math.cos(n * q)
     return f
@@ -401,7 +407,7 @@ def static_friction(p, j, v):
     if kind == 2 or kind == 3 or kind == 6:
         return _sign(v) * _stribeck(v, sc[FC], sc[FS], sc[VS], sc[DELTA]) + sc[NU] * v
     if kind == 4:
-        mult = 1.0 + sc[ASYM] if (int(sc[EXT_FLAGS]) & 2) and v < 0.0 else 1.0
+        mult = 1.0 + sc[ASYM] if (int(sc[EXT_FLAGS]) & EXT_ASYMMETRY) and v < 0.0 else 1.0
         return _sign(v) * _stribeck(v, sc[FC], sc[FS], sc[VS], sc[DELTA]) * mult + sc[NU] * v
     if kind == 5:
         return _sign(v) * _greybox_level(p, j, v) + sc[NU] * v
