@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from fastapi import FastAPI, Path as PathParam, Request
 from fastapi.responses import FileResponse, JSONResponse
@@ -33,13 +33,15 @@ from service.schemas import AxisFriction, ErrorBody, Finite, JobStatus, Name, Po
 FILES = {"circle.csv": "text/csv", "circle.png": "image/png", "summary.json": "application/json"}
 #: Largest number of 2 ms cycles a circle job may simulate (lead-in, circle, lead-out): 20 min of motion.
 MAX_CYCLES = 600_000
+#: A centre coordinate [mm]: within the reach of any robot the service knows.
+Coordinate = Annotated[float, Field(ge=-5000, le=5000, allow_inf_nan=False)]
 
 
 class CircleOptions(Strict):
-    radius_mm: Finite = Field(50.0, gt=0, le=2000, description="circle radius [mm]")
-    feed_mm_min: Finite = Field(2000.0, gt=0, le=60000, description="feed along the circle [mm/min]")
+    radius_mm: Finite = Field(50.0, ge=1, le=2000, description="circle radius [mm]")
+    feed_mm_min: Finite = Field(2000.0, ge=1, le=60000, description="feed along the circle [mm/min]")
     plane: Literal["xy", "yz", "zx"] = Field("xy", description="plane of the workpiece frame")
-    center_mm: list[Finite] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
+    center_mm: list[Coordinate] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3,
                                     description="centre in the workpiece frame [mm]")
     cw: bool = Field(False, description="clockwise about the plane normal (G2); default counter-clockwise")
     friction: bool = Field(True, description="joint friction on")
