@@ -160,11 +160,10 @@ def run(request: dict, job_dir: Path, progress) -> dict:
     """The job body: fetch the registered friction models, simulate and evaluate the circle, write the
     files into ``<job>/out``."""
     from service import registry
+    from service.paths import named_file
     from simulate.evaluation.circle import evaluate_run, simulate_circle, write_outputs
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import parse_poses
-
-    from service.paths import named_file
 
     models = {}
     for entry in request.get("friction", []):

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pytest
 
 from simulate.machining.simulation import loop_drive, simulate_machining
 from simulate.robot.drive import DriveFlags, simulate_drive
