@@ -586,6 +586,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
     from service.compensation import add_routes as add_compensation_routes
     add_compensation_routes(app, settings, keyed)
+    from service.circle import add_routes as add_circle_routes
+    add_circle_routes(app, settings, keyed)
     from service.placement import add_routes as add_placement_routes   # placement searches (optimize-pose)
     add_placement_routes(app, settings, keyed)
     # the planner's browser page of finished jobs (HTML + its data routes); registered last

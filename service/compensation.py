@@ -77,7 +77,7 @@ def add_routes(app: FastAPI, settings, keyed: list) -> None:
     """Register the compensation routes on the service app (helpers of :mod:`service.app`)."""
     from service import app as svc
     from service.jobs import JobKind
-    from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, inside, named_file
+    from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, inside
 
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
     not_found = {404: {"model": ErrorBody}}
@@ -85,23 +85,13 @@ def add_routes(app: FastAPI, settings, keyed: list) -> None:
     @app.post("/compensations", status_code=202, response_model=JobStatus, dependencies=keyed,
               tags=["compensations"], responses={**not_found, 429: {"model": ErrorBody}})
     def submit_compensation(body: CompensationRequest, request: Request) -> JSONResponse:
-        from simulate.toolpath.placement import parse_poses
+        from service.circle import pose_of
 
         limits = settings.cost_limits()
         text, source = svc._program(body, limits)
         stock_text, stock_source = svc._stock(body)
         robot = svc._robot(body.robot)
-        if isinstance(body.pose, str):
-            path = named_file("poses", body.pose_set, ".json", "pose_set")
-            placements = {p.name: p for p in parse_poses(json.loads(path.read_text()), source=path.name)}
-            if body.pose not in placements:
-                raise InputError(f"no pose '{body.pose}' in {path.name} (has: {', '.join(placements)})",
-                                 source=path.name, field="pose")
-            p = placements[body.pose]
-            pose = {"name": p.name, "xyz": p.xyz.tolist(), "rpy": p.rpy.tolist(), "description": p.description}
-        else:
-            parse_poses({"poses": [body.pose.model_dump()]}, source="pose")
-            pose = body.pose.model_dump()
+        pose = pose_of(body)
         # each iteration simulates once, each stiffness check twice (original and compensated program)
         svc._cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
                   body.options.iterations + 1 + 2 * len(body.options.check_scales), limits)

@@ -74,6 +74,7 @@ class JobKind(str, Enum):
     explain = "explain"
     compensation = "compensation"
     placement_search = "placement_search"
+    circle = "circle"
 
 
 class QueueFull(RuntimeError):

@@ -417,4 +417,6 @@ def run_job(kind: JobKind, request: dict, job_dir: Path, progress: Progress, *, 
         return _import_stage("service.compensation", "the compensation").run(request, job_dir, progress)
     if kind is JobKind.placement_search:
         return _import_stage("service.placement", "the placement search").run(request, job_dir, progress, ray_address)
+    if kind is JobKind.circle:
+        return _import_stage("service.circle", "the circle").run(request, job_dir, progress)
     raise ValueError(f"unknown job kind {kind}")

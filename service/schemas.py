@@ -201,12 +201,19 @@ class PlacementSearchJobStatus(JobStatus):
     kind: Literal[JobKind.placement_search] = Field(description="'placement_search'")
 
 
+class CircleJobStatus(JobStatus):
+    """Status of a circle (ballbar) job (``POST /circles``); result: roundness, radius error and reversal
+    spikes [µm], the friction model per axis (``circle --json``)."""
+
+    kind: Literal[JobKind.circle] = Field(description="'circle'")
+
+
 #: Any job's status: one of the kinds, told apart by ``kind`` (OpenAPI ``oneOf`` with a discriminator).
 AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus, CompensationJobStatus,
-                               PlacementSearchJobStatus], Field(discriminator="kind")]
+                               PlacementSearchJobStatus, CircleJobStatus], Field(discriminator="kind")]
 STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: DiagnoseJobStatus,
                   JobKind.explain: ExplainJobStatus, JobKind.compensation: CompensationJobStatus,
-                  JobKind.placement_search: PlacementSearchJobStatus}
+                  JobKind.placement_search: PlacementSearchJobStatus, JobKind.circle: CircleJobStatus}
 
 
 class RankingEntry(BaseModel):

@@ -95,13 +95,13 @@ def offsets_table(result: CompensationResult, robot, placement) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def feedforward_table(result: CompensationResult, robot, components, substeps: int) -> pd.DataFrame:
+def feedforward_table(result: CompensationResult, robot, components, substeps: int | None) -> pd.DataFrame:
     """Per cycle of the compensated program: t_s, line, tau_f1_Nm..tau_f6_Nm (friction torque of the
-    joints' friction models along the compensated motion, from the servo simulation)."""
-    from simulate.robot.servo import simulate_servo
+    joints' friction models along the compensated motion, from the drive simulation)."""
+    from simulate.robot.drive import simulate_drive
 
     jt = result.after.trajectory
-    sv = simulate_servo(robot, jt.t, jt.q, friction=bool(components.friction), backlash=bool(components.switching),
+    sv = simulate_drive(robot, jt.t, jt.q, friction=bool(components.friction), backlash=bool(components.switching),
                         substeps=substeps)
     cols = {"t_s": jt.t, "line": jt.line}
     for j in range(6):

@@ -35,8 +35,6 @@ MATERIAL = "Al7075"
 SPINDLE_RPM = 12000.0
 #: Interpolation cycle [s] (paper 3.1): one coupled-loop step.
 CYCLE = 0.002
-#: Servo substeps per cycle [-]: 8 -> 4 kHz, the rate of a current/velocity loop of an industrial drive.
-SERVO_SUBSTEPS = 8
 #: Stock left out below the lowest programmed cutting height [m] (ranking, explain): no tool reaches
 #: it and it would only multiply the horizontal rays. ``machine`` keeps the whole stock (its
 #: virtual workpiece is the whole part).

@@ -1,7 +1,7 @@
 """The machining pipeline: one typed job in, one typed result out (paper Figure 4, sections 3.1-3.8).
 
     program -> interpolation (2 ms) -> placement + inverse kinematics (+ switching points)
-            -> coupled loop: servo with each joint's friction model, removal, forces, deflection
+            -> coupled loop: two-mass drives with each joint's friction model, removal, forces, deflection
             -> virtual workpiece -> virtual CMM scan -> Table-2 feature deviations
 
 Every caller builds a :class:`MachiningJob` and calls :func:`run_job`: ``greybench machine``,
@@ -36,11 +36,11 @@ class Components:
     deflection : bool
         Robot deflection under the cutting force (compliance ``J K^-1 J^T``) in the loop.
     friction : bool
-        Joint friction in the axis servos (each joint's friction model).
+        Joint friction in the drives (each joint's friction model).
     switching : bool
-        Gear backlash, whose effect appears where an axis stops or reverses (switching points, paper 3.7).
+        Gear backlash, whose effect appears where the load on a gear reverses (switching points, paper 3.7).
     servo : bool
-        False: no tracking error at all (an ideal drive).
+        The drives (motor, gear, link, control) in the loop; False: no tracking error at all (an ideal drive).
     """
 
     deflection: bool = True
@@ -73,8 +73,13 @@ class MachiningSettings:
         Refuse a program that never sets the spindle speed (the ranking: forces would rest on a guess).
     stiffness_scale : float
         Multiplies every joint stiffness [-].
-    substeps : int
-        Servo substeps per 2 ms cycle [-].
+    substeps : int or None
+        Drive substeps per 2 ms cycle [-]; None: per joint what its fastest mode needs
+        (:func:`simulate.robot.drive.substeps_for`).
+    friction_scale : float
+        Factor on every joint's Coulomb and static friction levels [-] (1: as fitted).
+    ff_friction : bool
+        The NC's friction feed-forward (off: the controller does not know the friction).
     stock_floor : float or None
         Leave out the stock this far [m] below the lowest programmed cutting height; None: whole stock.
     capacity : tuple of int or None
@@ -92,7 +97,9 @@ class MachiningSettings:
     spindle_rpm: float | None = None
     require_spindle: bool = False
     stiffness_scale: float = 1.0
-    substeps: int = defaults.SERVO_SUBSTEPS
+    substeps: int | None = None
+    friction_scale: float = 1.0
+    ff_friction: bool = False
     stock_floor: float | None = None
     capacity: tuple | None = None
     size: int | None = None
@@ -109,8 +116,12 @@ class MachiningSettings:
                              f"6 mm features", field="spacing")
         if self.spindle_rpm is not None and not (math.isfinite(self.spindle_rpm) and self.spindle_rpm > 0):
             raise InputError(f"spindle speed must be > 0 rev/min, got {self.spindle_rpm}", field="spindle")
-        if not (isinstance(self.substeps, int) and self.substeps >= 1):
-            raise InputError(f"servo substeps must be an integer >= 1, got {self.substeps!r}", field="substeps")
+        fs = self.friction_scale
+        if isinstance(fs, bool) or not (isinstance(fs, (int, float)) and math.isfinite(fs) and fs >= 0):
+            raise InputError(f"must be finite and >= 0, got {fs!r}", field="friction-scale")
+        if self.substeps is not None and not (isinstance(self.substeps, int) and not isinstance(self.substeps, bool)
+                                              and self.substeps >= 1):
+            raise InputError(f"drive substeps must be an integer >= 1, got {self.substeps!r}", field="substeps")
 
 
 @dataclass
@@ -125,8 +136,9 @@ class ProgramSetup:
     parsed : simulate.toolpath.gcode.Program
     interp : simulate.toolpath.interpolation.Interpolation
         The program at the 2 ms cycle (workpiece frame, m).
-    stock : Path
-        Stock description JSON.
+    stock : Path or None
+        Stock description JSON; None: no stock, nothing is cut (the drives and the path only, e.g. a
+        circular test).
     stock_doc : dict
         The stock JSON as read.
     spindle_rpm : float
@@ -282,6 +294,11 @@ def stock_workpiece(program: ProgramSetup, settings: MachiningSettings):
     from simulate.machining.dexel import DEFAULT_CAPACITY, TriDexel, raise_floor, read_stock_solids
 
     cap = settings.capacity or DEFAULT_CAPACITY
+    if program.stock is None:
+        # no stock: a block of 2^3 dexel cells 1 m below the path, which no tool reaches (the loop's
+        # removal rejects it by its bounding box)
+        lo = program.interp.xyz.min(axis=0) - np.array([0.0, 0.0, 1.0])
+        return TriDexel.box(lo, lo + 2 * settings.spacing, settings.spacing, capacity=cap)
     if settings.stock_floor is None:
         return TriDexel.from_stock_file(program.stock, settings.spacing, capacity=cap)
     floor = float(program.interp.xyz[:, 2].min()) - settings.stock_floor
@@ -372,25 +389,27 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
     c0 = time.perf_counter()
     R = job.placement.T[:3, :3]
     C = workpiece_compliance(robot, jt.q, R, s.stiffness_scale) if comp.deflection else None
-    servo = None
+    drive = None
     if comp.servo:
-        from simulate.machining.simulation import loop_servo
+        from simulate.machining.simulation import loop_drive
+        from simulate.robot.drive import drive_flags, drive_friction
         from simulate.robot.friction import loop_friction
 
+        flags = drive_flags(friction=comp.friction, backlash=comp.switching, ff_friction=s.ff_friction)
         fp, fr = loop_friction(robot, job.friction, enabled=comp.friction)
-        servo = loop_servo(robot, jt.q, jt.t, R, fp, backlash=comp.switching, with_friction=comp.friction,
-                           substeps=s.substeps)
+        fp = drive_friction(robot, fp, scale=s.friction_scale, flags=flags)
+        drive = loop_drive(robot, jt.q, jt.t, R, fp, substeps=s.substeps, flags=flags)
     else:
-        fr = [{"joint": j, "kind": "none", "source": "no servo"} for j in range(1, 7)]
+        fr = [{"joint": j, "kind": "none", "source": "no drives"} for j in range(1, 7)]
     n = len(jt.t)
     offset = np.zeros((n, 3)) if job.offset is None else np.broadcast_to(np.asarray(job.offset, float), (n, 3))
-    timings["robot (compliance, servo setup)"] = time.perf_counter() - c0
+    timings["robot (compliance, drive setup)"] = time.perf_counter() - c0
     c0 = time.perf_counter()
     wp = stock_workpiece(prog, s)
     timings["stock"] = time.perf_counter() - c0
     res = simulate_machining(wp, cutter, jt.t, jt.line, jt.xyz, mat, Spindle.from_rpm(rpm), compliance=C,
                              tracking_error=offset, switch=jt.switch if comp.switching else None,
-                             advance=advance, profile=profile, servo=servo)
+                             forces=prog.stock is not None, advance=advance, profile=profile, drive=drive)
     err = res.steps.tracking_error
     timings["coupled loop"] = res.wall_time
     scan = table = None

@@ -33,7 +33,7 @@ def circle(
     center_mm: Optional[str] = typer.Option(None, "--center-mm",
                                             help="Centre x,y,z in the workpiece frame [mm] (default: its origin)."),
     cw: bool = typer.Option(False, "--cw", help="Clockwise about the plane normal (G2); default counter-clockwise."),
-    out_dir: Path = typer.Option(..., "--out", help="Output folder (circle.csv, circle.png)."),
+    out_dir: Path = typer.Option(..., "--out", help="Output folder (circle.csv, circle.png, summary.json)."),
     no_friction: bool = typer.Option(False, "--no-friction", help="Switch off joint friction."),
     no_backlash: bool = typer.Option(False, "--no-backlash", help="Switch off the gear play."),
     friction_scale: float = typer.Option(1.0, "--friction-scale",
@@ -41,14 +41,14 @@ def circle(
     ff_friction: bool = typer.Option(False, "--ff-friction", help="NC friction feed-forward on (off: the NC does not know the friction)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
-    """Simulate a circle through the drives and evaluate it as a ballbar test.
+    """Simulate a circle through the machining pipeline (drives, friction models, no cutting) and
+    evaluate it as a ballbar test.
 
-    Writes circle.csv (angle_deg, radial_deviation_um, q1_rad..q6_rad) and circle.png (polar plot,
-    deviation magnified, reversal spikes marked with the joint), prints roundness_um,
+    Writes circle.csv (angle_deg, radial_deviation_um, q1_rad..q6_rad), circle.png (polar plot,
+    deviation magnified, reversal spikes marked with the joint) and summary.json, prints roundness_um,
     radius_error_um and reversal_spikes (angle [deg], joint, height [µm]).
     """
-    from identify.records import write_table
-    from simulate.evaluation.circle import CircleSpec, circle_table, evaluate_run, polar_plot, simulate_circle
+    from simulate.evaluation.circle import CircleSpec, evaluate_run, simulate_circle, write_outputs
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import load_poses, select_pose
 
@@ -56,19 +56,18 @@ def circle(
                       center=_centre(center_mm), ccw=not cw)
     placement = select_pose(load_poses(pose), name, source=str(pose))
     rob = load_robot(resolve_robot(robot))
-    with progress("circle: simulating", total=None):
+    with progress("circle: simulating", total=None) as advance:
         run = simulate_circle(rob, placement, spec, friction=not no_friction, backlash=not no_backlash,
-                              friction_scale=friction_scale, ff_friction=ff_friction)
+                              friction_scale=friction_scale, ff_friction=ff_friction, advance=advance)
         result = evaluate_run(run)
     # everything is computed: only now write
-    out_dir.mkdir(parents=True, exist_ok=True)
-    csv = write_table(circle_table(result), out_dir / "circle.csv")
     title = (f"{rob.name}, pose {placement.name}" + (", no friction" if no_friction else "")
              + (", no backlash" if no_backlash else "") + (f", friction x{friction_scale:g}" if friction_scale != 1 else ""))
-    png = out_dir / polar_plot(result, out_dir / "circle.png", title)
-    summary = {"robot": rob.name, "pose": placement.name, "radius_mm": radius_mm, "feed_mm_min": feed_mm_min,
-               "plane": spec.plane.value, "friction": not no_friction, "backlash": not no_backlash,
-               "friction_scale": friction_scale, **result.summary(), "csv": str(csv), "png": str(png)}
+    summary = write_outputs(result, out_dir, title=title, info={
+        "robot": rob.name, "pose": placement.name, "radius_mm": radius_mm, "feed_mm_min": feed_mm_min,
+        "plane": spec.plane.value, "friction": not no_friction, "backlash": not no_backlash,
+        "friction_scale": friction_scale, "friction_models": run.friction})
+    csv, png = summary["csv"], summary["png"]
     if as_json:
         emit_json(summary)
         return
@@ -128,7 +127,7 @@ def bench_circle(
 
     n = len(jt.t)
     print_summary("bench circle (CPU time, one thread)", {escape(k): v for k, v in {
-        "cycles [-]": n, "substeps per 2 ms cycle [-]": res.substeps,
+        "cycles [-]": n, "substeps per 2 ms cycle, A1-A6 [-]": "/".join(str(k) for k in res.substeps),
         "drive cycles per CPU second [1/s]": n / best, "drive per cycle [µs]": best / n * 1e6,
         "interpolation + IK [s]": c1 - c0, "load torques (Newton-Euler) [s]": c2 - c1,
         "whole simulation [s]": c4 - c3, "evaluation [s]": c5 - c4}.items()})

@@ -201,10 +201,10 @@ def bench_machining(
                                            help="Saved grey-box model folder for joints 1-3 (default: fit one with "
                                                 "5 epochs on a seeded synthetic 4 s record)."),
 ) -> None:
-    """Steps/s of the coupled loop (servo with friction inside) on the 320 test-piece program, one pose.
+    """Steps/s of the coupled loop (two-mass drives with friction inside) on the 320 test-piece program, one pose.
 
     Coupled steps per CPU second on one thread with the robot file's conventional LuGre friction and
-    with a grey-box LuGre model on joints 1-3 beside it, and the servo's share of the loop time.
+    with a grey-box LuGre model on joints 1-3 beside it, and the drives' share of the loop time.
 
     Wall and CPU time of the loop (on a machine shared with other jobs the CPU figure is the
     speed the code has), memory, and the ratio against calling the same removal and force kernels
@@ -241,13 +241,13 @@ def bench_machining(
     t1, c1 = time.perf_counter(), time.process_time()
     Rm = placement.T[:3, :3]
     C = workpiece_compliance(rob, jt.q[:n], Rm)
-    from simulate.machining.simulation import loop_servo
+    from simulate.machining.simulation import loop_drive
     from simulate.robot.friction import loop_friction
 
     fp_lugre, _ = loop_friction(rob)   # max100: inline (conventional) LuGre on every joint
 
-    def servo_of(fp):
-        return loop_servo(rob, jt.q[:n], jt.t[:n], Rm, fp)
+    def servo_of(fp):   # the two-mass drives (fresh state) stepped inside the loop
+        return loop_drive(rob, jt.q[:n], jt.t[:n], Rm, fp)
 
     t_robot, c_robot = time.perf_counter() - t1, time.process_time() - c1
     fp_grey, grey_note = _bench_greybox(rob, greybox)
@@ -296,7 +296,7 @@ def bench_machining(
         ref_loop = (time.perf_counter() - w0, time.process_time() - c0)
         del w0_
     res = simulate_machining(wp, cutter, jt.t[:n], jt.line[:n], jt.xyz[:n], mat, spindle, compliance=C,
-                             switch=jt.switch[:n], servo=servo_of(fp_lugre))
+                             switch=jt.switch[:n], drive=servo_of(fp_lugre))
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     t_mesh0 = time.perf_counter()
     from simulate.machining.surface_mesh import surface_mesh
@@ -309,14 +309,14 @@ def bench_machining(
     # the time split: the same run again, fresh stock, clock-reading (uncached) copy of the loop
     wp_prof = stock_workpiece(pj.program, job.settings)
     prof = simulate_machining(wp_prof, cutter, jt.t[:n], jt.line[:n], jt.xyz[:n], mat, spindle, compliance=C,
-                              switch=jt.switch[:n], profile=True, servo=servo_of(fp_lugre))
+                              switch=jt.switch[:n], profile=True, drive=servo_of(fp_lugre))
     del wp_prof
     # the same with grey-box LuGre friction on joints 1-3: cached loop, then the clock-reading copy
     grey = simulate_machining(stock_workpiece(pj.program, job.settings), cutter, jt.t[:n], jt.line[:n], jt.xyz[:n],
-                              mat, spindle, compliance=C, switch=jt.switch[:n], servo=servo_of(fp_grey))
+                              mat, spindle, compliance=C, switch=jt.switch[:n], drive=servo_of(fp_grey))
     grey_prof = simulate_machining(stock_workpiece(pj.program, job.settings), cutter, jt.t[:n], jt.line[:n],
                                    jt.xyz[:n], mat, spindle, compliance=C, switch=jt.switch[:n], profile=True,
-                                   servo=servo_of(fp_grey))
+                                   drive=servo_of(fp_grey))
     table = Table(title=f"machining bench: iso320 finishing, pose {placement.name}, spacing {spacing} mm, "
                         f"{numba.get_num_threads()} numba thread(s), cutter {cutter.diameter * 1e3:g} mm "
                         f"{cutter.flutes} flutes (robot file), one run")
@@ -330,25 +330,18 @@ def bench_machining(
                   f">= 5000, goal 20000 ({n / cpu / 5000:.2f}x on CPU)")
     table.add_row(escape(f"steps/s, grey-box LuGre joints 1-3 ({grey_note})"), f"{n / grey.wall_time:,.0f}",
                   f"{n / grey.cpu_time:,.0f}", f"{grey.cpu_time / cpu:.2f}x the LuGre CPU time")
-    # the servo alone over the same steps (same step function and friction), CPU time: its share of
-    # the loop's CPU time, free of the wall-clock split's preemption on a shared machine
-    from simulate.robot.servo import simulate_servo
-
-    for label, fp, loop_cpu, pr in (("conventional LuGre", fp_lugre, cpu, prof),
-                                    ("grey-box joints 1-3", fp_grey, grey.cpu_time, grey_prof)):
-        simulate_servo(rob, jt.t[:50], jt.q[:50], loop_friction=fp)   # compiled / cache loaded
-        c0 = time.process_time()
-        simulate_servo(rob, jt.t[:n], jt.q[:n], loop_friction=fp)
-        c_sv = time.process_time() - c0
-        table.add_row(escape(f"servo share of the loop, {label}"), f"{pr.timings.get('servo', 0.0):.2f} s",
-                      f"{c_sv:.2f} s", f"{c_sv / max(loop_cpu, 1e-12) * 100:.1f} % of the loop's CPU time "
-                      f"(wall split: {pr.timings.get('servo', 0.0) / max(pr.wall_time, 1e-12) * 100:.1f} %)")
+    # the drives' share: the loop's own clock split (ticks of drive_cycle) of the profiled runs
+    nsd = "/".join(str(n) for n in servo_of(fp_lugre).n_sub)
+    for label, pr in (("conventional LuGre", prof), ("grey-box joints 1-3", grey_prof)):
+        d = pr.timings.get("drive", 0.0)
+        table.add_row(escape(f"drive share of the loop, {label} ({nsd} substeps per joint)"),
+                      f"{d:.2f} s", "", f"{d / max(pr.wall_time, 1e-12) * 100:.1f} % of the profiled loop")
     table.add_row(escape("simulated / loop time"), f"{res.simulated_time / wall:.1f}", f"{res.simulated_time / cpu:.1f}",
                   ">= 10")
     pw = prof.wall_time
     table.add_row(escape("profiled run (clock-reading copy) [s]"), f"{pw:.2f}", f"{prof.cpu_time:.2f}",
                   f"{pw / wall:.2f}x the cached loop; split below")
-    parts = {k: v for k, v in prof.timings.items() if k in ("removal", "engagement", "forces", "robot", "servo")}
+    parts = {k: v for k, v in prof.timings.items() if k in ("removal", "engagement", "forces", "robot", "drive")}
     for k, v in parts.items():
         table.add_row(escape(f"  {k} [s]"), f"{v:.2f}", "", f"{v / pw * 100:.0f} % of the profiled loop")
     table.add_row(escape("    of removal: z-rays [s]"), f"{prof.timings.get('removal, z-rays', 0.0):.2f}", "", "")
@@ -360,7 +353,7 @@ def bench_machining(
                       f"{m / rc_:,.0f}", "same kernels, one call per step, no coupling")
         table.add_row(escape(f"one compiled loop, same steps [steps/s]"), f"{m / ref_loop[0]:,.0f}",
                       f"{m / ref_loop[1]:,.0f}", f"{(m / ref_loop[1]) / (m / rc_):.1f}x per CPU s")
-    table.add_row(escape("robot compliance + servo setup, up-front [s]"), f"{t_robot:.2f}", f"{c_robot:.2f}", "")
+    table.add_row(escape("robot compliance + drive setup, up-front [s]"), f"{t_robot:.2f}", f"{c_robot:.2f}", "")
     table.add_row(escape("setup (program, IK, stock) [s]"), f"{t_prep:.2f}", "", "")
     table.add_row(escape(f"surface mesh (stride {stride}, {n_tri:,} triangles) [s]"), f"{t_mesh:.2f}", "", "")
     table.add_row(escape("dexel memory [MB]"), f"{dexel_mb:.0f}", "", "")

@@ -151,7 +151,7 @@ def bench_robot(
 
     from simulate.robot.dynamics import rnea
     from simulate.robot.kinematics import opw_parameters
-    from simulate.robot.servo import CYCLE, simulate_servo
+    from simulate.robot.drive import CYCLE, simulate_drive
 
     numba.set_num_threads(1)
     r = load_robot(resolve_robot(robot))
@@ -185,9 +185,9 @@ def bench_robot(
         rn_w, rn_c = _timed(lambda: rnea(r, qs, qd, qdd))
     t = np.arange(0.0, servo_seconds, CYCLE)
     qc = (0.5 * (r.lower + r.upper) + 0.3 * np.sin(2 * np.pi * 0.4 * t)[:, None] * np.ones(6))
-    simulate_servo(r, t[:100], qc[:100])
-    with progress("servo"):
-        sv_w, sv_c = _timed(lambda: simulate_servo(r, t, qc, friction=True, backlash=True, substeps=8))
+    sv_n = "/".join(str(n) for n in simulate_drive(r, t[:100], qc[:100]).substeps)
+    with progress("drives"):
+        sv_w, sv_c = _timed(lambda: simulate_drive(r, t, qc, friction=True, backlash=True))
     ik_rate = (poses / ik_w, poses / ik_c)
     rn_rate = (samples / rn_w, samples / rn_c)
     sv_x = (servo_seconds / sv_w, servo_seconds / sv_c)
@@ -212,7 +212,7 @@ def bench_robot(
                       "", f"{min(ref_poses, poses)} poses")
     table.add_row("RNEA (numba)", f"{rn_rate[0] / 1e6:.2f} M samples/s", f"{rn_rate[1] / 1e6:.2f} M samples/s",
                   ">= 0.5 M samples/s", f"{rn_rate[1] / 5e5:.1f}x target")
-    table.add_row("six-axis servo (8 substeps, friction, backlash)", f"{sv_x[0]:.0f}x real time",
+    table.add_row(f"six two-mass drives ({sv_n} substeps, friction, backlash)", f"{sv_x[0]:.0f}x real time",
                   f"{sv_x[1]:.0f}x real time", ">= 20x", f"{servo_seconds:g} s simulated")
     out.print(table)
 

@@ -3,9 +3,10 @@
 A circle of radius ``R`` in the plane xy, yz or zx of the workpiece frame, centred at the pose's
 workpiece origin unless given, is written as a G-code program (a 90 deg lead-in arc, the full
 circle, a 90 deg lead-out arc, all ``G3`` counter-clockwise about the plane normal or ``G2``),
-interpolated jerk-limited at the 2 ms cycle (:mod:`simulate.toolpath.interpolation`), turned
-into joint commands by the inverse kinematics, and run through the drives
-(:func:`simulate_circle`, the one place the simulation is called). Only the full circle is
+interpolated jerk-limited at the 2 ms cycle (:mod:`simulate.toolpath.interpolation`), and run
+through the machining pipeline (:func:`simulate.pipeline.run_job`: inverse kinematics, the coupled
+loop with the same two-mass drives and friction models as ``machine``) without stock, so nothing is
+cut (:func:`simulate_circle`, the one place the simulation is called). Only the full circle is
 evaluated, so acceleration from and to rest is not in the trace.
 
 Evaluation of the tool positions (forward kinematics of the simulated link positions), in the
@@ -143,7 +144,10 @@ class CircleRun:
         Commanded and simulated TCP in the workpiece frame, m.
     q_cmd, q : ndarray (M, 6)
         Commanded and simulated link positions, rad.
-    drive : simulate.robot.drive.DriveResult
+    contact : ndarray (M, 6) of int8
+        Gear flank per sample (:class:`simulate.robot.drive.Contact`).
+    friction : list of dict
+        Per joint the friction model used (``{"joint", "kind", "source"}``).
     spec : CircleSpec
     """
 
@@ -153,44 +157,74 @@ class CircleRun:
     xyz: np.ndarray
     q_cmd: np.ndarray
     q: np.ndarray
-    drive: object
+    contact: np.ndarray
+    friction: list
     spec: CircleSpec
 
 
-def simulate_circle(robot, placement, spec: CircleSpec, *, friction: bool = True, backlash: bool = True,
-                    friction_scale: float = 1.0, ff_friction: bool = False, limits=None) -> CircleRun:
-    """Simulate the circle: interpolation, inverse kinematics, drives, forward kinematics.
+def circle_job(robot, placement, spec: CircleSpec, *, friction: bool = True, backlash: bool = True,
+               friction_scale: float = 1.0, ff_friction: bool = False, friction_models: dict | None = None,
+               limits=None):
+    """The circle as a machining job without stock, prepared (interpolation, inverse kinematics).
 
-    The single place the circle's simulation runs (no cutting: no process force). The drives get
-    the Newton-Euler load of the commanded motion (gravity and inertial coupling).
+    Returns ``(job, prepared)`` for :func:`simulate.pipeline.run_job`. ``friction_models``: joint
+    1..6 -> model reference replacing the robot file's (as a machining job's ``friction``).
 
     Raises
     ------
     InputError
-        The circle leaves the robot's reach or joint limits at this pose (``field="radius-mm"``).
+        The circle leaves the robot's reach or joint limits at this pose (``field="radius-mm"``),
+        or a bad friction scale (``friction-scale``).
     """
-    from simulate.robot.drive import drive_params, simulate_drive
-    from simulate.robot.kinematics import fk
+    from simulate import defaults
+    from simulate.pipeline import Components, MachiningJob, MachiningSettings, ProgramSetup, prepare
     from simulate.toolpath.interpolation import interpolate
-    from simulate.toolpath.placement import joint_trajectory
 
-    if not (math.isfinite(friction_scale) and friction_scale >= 0):
-        raise InputError(f"must be finite and >= 0, got {friction_scale}", field="friction-scale")
     prog = circle_program(spec)
     ip = interpolate(prog, limits)
+    setup = ProgramSetup(program=Path("<circle>"), source="<circle>", parsed=prog, interp=ip, stock=None,
+                         stock_doc={}, spindle_rpm=defaults.SPINDLE_RPM)
+    job = MachiningJob(program=setup, robot=robot, placement=placement, friction=dict(friction_models or {}),
+                       components=Components(deflection=False, friction=friction, switching=backlash, servo=True),
+                       settings=MachiningSettings(size=0, friction_scale=friction_scale, ff_friction=ff_friction))
+    job.settings.validate()
     try:
-        jt = joint_trajectory(robot, ip, placement, source="<circle>")
+        return job, prepare(job)
     except InputError as exc:
         raise InputError(f"the circle (R {spec.radius * 1e3:g} mm, plane {spec.plane.value}) is not feasible at "
                          f"pose '{placement.name}': {exc.message}", field="radius-mm") from None
-    params = drive_params(robot, friction_scale=friction_scale)
-    res = simulate_drive(robot, jt.t, jt.q, friction=friction, backlash=backlash, ff_friction=ff_friction,
-                         params=params)
+
+
+def simulate_circle(robot, placement, spec: CircleSpec, *, friction: bool = True, backlash: bool = True,
+                    friction_scale: float = 1.0, ff_friction: bool = False, friction_models: dict | None = None,
+                    limits=None, advance=None) -> CircleRun:
+    """Simulate the circle through the machining pipeline without stock (module docstring).
+
+    The drives get the load from the simulated state every cycle (gravity, inertial coupling; no
+    process force, nothing is cut) and each joint's friction model of the robot file, or of
+    ``friction_models`` (joint 1..6 -> model reference, as a machining job's ``friction``).
+    ``friction_scale`` multiplies every joint's Coulomb and static levels [-]; ``ff_friction``
+    switches the NC's friction feed-forward on; ``advance(n)`` gets the loop's progress in steps.
+
+    Raises
+    ------
+    InputError
+        As :func:`circle_job`; a bad friction model reference (naming the robot file key or the job
+        field).
+    """
+    from simulate.pipeline import run_job
+    from simulate.robot.kinematics import fk
+
+    job, pj = circle_job(robot, placement, spec, friction=friction, backlash=backlash, friction_scale=friction_scale,
+                         ff_friction=ff_friction, friction_models=friction_models, limits=limits)
+    out = run_job(job, prepared=pj, advance=advance)
+    jt, res = out.trajectory, out.result
+    q = jt.q - res.joint_error
     T_wb = np.linalg.inv(placement.T)
-    p_base = fk(robot, res.q)[:, :3, 3]
+    p_base = fk(out.robot, q)[:, :3, 3]
     xyz = p_base @ T_wb[:3, :3].T + T_wb[:3, 3]
-    return CircleRun(t=jt.t, segment=np.asarray(ip.segment), xyz_cmd=np.asarray(ip.xyz), xyz=xyz, q_cmd=jt.q,
-                     q=res.q, drive=res, spec=spec)
+    return CircleRun(t=jt.t, segment=np.asarray(out.program.interp.segment), xyz_cmd=np.asarray(out.program.interp.xyz),
+                     xyz=xyz, q_cmd=jt.q, q=q, contact=res.joint_contact, friction=out.friction, spec=spec)
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -400,3 +434,20 @@ def polar_plot(result: CircleResult, path: str | Path, title: str = "") -> str:
     ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.12), fontsize=8)
     fig.text(0.98, 0.02, "o spike peak, | joint reversal; label: joint, height [µm]", ha="right", fontsize=8)
     return _save(fig, Path(path))
+
+
+def write_outputs(result: CircleResult, out_dir: str | Path, *, title: str = "", info: dict | None = None) -> dict:
+    """Write ``circle.csv`` (:func:`circle_table`), ``circle.png`` (:func:`polar_plot`) and
+    ``summary.json`` into ``out_dir``; returns the summary (``info`` + :meth:`CircleResult.summary` +
+    the file paths). Everything is computed before this is called: only writing happens here."""
+    import json
+
+    from identify.records import write_table
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    csv = write_table(circle_table(result), out_dir / "circle.csv")
+    png = out_dir / polar_plot(result, out_dir / "circle.png", title)
+    summary = {**(info or {}), **result.summary(), "csv": str(csv), "png": str(png)}
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
+    return summary

@@ -183,9 +183,9 @@ def step_fields(robot: Robot, setup, sim, causes: list[Cause]) -> dict[str, np.n
             out[c.name] = f
         elif c.kind in ("backlash", "friction"):
             if e0 is None:
-                e0 = servo_error(robot, setup)
+                e0 = servo_error(robot, setup, F)
             step = BACKLASH_STEP if c.kind == "backlash" else FRICTION_STEP
-            e1 = servo_error(apply(robot, c, step), setup)
+            e1 = servo_error(apply(robot, c, step), setup, F)
             out[c.name] = (e1 - e0) / step
         elif c.kind == "thermal":
             t = np.asarray(jt.t, float)
@@ -218,11 +218,14 @@ def sensitivities(robot: Robot, setup, sim, comparison, causes: list[Cause], res
     and so the force, follows the deflection, which the first-order field misses.
     """
     if resimulate_stiffness:
-        out = sensitivities(robot, setup, sim, comparison, [c for c in causes if c.kind != "stiffness"], False)
+        # the gear play too: in the loop its effect depends on the process force (a gear the process
+        # torque swings across its play looks like an added compliance), which the drive-only field misses
+        again = ("stiffness", "backlash")
+        out = sensitivities(robot, setup, sim, comparison, [c for c in causes if c.kind not in again], False)
         for c in causes:
-            if c.kind == "stiffness":
-                out.columns[c.name] = resimulated_column(robot, setup, comparison, c,
-                                                          1.0 / float(robot.stiffness[c.axis - 1]))[:, None]
+            if c.kind in again:
+                step = 1.0 / float(robot.stiffness[c.axis - 1]) if c.kind == "stiffness" else BACKLASH_STEP
+                out.columns[c.name] = resimulated_column(robot, setup, comparison, c, step)[:, None]
                 out.causes[c.name] = c
         return out
     fields = step_fields(robot, setup, sim, causes)

@@ -178,14 +178,27 @@ def cutter_of(robot: Robot):
     return robot_cutter(robot)
 
 
-def servo_error(robot: Robot, setup: PartSetup) -> np.ndarray:
-    """Servo tracking error ``p(q_act) - p(q_cmd)`` (N, 3), workpiece frame, m, of the servo alone on the
-    commanded path (friction and play on, no process force): for sensitivities of the servo's
-    parameters (:mod:`simulate.explain.causes`)."""
-    from simulate.robot.servo import simulate_servo
+def servo_error(robot: Robot, setup: PartSetup, force: np.ndarray | None = None) -> np.ndarray:
+    """Drive tracking error ``p(q_link) - p(q_cmd)`` (N, 3), workpiece frame, m, of the drives alone on the
+    commanded path (friction and play on): for sensitivities of the drive's parameters
+    (:mod:`simulate.explain.causes`).
+
+    The links carry gravity and inertia along the command and, with ``force`` (N, 3) [N, workpiece
+    frame, on the tool per step], the process force of the previous step as the coupled loop applies
+    it (``-J^T F``, unknown to the NC's feed-forward): where a gear crosses its play depends on it.
+    """
+    from simulate.robot.drive import command_velocity, load_torques, simulate_drive
 
     jt = setup.trajectory(robot)
-    sv = simulate_servo(robot, jt.t, jt.q, friction=True, backlash=True)
+    v = command_velocity(jt.t, jt.q)
+    a = command_velocity(jt.t, v)
+    tau_model, jl = load_torques(robot, jt.q, v, a)
+    tau_load = tau_model
+    if force is not None:
+        w = np.zeros((len(jt.t), 6))
+        w[1:, :3] = np.asarray(force, float)[:-1] @ np.asarray(setup.rotation, float).T   # workpiece -> base
+        tau_load, _ = load_torques(robot, jt.q, v, a, wrench_tcp=w)
+    sv = simulate_drive(robot, jt.t, jt.q, tau_load=tau_load, tau_model=tau_model, link_inertia=jl)
     return sv.tcp_error(robot) @ setup.rotation  # base -> workpiece: R^T e, row-wise
 
 

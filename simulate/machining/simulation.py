@@ -1,7 +1,7 @@
 """The coupled machining loop of paper Figure 4 (sections 3.3-3.7).
 
 At each 2 ms step k the cutter tip sits at the commanded position plus the deflection of step
-k-1 plus the servo tracking error of step k (workpiece frame); the swept volume from the previous
+k-1 plus the drives' tracking error of step k (workpiece frame); the swept volume from the previous
 actual position is removed, the engagement gives the cutting force, and the force through the
 robot's Cartesian compliance gives the deflection used at step k+1.
 
@@ -20,11 +20,13 @@ change the pose by fractions of a millimetre, so ``C(q)`` is unchanged to first 
 computed for all steps in one vectorised call; only the translational 3x3 block is used (2.5-D,
 the tool axis rotation by the process wrench is neglected). The deflection follows ``C F`` with
 the lag of the arm's first structural mode (:data:`DEFLECTION_TIME_CONSTANT`), and the chip
-thickness comes from the servo-driven motion (command + tracking error): the quasi-static
-deflection moves where the cutter engages, not the feed per tooth. The axis servos are stepped inside
-the loop every step (:data:`ServoLoop`, :func:`simulate.robot.servo.servo_step`) with each joint's
-friction model, loaded by the previous step's process force as ``tau_ext = -J^T F``; the tracking error
-is ``J (q_act - q_cmd)`` at the commanded joints (first order; docs/simulation-pipeline.md).
+thickness comes from the drive-driven motion (command + tracking error): the quasi-static
+deflection moves where the cutter engages, not the feed per tooth. The six two-mass drives
+(motor, elasto-backlash gear, link, each joint's friction model; :mod:`simulate.robot.drive`) are
+stepped inside the loop every cycle (:data:`DriveLoop`, :func:`drive_cycle`), loaded from the current
+state: gravity and inertial coupling (Newton-Euler) plus the previous step's process force through
+``J^T``; the tracking error is ``J (q_link - q_cmd)`` at the commanded joints (first order;
+docs/drive-model.md).
 """
 from __future__ import annotations
 
@@ -41,7 +43,7 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-from simulate.robot.servo import SV_LINK, SV_TF, servo_step
+from simulate.robot.drive import CycleInput, drive_step, load_torque_step
 
 from .cutting import Material, Spindle, step_forces_sorted, substeps
 from .engagement import sort_layers
@@ -91,8 +93,10 @@ class MachiningResult:
         coupling (deflection), from the CPU's time-stamp counter inside the compiled loop; only
         filled with ``simulate_machining(..., profile=True)`` (callers may add their own entries)
     cpu_time : float  s, CPU time of this process during the loop (all threads)
-    joint_error : (N, 6) rad or None, servo joint error ``q_cmd - q_link`` per step (servo in the loop)
+    joint_error : (N, 6) rad or None, joint error ``q_cmd - q_link`` per step (drives in the loop)
     joint_friction : (N, 6) Nm or None, each joint's friction torque at the end of each step
+    joint_contact : (N, 6) int8 or None, each gear's flank at the end of each step
+        (:class:`simulate.robot.drive.Contact`: +1 / -1, 0 in the play)
     """
 
     steps: StepTable
@@ -102,6 +106,7 @@ class MachiningResult:
     cpu_time: float = 0.0
     joint_error: np.ndarray | None = None
     joint_friction: np.ndarray | None = None
+    joint_contact: np.ndarray | None = None
 
     @property
     def simulated_time(self) -> float:
@@ -157,28 +162,61 @@ CAPACITY_STEP = 4
 STATUS_OK, STATUS_OVERFLOW, STATUS_LAYERS, STATUS_FULL = 0, 1, 2, 3
 
 
-#: The axis servos inside the coupled loop (:func:`loop_servo`), a named tuple of:
-ServoLoop = namedtuple("ServoLoop", [
-    "on",        # bool: step the servos (False: the tracking error is the given offset only)
-    "params",    # simulate.robot.servo.ServoParams
+#: The six drives inside the coupled loop (:func:`loop_drive`), a named tuple of:
+DriveLoop = namedtuple("DriveLoop", [
+    "on",        # bool: step the drives (False: the tracking error is the given offset only)
+    "params",    # simulate.robot.drive.DriveParams
     "friction",  # simulate.robot.loop_friction.LoopFriction
-    "sst",       # (6, N_SERVO_STATE) servo state, updated
+    "st",        # simulate.robot.drive.DriveState, updated
     "fst",       # (6, S) friction state, updated
+    "flags",     # int, simulate.robot.drive.DriveFlags
+    "n_sub",     # (6,) int64, drive substeps per cycle and joint
+    "dyn",       # simulate.robot.drive.DynParams (Newton-Euler of the load, work arrays)
     "q",         # (N, 6) commanded joints [rad]
     "v",         # (N, 6) commanded joint velocities [rad/s]
+    "a",         # (N, 6) commanded joint accelerations [rad/s^2]
+    "model",     # (N, 6) load the NC's feed-forward knows along the command [Nm] (gravity, inertia)
     "jac",       # (N, 3, 6) translational Jacobian at the commanded joints, workpiece frame [m/rad]
-    "load",      # (N, 6) gravity torque along the path [Nm] (the gearbox load without the process)
-    "scratch",   # (2, 6): the step's tau_ext [Nm] and gearbox load [Nm]
+    "scratch",   # (4, 6): the cycle's process torque, load at its start and end [Nm], link inertia [kg m^2]
     "dq",        # (N, 6) out: joint error q_cmd - q_link [rad]
     "tf",        # (N, 6) out: friction torque at the end of the step [Nm]
+    "contact",   # (N, 6) int8 out: gear flank at the end of the step (Contact)
 ])
+
+
+@njit(cache=True)
+def drive_cycle(dr, k, dt, force):
+    """Step the drives over the cycle k-1 -> k of ``dt`` [s] (``dr``: :data:`DriveLoop`).
+
+    The link load is taken from the current state (``load_torque_step``): gravity and the
+    Coriolis/centrifugal terms at the simulated link positions and velocities, inertial coupling with
+    the commanded accelerations (the simulated ones differ by the error's second derivative; a
+    one-cycle-old measured acceleration fed back through the off-diagonal inertia would be an
+    explicit coupling that rings), and the process force of step k-1, ``-J^T F`` (the same one-step
+    lag as the deflection). Within the cycle the load follows the NC model's change,
+    ``load1 = load0 + model_k - model_(k-1)``. Fills ``dr.dq[k]``, ``dr.tf[k]``, ``dr.contact[k]``.
+    """
+    tp, l0, l1, jl = dr.scratch[0], dr.scratch[1], dr.scratch[2], dr.scratch[3]
+    for jj in range(6):
+        tp[jj] = -(dr.jac[k - 1, 0, jj] * force[k - 1, 0] + dr.jac[k - 1, 1, jj] * force[k - 1, 1]
+                   + dr.jac[k - 1, 2, jj] * force[k - 1, 2])
+    load_torque_step(dr.dyn, dr.st.q, dr.st.qd, dr.a[k - 1], tp, l0, jl)
+    for jj in range(6):
+        l1[jj] = l0[jj] + dr.model[k, jj] - dr.model[k - 1, jj]
+    cy = CycleInput(dr.q[k - 1], dr.q[k], dr.v[k - 1], dr.v[k], dr.a[k - 1], dr.a[k], l0, l1, dr.model[k - 1],
+                    dr.model[k], jl)
+    drive_step(dr.params, dr.friction, dr.st, dr.fst, cy, dt, dr.n_sub, dr.flags)
+    for jj in range(6):
+        dr.dq[k, jj] = dr.q[k, jj] - dr.st.q[jj]
+        dr.tf[k, jj] = dr.st.tau_f[jj]
+        dr.contact[k, jj] = dr.st.contact[jj]
 
 
 @njit(cache=True)
 def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, zlo, zhi, zls, zhs, zcnt,
                   lower, s, nx, ny, nz, xyz, err, t, C, use_compliance, R, rc, L, N, tan_helix, omega, phase,
                   kc, ke, n_sub, forces, time_constant, parallel_work, samp_ang, samp_eng, samp_cnt, layer_removed, colx, coly,
-                  pair_ray, pair_w, sorted_ang, perm, state, force, peak, deflection, ticks, servo):
+                  pair_ray, pair_w, sorted_ang, perm, state, force, peak, deflection, ticks, drive):
     """Steps ``k_from .. k_to - 1`` of the coupled loop (paper Figure 4) in one compiled call.
 
     Per step k: tool tip ``p1 = xyz[k] + deflection(k-1) + err[k]``; removal of the cutter swept
@@ -190,10 +228,11 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
     allocated per step.
 
     ``state`` (7,) carries ``[p0 (3), deflection (3), removed z-ray volume [m^3]]`` between calls;
-    ``servo`` (:data:`ServoLoop`) steps the six axis servos with their friction models first, giving
-    the step's tracking error (added to ``err``, which enters holding the given offset).
+    ``drive`` (:data:`DriveLoop`) steps the six drives with their friction models first
+    (:func:`drive_cycle`), giving the step's tracking error (added to ``err``, which enters holding
+    the given offset).
     ``ticks`` (6,) accumulates clock ticks of removal, engagement, forces, robot (deflection), the
-    z-ray part of the removal and the servo: always 0 here (cached kernel, no clock); the copy from
+    z-ray part of the removal and the drives: always 0 here (cached kernel, no clock); the copy from
     :func:`profiling_kernel` fills them from the CPU's time-stamp counter.
     Returns ``(status, step, mask)``: status 0 (``step = k_to``); 1 (ray capacity exceeded) / 2
     (more layers than the buffers) at ``step``; 3: after completing ``step - 1`` a ray of the
@@ -212,27 +251,15 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
     removed = state[6]
     par_ok = parallel_work > 0
     for k in range(k_from, k_to):
-        if servo.on:
+        if drive.on:
             cs = _clock()
-            # the servos over the cycle k-1 -> k; the process force of step k-1 loads the joints,
-            # tau_ext = -J^T F (held over the cycle: the same one-step lag as the deflection)
-            te = servo.scratch[0]
-            ld = servo.scratch[1]
-            for jj in range(6):
-                te[jj] = -(servo.jac[k - 1, 0, jj] * force[k - 1, 0] + servo.jac[k - 1, 1, jj] * force[k - 1, 1]
-                           + servo.jac[k - 1, 2, jj] * force[k - 1, 2])
-                ld[jj] = servo.load[k - 1, jj] + te[jj]
-            servo_step(servo.params, servo.friction, servo.sst, servo.fst, t[k] - t[k - 1], servo.q[k - 1],
-                       servo.q[k], servo.v[k - 1], servo.v[k], te, te, ld)
-            for jj in range(6):
-                servo.dq[k, jj] = servo.q[k, jj] - servo.sst[jj, SV_LINK]
-                servo.tf[k, jj] = servo.sst[jj, SV_TF]
-            # tracking error p(q_act) - p(q_cmd) = J (q_act - q_cmd) to first order (errors of ~1e-5 rad:
-            # the second-order term is below 1e-9 m), added to the given offset
+            drive_cycle(drive, k, t[k] - t[k - 1], force)
+            # tracking error p(q_link) - p(q_cmd) = J (q_link - q_cmd) to first order (errors of ~1e-4 rad:
+            # the second-order term is below 1e-7 m), added to the given offset
             for a in range(3):
                 e = 0.0
                 for jj in range(6):
-                    e -= servo.jac[k, a, jj] * servo.dq[k, jj]
+                    e -= drive.jac[k, a, jj] * drive.dq[k, jj]
                 err[k, a] += e
             ticks[5] += _clock() - cs
         for a in range(3):
@@ -299,7 +326,7 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
         # ---- forces
         if forces:
             dt = t[k] - t[k - 1]
-            # chip thickness from the servo-driven motion (command + tracking error); the quasi-static
+            # chip thickness from the drive-driven motion (command + tracking error); the quasi-static
             # deflection moves the engagement (samples at the deflected p1), not the feed per tooth
             for a in range(3):
                 vel[a] = (xyz[k, a] + err[k, a] - xyz[k - 1, a] - err[k - 1, a]) / dt
@@ -362,7 +389,7 @@ def profiling_kernel():
 def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Material, spindle: Spindle, *,
                        compliance=None, tracking_error=None, switch=None, forces: bool = True,
                        advance=None, time_constant: float = DEFLECTION_TIME_CONSTANT,
-                       parallel_work: int = PARALLEL_WORK, profile: bool = False, servo=None) -> MachiningResult:
+                       parallel_work: int = PARALLEL_WORK, profile: bool = False, drive=None) -> MachiningResult:
     """Run the coupled loop over a commanded cutter path (modifies ``workpiece``).
 
     Parameters
@@ -378,7 +405,7 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         Translational compliance in the workpiece frame per step; None: no deflection.
     tracking_error : (N, 3) m, optional
         Tool offset in the workpiece frame per step (a precomputed tracking error, a thermal drift);
-        the in-loop servo's error is added to it. None: none.
+        the in-loop drives' error is added to it. None: none.
     switch : (N,) int, optional
         Switching bits per step (paper 3.7).
     forces : bool
@@ -391,10 +418,10 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         Ray visits per step above which a step's removal runs in parallel (see :data:`PARALLEL_WORK`).
     profile : bool
         Run the uncached clock-reading copy of the loop (:func:`profiling_kernel`) and fill
-        ``MachiningResult.timings`` with the split removal / engagement / forces / robot / servo; False
+        ``MachiningResult.timings`` with the split removal / engagement / forces / robot / drive; False
         (default): the cached loop, ``timings`` empty.
-    servo : ServoLoop, optional
-        The axis servos stepped inside the loop (:func:`loop_servo`); None: none.
+    drive : DriveLoop, optional
+        The six drives stepped inside the loop (:func:`loop_drive`); None: none.
 
     Raises
     ------
@@ -428,9 +455,9 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     state = np.zeros(7)
     state[:3] = xyz[0] + err[0]
     ticks = np.zeros(6, np.int64)
-    sv = servo if servo is not None else _no_servo()
+    sv = drive if drive is not None else _no_drive()
     if sv.on and (sv.q.shape[0] != n or sv.jac.shape[0] != n):
-        raise ValueError("the servo's command must have one row per step")
+        raise ValueError("the drives' command must have one row per step")
     par_work = int(parallel_work) if numba.get_num_threads() > 1 else 0
     chunk = max(1, n // 200)
     kernel = coupled_steps
@@ -476,12 +503,12 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         # ticks -> seconds with the loop's own wall time (the counter's rate is not known up-front)
         sec = wall / total_ticks
         timings = {"removal": ticks[0] * sec, "engagement": ticks[1] * sec, "forces": ticks[2] * sec,
-                   "robot": ticks[3] * sec, "removal, z-rays": ticks[4] * sec, "servo": ticks[5] * sec}
+                   "robot": ticks[3] * sec, "removal, z-rays": ticks[4] * sec, "drive": ticks[5] * sec}
         timings = {k: float(v) for k, v in timings.items()}
     st.tracking_error[:] = err
-    joint_error = sv.dq if sv.on else None
-    joint_friction = sv.tf if sv.on else None
-    return MachiningResult(st, float(state[6]), wall, timings, cpu, joint_error, joint_friction)
+    on = sv.on
+    return MachiningResult(st, float(state[6]), wall, timings, cpu, sv.dq if on else None, sv.tf if on else None,
+                           sv.contact if on else None)
 
 
 @njit(cache=False)   # the intrinsic cannot be cached
@@ -503,45 +530,56 @@ def workpiece_compliance(robot, q, placement_rotation, stiffness_scale: float = 
     return np.einsum("ji,njk,kl->nil", Rm, Cb, Rm)
 
 
-def _no_servo():
-    """A switched-off :data:`ServoLoop` (same types, so the loop compiles once)."""
+def _no_drive():
+    """A switched-off :data:`DriveLoop` (same types, so the loop compiles once)."""
+    from simulate.robot.drive import DriveParams, dyn_params_empty, new_state as drive_state
     from simulate.robot.loop_friction import assemble, new_state
-    from simulate.robot.servo import N_SERVO_STATE, ServoParams
 
     z6 = np.zeros(6)
     fp = assemble([None] * 6)
-    sp = ServoParams(J=np.ones(6), kv=z6, kp=z6, ki=z6, ffv=z6, fft=z6, play=z6, substeps=1, ff_ext=False,
-                     friction=False)
+    p = DriveParams(jm=np.ones(6), c=np.ones(6), d=z6, b=z6, kv=z6, kp=z6, ki=z6, ffv=z6, fft=z6,
+                    side=np.zeros(6, np.int64))
     z = np.zeros((1, 6))
-    return ServoLoop(False, sp, fp, np.zeros((6, N_SERVO_STATE)), new_state(fp), z, z, np.zeros((1, 3, 6)), z,
-                     np.zeros((2, 6)), z, z)
+    return DriveLoop(False, p, fp, drive_state(), new_state(fp), 0, np.ones(6, np.int64), dyn_params_empty(), z, z,
+                     z, z, np.zeros((1, 3, 6)), np.zeros((4, 6)), z, z, np.zeros((1, 6), np.int8))
 
 
-def loop_servo(robot, q, t, placement_rotation, friction, *, backlash: bool = True, with_friction: bool = True,
-               substeps: int | None = None) -> ServoLoop:
-    """The axis servos for the coupled loop along the commanded joints ``q`` (N, 6) [rad] at ``t`` (N,) [s].
+def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substeps: int | None = None,
+               payload=None) -> DriveLoop:
+    """The six drives for the coupled loop along the commanded joints ``q`` (N, 6) [rad] at ``t`` (N,) [s].
 
     ``friction`` is the joints' :data:`~simulate.robot.loop_friction.LoopFriction`
     (:func:`simulate.robot.friction.loop_friction`); ``placement_rotation`` the workpiece-to-base
-    rotation (3, 3). The Jacobian (tracking error and ``tau_ext = -J^T F``) and the gravity torque
-    (the gearbox load the friction models see, plus the process torque) are taken at the commanded
-    joints, computed once for all steps. The process force is an unmeasured disturbance for the
-    controller (not fed forward; its velocity integrator rejects it).
+    rotation (3, 3); ``flags`` :class:`~simulate.robot.drive.DriveFlags` (default: friction, play,
+    velocity/torque feed-forward, windup compensation); ``substeps`` per 2 ms cycle, one or per joint (default
+    :func:`~simulate.robot.drive.substeps_for`). The NC's feed-forward knows gravity and inertia along
+    the command (not the process force: an unmeasured disturbance its velocity integrator rejects).
+    The Jacobian (tracking error and ``-J^T F``) is taken at the commanded joints, for all steps at once.
+    The state starts at equilibrium on the first command.
     """
-    from simulate import defaults
-    from simulate.robot.dynamics import gravity_torque
+    from simulate.robot.drive import (DriveFlags, as_substeps, command_velocity, drive_init, drive_params,
+                                      dyn_params, load_torques, new_state as drive_state, substeps_for)
     from simulate.robot.kinematics import jacobian
     from simulate.robot.loop_friction import new_state
-    from simulate.robot.servo import command_velocity, servo_params, servo_state
 
     q = np.ascontiguousarray(q, dtype=float)
     t = np.ascontiguousarray(t, dtype=float)
+    n = len(t)
+    flags = int(DriveFlags.default() if flags is None else flags)
     Rm = np.asarray(placement_rotation, float)
     jac = np.ascontiguousarray(np.einsum("ji,njk->nik", Rm, jacobian(robot, q)[:, :3, :]))
-    v = np.ascontiguousarray(command_velocity(t, q)) if len(t) > 1 else np.zeros_like(q)
-    sp = servo_params(robot, q[0], friction=with_friction, backlash=backlash,
-                      substeps=substeps or defaults.SERVO_SUBSTEPS, ff_ext=False)
-    n = len(t)
-    return ServoLoop(True, sp, friction, servo_state(q[0], v[0]), new_state(friction), q, v, jac,
-                     np.ascontiguousarray(gravity_torque(robot, q)), np.zeros((2, 6)), np.zeros((n, 6)),
-                     np.zeros((n, 6)))
+    v = np.ascontiguousarray(command_velocity(t, q)) if n > 1 else np.zeros_like(q)
+    a = np.ascontiguousarray(command_velocity(t, v)) if n > 1 else np.zeros_like(q)
+    model, jl = load_torques(robot, q, v, a, payload=payload)
+    model = np.ascontiguousarray(model)
+    p = drive_params(robot)
+    T = float(np.max(np.diff(t))) if n > 1 else 0.002
+    n_sub = as_substeps(substeps) if substeps is not None else substeps_for(p, jl, T, flags, friction)
+    st, fst = drive_state(), new_state(friction)
+    drive_init(p, st, fst, q[0], v[0], model[0], model[0], jl[0], flags)
+    dq = np.zeros((n, 6))
+    dq[0] = q[0] - st.q   # the gear's play and windup at the start (the loop steps from k = 1)
+    contact = np.zeros((n, 6), np.int8)
+    contact[0] = st.contact
+    return DriveLoop(True, p, friction, st, fst, flags, n_sub, dyn_params(robot, payload), q, v, a, model, jac,
+                     np.zeros((4, 6)), dq, np.zeros((n, 6)), contact)

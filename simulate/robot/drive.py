@@ -15,9 +15,10 @@ gear ratio ``N``; equations and sources in ``docs/drive-model.md``)::
 * **Load** ``tau_load``: gravity, inertial coupling of the other joints and the process force
   through ``J^T``, supplied by the caller per cycle (linear within it);
   :func:`load_torques` computes it with the Newton-Euler model of :mod:`simulate.robot.dynamics`.
-* **Friction** acts on the motor or the link side (``DriveParams.side``), one call of
-  :func:`friction_torque` per joint and substep (LuGre with the exact bristle update, held
-  velocity; the loop's friction dispatch can replace that one function).
+* **Friction** acts on the motor or the link side (``DriveParams.side``): one call per joint and
+  substep of the loop-friction dispatch :func:`simulate.robot.loop_friction.friction_torque` (any
+  fitted model type, or the robot file's inline LuGre as a LoopFriction of kind LUGRE), on the
+  simulated velocity and position of that side, with the gear torque as the gearbox load.
 * **Control** as an NC drive, evaluated every substep: position P from the motor encoder,
   velocity PI on the motor speed, velocity and torque feed-forward::
 
@@ -34,15 +35,19 @@ gear ratio ``N``; equations and sources in ``docs/drive-model.md``)::
   difference velocities); the feed-forward torque is evaluated at substep midpoints.
 
 Integration (the gear is stiff: ``f_r = sqrt(c (1/J_m' + 1/J_l)) / 2 pi`` is 25-200 Hz): each
-cycle ``T`` is cut into ``n_sub`` substeps of ``h = T / n_sub``. The control torque is held over a
-substep (zero-order hold, as a digital current loop), friction is held at its start velocity
-with the exact bristle update, and the two masses are advanced by velocity Verlet
-(kick-drift-kick; second order, symplectic: no numerical damping of the gear mode, stable for
-``omega h < 2``). :func:`substeps_for` picks ``n_sub`` so that ``omega_max h <= 0.1`` where
-``omega_max`` bounds the gear mode, the bristle mode ``sqrt(s0 / J_side)``, the damping rates and
-the velocity-loop rate ``kp / J_m'``; the phase error of the gear mode is then below
-``(omega h)^2 / 24 = 0.04 %`` per period. At a 2 ms cycle the shipped robot needs 36 substeps
-(A1's velocity loop, ``kp / J_m' = 1780 1/s``, sets the rate; A6's gear mode at 200 Hz needs 26).
+cycle ``T`` is cut, per joint, into ``n_sub[j]`` substeps of ``h = T / n_sub[j]`` (the joints are
+independent within a cycle, their load being given, so each runs at its own rate). The control
+torque is held over a substep (zero-order hold, as a digital current loop), friction (the model's
+own discretisation) is evaluated at the substep's start and held, and the two masses are advanced
+by velocity Verlet (kick-drift-kick; second order, symplectic: no numerical damping of the gear
+mode, stable for ``omega h < 2``). :func:`substeps_for` picks ``n_sub[j]`` so that
+``omega_max h <= OMEGA_H = 0.2`` where ``omega_max`` bounds joint j's gear mode, bristle mode
+``sqrt(s0 / J_side)``, damping rates and velocity-loop rate ``kp / J_m'``: the phase error of the
+gear mode is then below ``(omega h)^2 / 24 = 0.17 %`` per period and the discrete velocity loop's
+pole ``1 - kp h / J_m'`` is at 0.8 (stable below 2). At a 2 ms cycle the shipped robot needs 18,
+18, 14, 5, 5, 13 substeps (A1, A2: the velocity loop, ``kp / J_m' = 1780 1/s``; A6: its gear mode
+at 200 Hz), 73 joint-substeps per cycle. With ``OMEGA_H = 0.1`` (143) the circle test's spikes
+and lost motions differ by less than 0.1 µm and every closed-form test passes with either.
 """
 from __future__ import annotations
 
@@ -56,12 +61,13 @@ from numba import njit
 
 from identify.errors import InputError
 from simulate.robot.dynamics import _rnea_kernel
+from simulate.robot.loop_friction import bristle_rates, friction_torque, static_friction
 
 N_AXES = 6
 CYCLE = 0.002   # s, interpolation cycle
 
-#: Bound on omega * h that :func:`substeps_for` enforces [-].
-OMEGA_H = 0.1
+#: Bound on omega * h that :func:`substeps_for` enforces [-] (module docstring: why 0.2).
+OMEGA_H = 0.2
 
 
 class DriveFlags(IntFlag):
@@ -79,6 +85,15 @@ class DriveFlags(IntFlag):
     def default(cls) -> "DriveFlags":
         """Friction and backlash on; velocity, torque feed-forward and windup compensation on."""
         return cls.FRICTION | cls.BACKLASH | cls.FF_VEL | cls.FF_TAU | cls.WINDUP
+
+
+# the members as plain ints for the compiled kernels (numba does not type IntFlag arithmetic)
+F_FRICTION = int(DriveFlags.FRICTION)
+F_BACKLASH = int(DriveFlags.BACKLASH)
+F_FF_VEL = int(DriveFlags.FF_VEL)
+F_FF_TAU = int(DriveFlags.FF_TAU)
+F_FF_FRICTION = int(DriveFlags.FF_FRICTION)
+F_WINDUP = int(DriveFlags.WINDUP)
 
 
 class Contact(IntEnum):
@@ -99,14 +114,16 @@ class FrictionSide(IntEnum):
 #: Per-joint parameters, arrays of shape (6,) [SI, joint side]:
 #: jm reflected motor inertia N^2 J_m [kg m^2]; c gear stiffness [Nm/rad]; d gear damping [Nm s/rad];
 #: b total play [rad]; kv [1/s], kp [Nm s/rad], ki [Nm/rad] loop gains; ffv, fft feed-forward factors [-];
-#: side FrictionSide (int64); LuGre fc, fs [Nm], vs [rad/s], delta [-], s0 [Nm/rad], s1, nu [Nm s/rad].
-DriveParams = namedtuple("DriveParams", "jm c d b kv kp ki ffv fft side fc fs vs delta s0 s1 nu")
+#: side FrictionSide (int64). The friction itself is a separate LoopFriction
+#: (:mod:`simulate.robot.loop_friction`) with its state array.
+DriveParams = namedtuple("DriveParams", "jm c d b kv kp ki ffv fft side")
 
 #: Per-joint state, arrays of shape (6,), updated in place by :func:`drive_step`:
 #: theta motor position [rad], omega motor velocity [rad/s] (both joint side), q, qd link position [rad]
-#: and velocity [rad/s], integ velocity-loop integrator [Nm], z LuGre bristle state [rad],
-#: u motor torque [Nm], tau_s gear torque [Nm], tau_f friction torque [Nm], contact Contact (int64).
-DriveState = namedtuple("DriveState", "theta omega q qd integ z u tau_s tau_f contact")
+#: and velocity [rad/s], integ velocity-loop integrator [Nm], u motor torque [Nm], tau_s gear
+#: torque [Nm], tau_f friction torque [Nm], contact Contact (int64). The friction model's own state
+#: (bristles, hidden state) is the LoopFriction state array beside it.
+DriveState = namedtuple("DriveState", "theta omega q qd integ u tau_s tau_f contact")
 
 #: One cycle's input, arrays of shape (6,), values at the cycle start (0) and end (1):
 #: r0, r1 commanded link positions [rad]; v0, v1 commanded velocities [rad/s]; a0, a1 commanded
@@ -117,30 +134,6 @@ CycleInput = namedtuple("CycleInput", "r0 r1 v0 v1 a0 a1 load0 load1 model0 mode
 
 
 # --------------------------------------------------------------------------- per-step kernels
-
-@njit(cache=True)
-def static_friction(p, j, v):
-    """Steady-state (static) friction of joint j at velocity v [Nm]: ``sign(v) g(v) + nu v``."""
-    g = p.fc[j] + (p.fs[j] - p.fc[j]) * math.exp(-abs(v / p.vs[j]) ** p.delta[j])
-    sg = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
-    return sg * g + p.nu[j] * v
-
-
-@njit(cache=True)
-def friction_torque(p, j, v, z, h):
-    """Friction torque of joint j over a substep, velocity ``v`` [rad/s] held; returns (tau [Nm], z_new [rad]).
-
-    LuGre ``tau = s0 z + s1 z_d + nu v`` with the exact bristle update
-    ``z+ = zss + (z - zss) exp(-s0 |v| h / g(v))``, ``zss = sign(v) g(v) / s0`` (stable for any s0);
-    ``z_d`` is the mean over the substep. The single place friction enters the drive: the loop's
-    friction dispatch (any fitted model type) replaces this function.
-    """
-    g = p.fc[j] + (p.fs[j] - p.fc[j]) * math.exp(-abs(v / p.vs[j]) ** p.delta[j])
-    sg = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
-    zss = sg * g / p.s0[j]
-    zn = zss + (z - zss) * math.exp(-p.s0[j] * abs(v) * h / g)
-    return p.s0[j] * zn + p.s1[j] * (zn - z) / h + p.nu[j] * v, zn
-
 
 @njit(cache=True)
 def gear_torque(c, d, b2, delta, delta_d):
@@ -166,29 +159,20 @@ def _contact(delta, b2):
 
 
 @njit(cache=True)
-def _hermite(s, T, p0, p1, v0, v1):
-    """Cubic Hermite reference at s in [0, 1]: position [rad], velocity [rad/s]."""
-    s2 = s * s
-    s3 = s2 * s
-    r = (2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * T * v0 + (-2 * s3 + 3 * s2) * p1 + (s3 - s2) * T * v1
-    rd = ((6 * s2 - 6 * s) * p0 + (3 * s2 - 4 * s + 1) * T * v0 + (-6 * s2 + 6 * s) * p1
-          + (3 * s2 - 2 * s) * T * v1) / T
-    return r, rd
-
-
-@njit(cache=True)
-def drive_init(p, st, r, v, load, model, jl, flags):
+def drive_init(p, st, fst, r, v, load, model, jl, flags):
     """Put ``st`` at rest-equilibrium (velocity ``v``) on the reference ``r`` [rad] under ``load`` [Nm].
 
     The motor sits on its (windup-compensated) setpoint, the gear carries ``load`` on the flank
     its sign selects (centred in the play at zero load), the integrator holds the torque the
-    feed-forward does not supply, friction bristles are relaxed (z = 0).
+    feed-forward does not supply; the friction state ``fst`` is reset (each model starts at its
+    steady state on the first call: LuGre bristles relaxed at rest).
     """
+    fst[:, :] = 0.0
     for j in range(N_AXES):
-        b2 = 0.5 * p.b[j] if flags & 2 else 0.0
-        fft = p.fft[j] if flags & 8 else 0.0
+        b2 = 0.5 * p.b[j] if flags & F_BACKLASH else 0.0
+        fft = p.fft[j] if flags & F_FF_TAU else 0.0
         tg = fft * model[j]
-        sh = r[j] + (tg / p.c[j] if flags & 32 else 0.0)
+        sh = r[j] + (tg / p.c[j] if flags & F_WINDUP else 0.0)
         sg = 1.0 if load[j] > 0 else (-1.0 if load[j] < 0 else 0.0)
         dl = load[j] / p.c[j] + sg * b2
         st.theta[j] = sh
@@ -196,7 +180,6 @@ def drive_init(p, st, r, v, load, model, jl, flags):
         st.omega[j] = v[j]
         st.qd[j] = v[j]
         st.integ[j] = load[j] - fft * model[j]
-        st.z[j] = 0.0
         st.u[j] = load[j]
         st.tau_s[j] = load[j]
         st.tau_f[j] = 0.0
@@ -204,37 +187,45 @@ def drive_init(p, st, r, v, load, model, jl, flags):
 
 
 @njit(cache=True)
-def drive_step(p, st, cy, T, n_sub, flags):
-    """Advance the six drives by one cycle of ``T`` [s] in ``n_sub`` substeps; updates ``st`` in place.
+def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
+    """Advance the six drives by one cycle of ``T`` [s], joint j in ``n_sub[j]`` substeps; updates ``st`` in place.
 
     Parameters
     ----------
     p : DriveParams
+    fp : simulate.robot.loop_friction.LoopFriction
+        Each joint's friction model, evaluated once per substep at the substep's start on the side
+        ``p.side`` says (velocity, position) with the gear torque as the gearbox load, and held
+        over the substep.
     st : DriveState
         State at the cycle start; holds the state at the cycle end on return (``u``, ``tau_s``,
         ``tau_f`` are the last substep's values, ``contact`` the flank at the end).
+    fst : ndarray (6, S)
+        Friction state (:func:`simulate.robot.loop_friction.new_state`), updated in place.
     cy : CycleInput
         Reference, load and link inertia of this cycle.
     T : float
         Cycle time [s].
-    n_sub : int
-        Substeps (see :func:`substeps_for`).
+    n_sub : ndarray (6,) of int64
+        Substeps per joint (see :func:`substeps_for`): the joints are independent within a cycle
+        (the load is given), so each runs at the rate its own fastest mode needs.
     flags : int
         :class:`DriveFlags`.
     """
-    h = T / n_sub
-    fr_on = flags & 1
+    fr_on = flags & F_FRICTION
     for j in range(N_AXES):
-        b2 = 0.5 * p.b[j] if flags & 2 else 0.0
-        ffv = p.ffv[j] if flags & 4 else 0.0
-        fft = p.fft[j] if flags & 8 else 0.0
+        ns = n_sub[j]
+        h = T / ns
+        b2 = 0.5 * p.b[j] if flags & F_BACKLASH else 0.0
+        ffv = p.ffv[j] if flags & F_FF_VEL else 0.0
+        fft = p.fft[j] if flags & F_FF_TAU else 0.0
         jm = p.jm[j]
         jl = cy.jl[j]
         c = p.c[j]
         d = p.d[j]
         side = p.side[j]
         theta, omega, q, qd = st.theta[j], st.omega[j], st.q[j], st.qd[j]
-        integ, z = st.integ[j], st.z[j]
+        integ = st.integ[j]
         u = st.u[j]
         ts = st.tau_s[j]
         tf = 0.0
@@ -242,11 +233,16 @@ def drive_step(p, st, cy, T, n_sub, flags):
         # feed-forward acceleration linear in the cycle: the cubic Hermite's own jerk would amplify
         # the error of difference velocities (it is 3x the true jerk for central differences)
         jerk = (cy.a1[j] - cy.a0[j]) / T
-        for i in range(n_sub):
-            sa = i / n_sub
-            sm = (i + 0.5) / n_sub
-            r, rd = _hermite(sa, T, cy.r0[j], cy.r1[j], cy.v0[j], cy.v1[j])
-            _, rdm = _hermite(sm, T, cy.r0[j], cy.r1[j], cy.v0[j], cy.v1[j])
+        # cubic Hermite reference r(s) = h0 + h1 s + h2 s^2 + h3 s^3, s = (time in the cycle) / T
+        h0, h1 = cy.r0[j], T * cy.v0[j]
+        h2 = 3.0 * (cy.r1[j] - h0) - 2.0 * h1 - T * cy.v1[j]
+        h3 = 2.0 * (h0 - cy.r1[j]) + h1 + T * cy.v1[j]
+        for i in range(ns):
+            sa = i / ns
+            sm = (i + 0.5) / ns
+            r = h0 + sa * (h1 + sa * (h2 + sa * h3))
+            rd = (h1 + sa * (2.0 * h2 + 3.0 * sa * h3)) / T
+            rdm = (h1 + sm * (2.0 * h2 + 3.0 * sm * h3)) / T
             rdd = cy.a0[j] + jerk * sa * T
             rddm = cy.a0[j] + jerk * sm * T
             mod_a = cy.model0[j] + dmod * sa * T
@@ -254,30 +250,32 @@ def drive_step(p, st, cy, T, n_sub, flags):
             # NC: motor setpoint (windup compensated), position P, velocity PI, feed-forward
             th_r = r
             th_rd = rd
-            if flags & 32:
+            if flags & F_WINDUP:
                 # c delta + d delta_d = tau_g to first order in d/c: delta = (tau_g - (d/c) tau_g_d) / c
                 tg_d = fft * (jl * jerk + dmod)
                 th_r += (fft * (jl * rdd + mod_a) - d / c * tg_d) / c
                 th_rd += tg_d / c
-                if flags & 16 and side == 0:
+                if flags & F_FF_FRICTION and side == 0:
                     # joint-side friction the NC expects also passes the gear: its windup too
                     # (position only: its derivative is an impulse at each reversal)
-                    th_r += static_friction(p, j, rd) / c
+                    th_r += static_friction(fp, j, rd) / c
             vcmd = p.kv[j] * (th_r - theta) + ffv * th_rd
             ev = vcmd - omega
             integ += p.ki[j] * ev * h
             uff = fft * ((jm + jl) * rddm + mod_m)
-            if flags & 16:
-                uff += static_friction(p, j, rdm)
+            if flags & F_FF_FRICTION:
+                uff += static_friction(fp, j, rdm)
             u = p.kp[j] * ev + integ + uff
-            # friction, held over the substep at its start velocity
+            # friction on the simulated motion of its side now (gearbox load: the gear torque), held
+            # over the substep
             tfm = 0.0
             tfl = 0.0
             if fr_on:
-                tf, z = friction_torque(p, j, omega if side == 1 else qd, z, h)
                 if side == 1:
+                    tf = friction_torque(fp, j, fst, omega, theta, ts, h)
                     tfm = tf
                 else:
+                    tf = friction_torque(fp, j, fst, qd, q, ts, h)
                     tfl = tf
             load = cy.load0[j] + (cy.load1[j] - cy.load0[j]) * sm
             # velocity Verlet: kick, drift, kick (gear torque at both ends of the substep)
@@ -294,7 +292,6 @@ def drive_step(p, st, cy, T, n_sub, flags):
         st.q[j] = q
         st.qd[j] = qd
         st.integ[j] = integ
-        st.z[j] = z
         st.u[j] = u
         st.tau_s[j] = ts
         st.tau_f[j] = tf
@@ -303,21 +300,22 @@ def drive_step(p, st, cy, T, n_sub, flags):
 
 
 @njit(cache=True)
-def _run_kernel(p, st, ref, load, model, jl, t, n_sub, flags, out_q, out_th, out_ts, out_tf, out_u, out_c):
+def _run_kernel(p, fp, st, fst, ref, load, model, jl, t, n_sub, flags, out_f, out_c):
+    """Run the drives along a whole command; out_f (6, M, 6): q, theta, tau_s, tau_f, u; out_c (M, 6)."""
     m = t.shape[0]
     r, v, a = ref[0], ref[1], ref[2]
-    drive_init(p, st, r[0], v[0], load[0], model[0], jl[0], flags)
+    drive_init(p, st, fst, r[0], v[0], load[0], model[0], jl[0], flags)
     for k in range(m):
         if k > 0:
             cy = CycleInput(r[k - 1], r[k], v[k - 1], v[k], a[k - 1], a[k], load[k - 1], load[k], model[k - 1], model[k],
                             0.5 * (jl[k - 1] + jl[k]))
-            drive_step(p, st, cy, t[k] - t[k - 1], n_sub, flags)
+            drive_step(p, fp, st, fst, cy, t[k] - t[k - 1], n_sub, flags)
         for j in range(N_AXES):
-            out_q[k, j] = st.q[j]
-            out_th[k, j] = st.theta[j]
-            out_ts[k, j] = st.tau_s[j]
-            out_tf[k, j] = st.tau_f[j]
-            out_u[k, j] = st.u[j]
+            out_f[0, k, j] = st.q[j]
+            out_f[1, k, j] = st.theta[j]
+            out_f[2, k, j] = st.tau_s[j]
+            out_f[3, k, j] = st.tau_f[j]
+            out_f[4, k, j] = st.u[j]
             out_c[k, j] = st.contact[j]
 
 
@@ -325,44 +323,56 @@ def _run_kernel(p, st, ref, load, model, jl, t, n_sub, flags, out_q, out_th, out
 
 def new_state() -> DriveState:
     """A zeroed :class:`DriveState` (use :func:`drive_init` to put it at equilibrium)."""
-    z = [np.zeros(N_AXES) for _ in range(9)]
+    z = [np.zeros(N_AXES) for _ in range(8)]
     return DriveState(*z, np.zeros(N_AXES, dtype=np.int64))
 
 
-def substeps_for(p: DriveParams, jl, T: float = CYCLE, flags: int = int(DriveFlags.default())) -> int:
-    """Substeps per cycle ``T`` [s] so that ``omega_max h <= OMEGA_H`` (module docstring).
+def substeps_for(p: DriveParams, jl, T: float = CYCLE, flags: int = int(DriveFlags.default()),
+                 friction=None) -> np.ndarray:
+    """Substeps per cycle ``T`` [s] per joint, (6,) int64, so that ``omega_max h <= OMEGA_H`` for each
+    joint's own fastest rate (module docstring).
 
-    ``jl`` [kg m^2] (6,) or (M, 6): the smallest link inertia per joint along the motion is used.
+    ``jl`` [kg m^2] (6,) or (M, 6): the smallest link inertia per joint along the motion is used;
+    ``friction`` the LoopFriction whose bristle stiffness and damping must be resolved too (with
+    ``DriveFlags.FRICTION``).
     """
     jl_min = np.min(np.atleast_2d(np.asarray(jl, float)), axis=0)
     w_gear = np.sqrt(p.c * (1.0 / p.jm + 1.0 / jl_min))
     rate_d = p.d * (1.0 / p.jm + 1.0 / jl_min)
     rate_ctl = p.kp / p.jm
     cand = [w_gear, rate_d, rate_ctl]
-    if flags & DriveFlags.FRICTION:
+    if flags & DriveFlags.FRICTION and friction is not None:
+        s0, damp = bristle_rates(friction)
         j_side = np.where(p.side == FrictionSide.MOTOR, p.jm, jl_min)
-        cand += [np.sqrt(p.s0 / j_side), (p.s1 + p.nu) / j_side]
-    w = float(np.max(np.concatenate(cand)))
-    return max(1, int(math.ceil(w * T / OMEGA_H)))
+        cand += [np.sqrt(s0 / j_side), damp / j_side]
+    w = np.max(np.stack(cand), axis=0)
+    return np.maximum(1, np.ceil(w * T / OMEGA_H)).astype(np.int64)
 
 
-def drive_params(robot, *, gains=None, friction_scale: float = 1.0) -> DriveParams:
-    """The :class:`DriveParams` of a robot: rotor inertia, gear stiffness/damping/play, servo gains, friction.
+def as_substeps(substeps) -> np.ndarray:
+    """Substeps per joint (6,) int64 from an int or six ints; ``ValueError`` below 1."""
+    n = np.broadcast_to(np.asarray(substeps), (N_AXES,))
+    if not np.all(n == np.floor(n)) or np.any(n < 1):
+        raise ValueError(f"substeps must be integers >= 1, got {substeps!r}")
+    return np.ascontiguousarray(n, dtype=np.int64)
+
+
+def drive_params(robot, *, gains=None) -> DriveParams:
+    """The :class:`DriveParams` of a robot: rotor inertia, gear stiffness/damping/play, servo gains, friction side.
+
+    The friction models are separate: :func:`simulate.robot.friction.loop_friction`.
 
     Parameters
     ----------
     robot : simulate.robot.model.Robot
-        Needs its ``[joint.drive]`` tables (``robot.drive``) and inline LuGre friction.
+        Needs its ``[joint.drive]`` tables (``robot.drive``).
     gains : simulate.robot.model.ServoGains, optional
         Replaces ``robot.servo``.
-    friction_scale : float
-        Multiplies the Coulomb and static levels ``fc, fs`` [-] (e.g. 2 for a doubled friction).
 
     Raises
     ------
     InputError
-        No ``[joint.drive]`` table, an infinite (rigid) stiffness, or a friction model reference
-        (the drive takes inline LuGre).
+        No ``[joint.drive]`` table or an infinite (rigid) stiffness.
     """
     if robot.drive is None:
         raise InputError("the drive model needs a [joint.drive] table per joint", source=robot.source or None,
@@ -371,23 +381,45 @@ def drive_params(robot, *, gains=None, friction_scale: float = 1.0) -> DrivePara
         if not math.isfinite(robot.stiffness[j]):
             raise InputError("the drive model needs a finite gear stiffness", source=robot.source or None,
                              field=f"joint[{j + 1}].stiffness")
-    lugre = []
-    for j, spec in enumerate(robot.friction):
-        if spec.lugre is None:
-            raise InputError("the drive model takes inline LuGre friction (fc, fs, vs, delta, s0, s1, nu); "
-                             "model references enter with the loop's friction dispatch",
-                             source=robot.source or None, field=f"joint[{j + 1}].friction.model")
-        lugre.append(spec.lugre)
     gs = gains if gains is not None else robot.servo
-    col = lambda key: np.array([getattr(x, key) for x in lugre], float)  # noqa: E731
     dr = robot.drive
     return DriveParams(
         jm=np.array(robot.rotor_inertia, float), c=np.array(robot.stiffness, float), d=np.array(dr.damping, float),
         b=np.array(robot.backlash, float), kv=np.array(gs.kv, float), kp=np.array(gs.kp_vel, float),
         ki=np.array(gs.ki_vel, float), ffv=np.array(gs.ff_vel, float), fft=np.array(gs.ff_tau, float),
-        side=np.array(dr.friction_side, dtype=np.int64),
-        fc=col("fc") * friction_scale, fs=col("fs") * friction_scale, vs=col("vs"), delta=col("delta"),
-        s0=col("s0"), s1=col("s1"), nu=col("nu"))
+        side=np.array(dr.friction_side, dtype=np.int64))
+
+
+def drive_flags(*, friction: bool = True, backlash: bool = True, ff_friction: bool = False) -> DriveFlags:
+    """:meth:`DriveFlags.default` with friction, play and friction feed-forward switched as given."""
+    flags = DriveFlags.default()
+    if not friction:
+        flags &= ~DriveFlags.FRICTION
+    if not backlash:
+        flags &= ~DriveFlags.BACKLASH
+    if ff_friction:
+        flags |= DriveFlags.FF_FRICTION
+    return flags
+
+
+def drive_friction(robot, friction=None, *, scale: float = 1.0, flags: DriveFlags = DriveFlags.default()):
+    """The LoopFriction the drives use: ``friction`` or the robot file's, levels times ``scale``.
+
+    Raises ``InputError`` (``friction-scale``) for a scale of an LSTM model's level, and
+    (``ff-friction``) for friction feed-forward on a joint whose model has no static curve (LSTM).
+    """
+    from simulate.robot.friction import loop_friction
+    from simulate.robot.loop_friction import FrictionKind, scale_levels
+
+    fp = friction if friction is not None else loop_friction(robot)[0]
+    try:
+        fp = scale_levels(fp, float(scale))
+    except ValueError as exc:
+        raise InputError(str(exc), field="friction-scale") from None
+    if flags & DriveFlags.FF_FRICTION and np.any(np.asarray(fp.kind) == FrictionKind.LSTM):
+        raise InputError("friction feed-forward needs a static friction curve; an LSTM model has none",
+                         field="ff-friction")
+    return fp
 
 
 def load_torques(robot, q, qd, qdd, *, wrench_tcp=None, payload=None):
@@ -439,6 +471,14 @@ def dyn_params(robot, payload=None) -> DynParams:
                      out=np.zeros((8, N_AXES)))
 
 
+def dyn_params_empty() -> DynParams:
+    """A :class:`DynParams` of no robot (all zero): a placeholder of the right types."""
+    z = np.zeros((8, N_AXES))
+    return DynParams(dh=np.zeros((N_AXES, 4)), mass=np.zeros(N_AXES), com=np.zeros((N_AXES, 3)),
+                     inertia=np.zeros((N_AXES, 3, 3)), g0=np.zeros(3), zero=np.zeros(N_AXES), q_rows=z.copy(),
+                     qd_rows=z.copy(), qdd_rows=z.copy(), out=z.copy())
+
+
 @njit(cache=True)
 def load_torque_step(dyn, q, qd, qdd, tau_process, out_load, out_jl):
     """Per-step :func:`load_torques` for a compiled loop (one Newton-Euler call of 8 rows).
@@ -485,8 +525,8 @@ class DriveResult:
         :class:`Contact` per sample: +1/-1 flank, 0 in the play.
     tau_load : ndarray
         Load torque on the link that was applied [Nm].
-    substeps : int
-        Substeps per cycle used.
+    substeps : ndarray (6,) of int
+        Substeps per cycle used, per joint.
     flags : DriveFlags
     """
 
@@ -499,13 +539,19 @@ class DriveResult:
     tau_motor: np.ndarray
     contact: np.ndarray
     tau_load: np.ndarray
-    substeps: int
+    substeps: np.ndarray
     flags: DriveFlags
 
     @property
     def error(self) -> np.ndarray:
         """Link following error ``q_cmd - q`` [rad]."""
         return self.q_cmd - self.q
+
+    def tcp_error(self, robot) -> np.ndarray:
+        """Path error at the TCP, ``p(q) - p(q_cmd)`` (M, 3) [m], base frame."""
+        from simulate.robot.kinematics import fk
+
+        return fk(robot, self.q)[:, :3, 3] - fk(robot, self.q_cmd)[:, :3, 3]
 
 
 def command_velocity(t, q) -> np.ndarray:
@@ -515,9 +561,9 @@ def command_velocity(t, q) -> np.ndarray:
 
 def simulate_drive(robot, t, q_cmd, *, tau_load=None, tau_model=None, link_inertia=None,
                    flags: DriveFlags | None = None, friction: bool = True, backlash: bool = True,
-                   ff_friction: bool = False, params: DriveParams | None = None,
-                   substeps: int | None = None) -> DriveResult:
-    """Run the six drives along a commanded joint trajectory.
+                   ff_friction: bool = False, params: DriveParams | None = None, loop_friction=None,
+                   friction_scale: float = 1.0, substeps: int | None = None) -> DriveResult:
+    """Run the six drives along a commanded joint trajectory (loads given or along the command).
 
     Parameters
     ----------
@@ -540,13 +586,19 @@ def simulate_drive(robot, t, q_cmd, *, tau_load=None, tau_model=None, link_inert
         Switch friction, gear play and friction feed-forward.
     params : DriveParams, optional
         Replaces :func:`drive_params` of the robot.
-    substeps : int, optional
-        Substeps per cycle; default :func:`substeps_for`.
+    loop_friction : LoopFriction, optional
+        Each joint's friction model; default the robot file's (:func:`drive_friction`).
+    friction_scale : float
+        Factor on every joint's Coulomb and static levels [-].
+    substeps : int or array_like (6,), optional
+        Substeps per cycle (per joint); default :func:`substeps_for`.
 
     Returns
     -------
     DriveResult
     """
+    from simulate.robot.loop_friction import new_state as friction_state
+
     t = np.ascontiguousarray(np.asarray(t, float))
     q = np.ascontiguousarray(np.asarray(q_cmd, float))
     if t.ndim != 1 or q.shape != (t.shape[0], N_AXES):
@@ -554,15 +606,10 @@ def simulate_drive(robot, t, q_cmd, *, tau_load=None, tau_model=None, link_inert
     if t.shape[0] < 2 or not np.all(np.diff(t) > 0):
         raise ValueError("t must be strictly increasing with at least 2 samples")
     if flags is None:
-        flags = DriveFlags.default()
-        if not friction:
-            flags &= ~DriveFlags.FRICTION
-        if not backlash:
-            flags &= ~DriveFlags.BACKLASH
-        if ff_friction:
-            flags |= DriveFlags.FF_FRICTION
+        flags = drive_flags(friction=friction, backlash=backlash, ff_friction=ff_friction)
     flags = DriveFlags(flags)
     p = params if params is not None else drive_params(robot)
+    fp = drive_friction(robot, loop_friction, scale=friction_scale, flags=flags)
     v = np.ascontiguousarray(command_velocity(t, q))
     a = np.ascontiguousarray(command_velocity(t, v))
     if tau_load is None or link_inertia is None:
@@ -575,13 +622,11 @@ def simulate_drive(robot, t, q_cmd, *, tau_load=None, tau_model=None, link_inert
     if not np.all(jl > 0):
         raise ValueError("link inertia must be > 0")
     T = float(np.max(np.diff(t)))
-    n_sub = int(substeps) if substeps is not None else substeps_for(p, jl, T, int(flags))
-    if n_sub < 1:
-        raise ValueError("substeps must be >= 1")
+    n_sub = as_substeps(substeps) if substeps is not None else substeps_for(p, jl, T, int(flags), fp)
     m = t.shape[0]
-    out = [np.empty((m, N_AXES)) for _ in range(5)]
+    out = np.empty((5, m, N_AXES))
     oc = np.empty((m, N_AXES), dtype=np.int8)
     st = new_state()
-    _run_kernel(p, st, np.stack([q, v, a]), tl, tm, jl, t, n_sub, int(flags), *out, oc)
+    _run_kernel(p, fp, st, friction_state(fp), np.stack([q, v, a]), tl, tm, jl, t, n_sub, int(flags), out, oc)
     return DriveResult(t=t, q_cmd=q, q=out[0], theta=out[1], tau_gear=out[2], tau_friction=out[3], tau_motor=out[4],
                        contact=oc, tau_load=tl, substeps=n_sub, flags=flags)

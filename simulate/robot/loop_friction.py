@@ -1,8 +1,9 @@
 """Every fitted friction model as compiled "loop friction", evaluated inside the coupled machining loop.
 
-The coupled loop (:mod:`simulate.machining.simulation`) steps the axis servos every substep
-(:func:`simulate.robot.servo.servo_step`); each joint's friction torque comes from ONE numba dispatch
-function, evaluated on the simulated joint motion of that substep::
+The coupled loop (:mod:`simulate.machining.simulation`) steps the two-mass drives every substep
+(:func:`simulate.robot.drive.drive_step`); each joint's friction torque comes from ONE numba dispatch
+function, evaluated on the simulated motion of that substep (joint or motor side, as the drive
+says)::
 
     tau_F = friction_torque(p, j, state, v, q, load, dt)
 
@@ -88,6 +89,12 @@ class Extension(IntFlag):
     ASYMMETRY = 2
     POSITION = 4
     TEMPERATURE = 8
+
+
+# the members as plain ints for the compiled code (numba does not type IntFlag arithmetic)
+EXT_LOAD = int(Extension.LOAD)
+EXT_ASYMMETRY = int(Extension.ASYMMETRY)
+EXT_POSITION = int(Extension.POSITION)
 
 
 # scalar parameter slots (columns of LoopFriction.scal)
@@ -234,14 +241,14 @@ def _extended(p, j, st, v, q, load, dt):
     sc = p.scal[j]
     flags = int(sc[EXT_FLAGS])
     mult = 1.0
-    if flags & 1:
+    if flags & EXT_LOAD:
         mult *= max(1.0 + sc[K_LOAD] * (abs(load) - sc[LOAD_REF]), LEVEL_FLOOR)
     # temperature (flag 8): at the model's reference temperature, dT = 0: factors 1 (module docstring)
-    if (flags & 2) and v < 0.0:
+    if (flags & EXT_ASYMMETRY) and v < 0.0:
         mult *= 1.0 + sc[ASYM]
     g = _stribeck(v, sc[FC], sc[FS], sc[VS], sc[DELTA]) * mult
     f = _lugre_step(p, j, st, v, g, dt, sc[NU])
-    if flags & 4:
+    if flags & EXT_POSITION:
         n = sc[RIP_ORDER]
         f += sc[RIP_SIN] * math.sin(n * q) + sc[RIP_COS] * math.cos(n * q)
     return f
@@ -382,6 +389,71 @@ def friction_torque(p, j, state, v, q, load, dt):
     if kind == 7:   # LSTM
         return _lstm(p, j, state, v, q, dt)
     return 0.0
+
+
+@njit(cache=True)
+def static_friction(p, j, v):
+    """Steady-state friction curve of joint ``j`` at a held velocity ``v`` [rad/s] -> [Nm].
+
+    What an NC's friction feed-forward would use: ``sign(v) g(v) + nu v`` for the LuGre forms and
+    the grey-box (its MLP level), the closed forms of coulomb-viscous and Stribeck, the LuGre base
+    of a residual model, and the direction asymmetry of a lugre-extended one (its load factor at
+    the reference load). An LSTM has no static curve of its own: 0.
+    """
+    kind = p.kind[j]
+    sc = p.scal[j]
+    if kind == 1:
+        return sc[MU] * _sign(v) + sc[NU] * v
+    if kind == 2 or kind == 3 or kind == 6:
+        return _sign(v) * _stribeck(v, sc[FC], sc[FS], sc[VS], sc[DELTA]) + sc[NU] * v
+    if kind == 4:
+        mult = 1.0 + sc[ASYM] if (int(sc[EXT_FLAGS]) & EXT_ASYMMETRY) and v < 0.0 else 1.0
+        return _sign(v) * _stribeck(v, sc[FC], sc[FS], sc[VS], sc[DELTA]) * mult + sc[NU] * v
+    if kind == 5:
+        return _sign(v) * _greybox_level(p, j, v) + sc[NU] * v
+    return 0.0
+
+
+def bristle_rates(p: LoopFriction) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint the bristle stiffness ``s0`` [Nm/rad] and the velocity damping ``s1 + nu`` [Nm s/rad]
+    an explicit integrator must resolve (0 where the form has none; an LSTM's rate is its own sample)."""
+    kind = np.asarray(p.kind)
+    bristle = np.isin(kind, [FrictionKind.LUGRE, FrictionKind.LUGRE_EXTENDED, FrictionKind.GREYBOX,
+                             FrictionKind.RESIDUAL])
+    s0 = np.where(bristle, p.scal[:, S0], 0.0)
+    damp = np.where(bristle, p.scal[:, S1], 0.0) + np.where(kind != FrictionKind.LSTM, p.scal[:, NU], 0.0)
+    return s0, damp
+
+
+def scale_levels(p: LoopFriction, factor: float) -> LoopFriction:
+    """The friction with every joint's Coulomb and static levels multiplied by ``factor`` [-].
+
+    ``fc, fs`` of the Stribeck/LuGre forms (the residual's LuGre base), ``mu`` of coulomb-viscous,
+    the whole level curve ``g(v)`` of a grey-box; viscous parts unchanged. An LSTM has no separate
+    level: ``ValueError``.
+    """
+    if factor == 1.0:
+        return p
+    kind = np.asarray(p.kind)
+    if np.any(kind == FrictionKind.LSTM):
+        raise ValueError("an LSTM friction model has no Coulomb/static level to scale")
+    scal = p.scal.copy()
+    scal[:, [FC, FS, MU]] *= factor
+    grey = kind == FrictionKind.GREYBOX
+    scal[grey, TAU_SCALE] *= factor
+    return p._replace(scal=scal)
+
+
+def lugre_friction(fc, fs, vs, delta, s0, s1, nu) -> LoopFriction:
+    """Six joints of LuGre friction from per-joint arrays (6,) [Nm, Nm, rad/s, -, Nm/rad, Nm s/rad, Nm s/rad]."""
+    rows = []
+    cols = [np.broadcast_to(np.asarray(x, float), (6,)) for x in (fc, fs, vs, delta, s0, s1, nu)]
+    for j in range(6):
+        row = _empty()
+        row["kind"] = int(FrictionKind.LUGRE)
+        row["scal"][[FC, FS, VS, DELTA, S0, S1, NU]] = [c[j] for c in cols]
+        rows.append(row)
+    return assemble(rows)
 
 
 # --------------------------------------------------------------------------- building the parameters

@@ -217,8 +217,61 @@ def test_gravity_holds_a2_a3_on_their_flanks_while_a1_crosses_its_play(runs):
     """On the circle A2 and A3 reverse (spikes listed) but gravity keeps their gears on one flank;
     unloaded A1 changes flank at each of its two reversals."""
     run, res = runs["base"]
-    c = run.drive.contact[run.segment == 1]
+    c = run.contact[run.segment == 1]
     changes = [int(np.sum((c[1:, j] != c[:-1, j]) & (c[1:, j] != 0))) for j in range(6)]
     assert {2, 3} <= {s.joint for s in res.spikes}
     assert changes[1] == changes[2] == 0 and len(np.unique(c[:, 1])) == 1
     assert changes[0] == 2
+
+
+def test_the_circle_is_the_machining_loop_and_play_adds_to_friction(runs):
+    """The A1 spike is the play's part plus the friction's: without play it doubles with the friction
+    levels (measured 1.97x); with play, doubling adds what the friction part alone is (the play's
+    part, ~b x lever, does not scale), so the ratio is (P + 2F) / (P + F) < 2 (docs/drive-model.md)."""
+    a1 = lambda key: max(abs(s.height_um) for s in runs[key][1].spikes if s.joint == 1)   # noqa: E731
+    f_part = a1("no_backlash")
+    assert a1("friction_x2") - a1("base") == pytest.approx(f_part, rel=0.1)
+    assert all(f["kind"] == "lugre" and f["source"] == "inline" for f in runs["base"][0].friction)
+
+
+def _robot_with_models(tmp_path: Path, refs: dict) -> Path:
+    """max100.toml with joints' [joint.friction] tables replaced by ``model = "<ref>"``."""
+    parts = (ROOT / "data" / "robots" / "max100.toml").read_text().split("[[joint]]")
+    for j, ref in refs.items():
+        p = parts[j]
+        hdr = re.search(r"^\[joint\.friction\][^\n]*", p, re.M)
+        rest = p[hdr.end():]
+        m = re.search(r"\n\[", rest)
+        parts[j] = p[:hdr.start()] + f'[joint.friction]\nmodel = "{ref}"\n' + rest[m.start() if m else len(rest):]
+    out = tmp_path / "robot.toml"
+    out.write_text("[[joint]]".join(parts))
+    return out
+
+
+def test_cli_circle_with_fitted_greybox_and_lstm_models(tmp_path):
+    """A robot file whose A1 friction is a fitted grey-box model and A2's an LSTM (few epochs): the
+    circle runs through the same loop with those models and gives another trace than the inline LuGre."""
+    pytest.importorskip("torch")
+    from dataclasses import replace
+
+    from identify.axis_limits import AxisLimits
+    from identify.models import make_model
+    from identify.plant import PlantConfig, synthesize
+    from identify.records import validate_frame
+    from identify.trajectories import universal_trajectory
+
+    tr = universal_trajectory(AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0), duration=4.0)
+    rec = validate_frame(synthesize(tr.t, tr.q, tr.qd, tr.qdd, config=replace(PlantConfig(), static_curve="hump"),
+                                    seed=1).frame, "circle-models")
+    make_model("greybox", epochs=5).fit(rec).save(tmp_path / "m1")
+    make_model("lstm", epochs=2, batches=2).fit(rec).save(tmp_path / "m2")
+    robot = _robot_with_models(tmp_path, {1: "m1", 2: "m2"})
+    docs = {}
+    for key, rob in (("models", str(robot)), ("inline", "max100")):
+        r = runner.invoke(app, ["circle", "--robot", rob, "--pose", str(POSES), "--name", "pose1", "--out",
+                                str(tmp_path / key), "--json"])
+        assert r.exit_code == 0, r.output
+        docs[key] = json.loads(r.stdout)
+    assert [f["kind"] for f in docs["models"]["friction_models"][:3]] == ["greybox", "lstm", "lugre"]
+    assert docs["models"]["roundness_um"] > 0
+    assert abs(docs["models"]["largest_spike_um"] - docs["inline"]["largest_spike_um"]) > 1.0

@@ -13,6 +13,7 @@ import pytest
 from simulate.robot.drive import (Contact, DriveFlags, DriveParams, FrictionSide, drive_params, load_torques,
                                   simulate_drive, substeps_for)
 from simulate.robot.kinematics import fk
+from simulate.robot.loop_friction import lugre_friction
 from simulate.toolpath.placement import HOME_Q
 
 T = 0.002
@@ -20,13 +21,13 @@ JL = np.array([650.0, 480.0, 137.0, 1.25, 4.0, 0.065])   # kg m^2, link inertias
 FF = DriveFlags.FF_VEL | DriveFlags.FF_TAU | DriveFlags.WINDUP
 
 
-def coulomb(p: DriveParams, fc, side=FrictionSide.JOINT, s0=1e7, jl=JL) -> DriveParams:
-    """Pure Coulomb friction fc [Nm] (fs = fc, no viscous part, stiff bristles: pre-sliding fc/s0 negligible,
-    bristle mode damped at ratio 0.5)."""
+def coulomb(p: DriveParams, fc, side=FrictionSide.JOINT, s0=1e7, jl=JL, vs=1e-4):
+    """Drive parameters with friction on ``side`` and pure Coulomb LuGre friction fc [Nm] (fs = fc, no
+    viscous part, stiff bristles: pre-sliding fc/s0 negligible, bristle mode damped at ratio 0.5)."""
     fc = np.broadcast_to(np.asarray(fc, float), (6,)).copy()
     j_side = p.jm if side == FrictionSide.MOTOR else np.asarray(jl, float)
-    return p._replace(fc=fc, fs=fc.copy(), vs=np.full(6, 1e-4), nu=np.zeros(6), s0=np.full(6, s0),
-                      s1=np.sqrt(s0 * j_side), side=np.full(6, int(side), dtype=np.int64))
+    fp = lugre_friction(fc, fc, vs, 1.0, s0, np.sqrt(s0 * j_side), 0.0)
+    return p._replace(side=np.full(6, int(side), dtype=np.int64)), fp
 
 
 def cosine(amplitude, omega, duration, q0=None):
@@ -53,9 +54,9 @@ def test_lost_motion_is_backlash_plus_friction_windup_times_lever(robot, params)
     backwards, the link differs by the play b plus the friction windup 2 fc / c; at the TCP by that
     times the lever arm (distance of the TCP from the axis)."""
     fc = 60.0
-    p = coulomb(params, fc)
+    p, fp = coulomb(params, fc)
     t, dq = cosine(0.02, math.pi / 2, 5.2)
-    res = simulate_drive(robot, t, HOME_Q + dq, params=p, tau_load=np.zeros(6), link_inertia=JL,
+    res = simulate_drive(robot, t, HOME_Q + dq, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL,
                          flags=FF | DriveFlags.FRICTION | DriveFlags.BACKLASH)
     # zero crossings backwards (3 s) and forwards (5 s): same command, full speed, no acceleration
     e_back, e_fwd = around(t, res.error, 3.0), around(t, res.error, 5.0)
@@ -69,7 +70,7 @@ def test_lost_motion_is_backlash_plus_friction_windup_times_lever(robot, params)
     lever = math.hypot(*fk(robot, HOME_Q)[:2, 3])
     assert np.linalg.norm(pa - pb) == pytest.approx(expect * lever, rel=0.01)
     # the play alone: no backlash leaves the windup only
-    res0 = simulate_drive(robot, t, HOME_Q + dq, params=p, tau_load=np.zeros(6), link_inertia=JL,
+    res0 = simulate_drive(robot, t, HOME_Q + dq, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL,
                           flags=FF | DriveFlags.FRICTION)
     assert around(t, res0.error, 5.0)[0] - around(t, res0.error, 3.0)[0] == pytest.approx(2 * fc / p.c[0], rel=0.01)
 
@@ -81,9 +82,10 @@ def test_lost_motion_seeded_parameters(robot, params):
     fc = rng.uniform(5.0, 100.0, 6)
     c = rng.uniform(2e5, 3e6, 6)
     jl = JL * rng.uniform(0.5, 2.0, 6)     # within reach of each joint's loop gains
-    p = coulomb(params, fc, jl=jl)._replace(b=b, c=c, d=0.2 * np.sqrt(c * jl))
+    p, fp = coulomb(params, fc, jl=jl)
+    p = p._replace(b=b, c=c, d=0.2 * np.sqrt(c * jl))
     t, q = cosine(0.02, math.pi / 4, 10.2)     # slow: the flank impact's ringing has died at the crossings
-    res = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=jl,
+    res = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=jl,
                          flags=FF | DriveFlags.FRICTION | DriveFlags.BACKLASH)
     lost = around(t, res.error, 10.0) - around(t, res.error, 6.0)
     np.testing.assert_allclose(lost, b + 2 * fc / c, rtol=0.01)
@@ -139,17 +141,17 @@ def test_reversal_spike_order_of_magnitude_from_stiction_and_gains(robot, params
     (the error at breakaway) within a factor 2 (the error still grows while the motor catches up,
     more so for the heavy axes); without friction the error there is orders of magnitude smaller."""
     fc = np.array([80.0, 80.0, 55.0, 16.0, 16.0, 8.0])
-    p = coulomb(params, fc, side=FrictionSide.MOTOR)
+    p, fp = coulomb(params, fc, side=FrictionSide.MOTOR)
     A, w = 0.05, 2 * math.pi * 0.1          # reversal at t = 5 s, acceleration A w^2
     t, q = cosine(A, w, 6.0)
-    res = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=JL,
+    res = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL,
                          flags=FF | DriveFlags.FRICTION)
     win = (t > 4.8) & (t < 5.8)
     spike = np.abs(res.error[win]).max(axis=0)
     expect = np.array([_spike_closed_form(A * w * w, fc[j], fc[j], p.kv[j], p.kp[j], p.ki[j]) for j in range(6)])
     ratio = spike / expect
     assert np.all((ratio > 0.9) & (ratio < 2.0)), ratio
-    res0 = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=JL, flags=FF)
+    res0 = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL, flags=FF)
     assert np.all(np.abs(res0.error[win]).max(axis=0) < 0.01 * spike)
 
 
@@ -174,11 +176,11 @@ def test_gravity_preloaded_joint_keeps_its_flank_unloaded_one_crosses(robot, par
     through the velocity reversals; the unloaded one changes flank within 0.1 s after each reversal
     (the inertia torque J_l A w^2 = 32 Nm stays below the 60 Nm friction, so the transmitted torque
     changes sign with the velocity)."""
-    p = coulomb(params, 60.0)
+    p, fp = coulomb(params, 60.0)
     A, w = 0.02, math.pi / 2
     t, q = cosine(A, w, 6.6)
     load = np.array([0.0, 1500.0, 0.0, 0.0, 0.0, 0.0])
-    res = simulate_drive(robot, t, q, params=p, tau_load=load, link_inertia=JL,
+    res = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=load, link_inertia=JL,
                          flags=FF | DriveFlags.FRICTION | DriveFlags.BACKLASH)
     assert np.all(res.contact[:, 1] == Contact.POSITIVE)
     c0 = res.contact[:, 0]
@@ -197,7 +199,8 @@ def test_motor_side_friction_does_not_wind_up_the_gear(robot, params):
     t, q = cosine(0.02, math.pi / 2, 3.2)
     e = {}
     for side in (FrictionSide.MOTOR, FrictionSide.JOINT):
-        res = simulate_drive(robot, t, q, params=coulomb(params, 60.0, side=side), tau_load=np.zeros(6),
+        p, fp = coulomb(params, 60.0, side=side)
+        res = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6),
                              link_inertia=JL, flags=FF | DriveFlags.FRICTION)
         e[side] = around(t, res.error, 3.0)[0]
     assert abs(e[FrictionSide.MOTOR]) < 1e-7
@@ -206,11 +209,11 @@ def test_motor_side_friction_does_not_wind_up_the_gear(robot, params):
 
 def test_friction_feed_forward_reduces_the_spike(robot, params):
     """The NC's friction feed-forward (off by default) on the exact friction shrinks the reversal spike."""
-    p = coulomb(params, 80.0, side=FrictionSide.MOTOR)._replace(vs=np.full(6, 1e-3))
+    p, fp = coulomb(params, 80.0, side=FrictionSide.MOTOR, vs=1e-3)
     t, q = cosine(0.05, 2 * math.pi * 0.1, 6.0)
     win = (t > 4.8) & (t < 5.8)
-    off = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=JL, flags=FF | DriveFlags.FRICTION)
-    on = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=JL,
+    off = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL, flags=FF | DriveFlags.FRICTION)
+    on = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL,
                         flags=FF | DriveFlags.FRICTION | DriveFlags.FF_FRICTION)
     assert np.abs(on.error[win, 0]).max() < 0.5 * np.abs(off.error[win, 0]).max()
 
@@ -228,9 +231,13 @@ def test_load_torques_split_own_inertia(robot):
 
 
 def test_substeps_resolve_the_fastest_mode(params):
+    """Per joint: its gear mode and its velocity loop resolved at omega h <= OMEGA_H, and no finer."""
+    from simulate.robot.drive import OMEGA_H
+
     n = substeps_for(params, JL, T)
-    w = np.sqrt(params.c * (1 / params.jm + 1 / JL)).max()
-    assert w * T / n <= 0.1 and n >= 1
+    w = np.maximum(np.sqrt(params.c * (1 / params.jm + 1 / JL)), params.kp / params.jm)
+    assert np.all(w * T / n <= OMEGA_H) and np.all(n >= 1)
+    assert np.all(w * T / (n - 1) > OMEGA_H) or np.any(n == 1)
 
 
 def test_elasto_backlash_law():
@@ -311,6 +318,8 @@ def test_step_api_matches_simulate_drive(robot, params):
     """drive_init + drive_step called cycle by cycle (as a coupled loop does) reproduce simulate_drive;
     friction feed-forward is off by default (the NC does not know the friction)."""
     from simulate.robot.drive import CycleInput, command_velocity, drive_init, drive_step, new_state
+    from simulate.robot.friction import loop_friction
+    from simulate.robot.loop_friction import new_state as friction_state
 
     assert not DriveFlags.default() & DriveFlags.FF_FRICTION
     t, q = cosine(0.02, math.pi / 2, 1.0, q0=HOME_Q)
@@ -319,11 +328,13 @@ def test_step_api_matches_simulate_drive(robot, params):
     load = np.array([0.0, 1500.0, 300.0, 5.0, 10.0, 0.0])
     ref = simulate_drive(robot, t, q, params=params, tau_load=load, link_inertia=JL)
     st = new_state()
+    fp = loop_friction(robot)[0]
+    fst = friction_state(fp)
     flags = int(DriveFlags.default())
-    drive_init(params, st, q[0], v[0], load, load, JL, flags)
+    drive_init(params, st, fst, q[0], v[0], load, load, JL, flags)
     for k in range(1, len(t)):
         cy = CycleInput(q[k - 1], q[k], v[k - 1], v[k], a[k - 1], a[k], load, load, load, load, JL)
-        drive_step(params, st, cy, t[k] - t[k - 1], ref.substeps, flags)
+        drive_step(params, fp, st, fst, cy, t[k] - t[k - 1], ref.substeps, flags)
     np.testing.assert_allclose(st.q, ref.q[-1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(st.tau_s, ref.tau_gear[-1], rtol=1e-9, atol=1e-6)
     np.testing.assert_array_equal(st.contact, ref.contact[-1])
@@ -333,10 +344,10 @@ def test_friction_feed_forward_compensates_the_joint_side_windup(robot, params):
     """Joint-side Coulomb friction winds the gear by fc / c at constant speed; with the NC's friction
     feed-forward (exact model) the windup compensation removes it."""
     t, q = cosine(0.02, math.pi / 2, 3.2)
-    p = coulomb(params, 60.0)
+    p, fp = coulomb(params, 60.0)
     base = FF | DriveFlags.FRICTION
-    off = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=JL, flags=base)
-    on = simulate_drive(robot, t, q, params=p, tau_load=np.zeros(6), link_inertia=JL, flags=base | DriveFlags.FF_FRICTION)
+    off = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL, flags=base)
+    on = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL, flags=base | DriveFlags.FF_FRICTION)
     assert abs(around(t, off.error, 3.0)[0]) == pytest.approx(60.0 / p.c[0], rel=0.01)
     assert abs(around(t, on.error, 3.0)[0]) < 0.01 * 60.0 / p.c[0]
 

@@ -1,4 +1,4 @@
-"""Friction by reference: any saved identify model in the robot file feeds the servo; bad references
+"""Friction by reference: any saved identify model in the robot file feeds the drives; bad references
 are named by the robot file key."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from identify.errors import InputError
 from simulate.robot.friction import joint_rows, loop_friction
 from simulate.robot.model import FrictionSpec, load_robot, save_robot
-from simulate.robot.servo import CYCLE, simulate_servo
+from simulate.robot.drive import CYCLE, simulate_drive
 
 models = pytest.importorskip("identify.models")
 
@@ -38,14 +38,14 @@ def test_saved_lugre_model_equals_inline_parameters(robot, tmp_path):
     assert np.array_equal(a.kind, b.kind) and np.array_equal(a.scal, b.scal)
     assert sa[3]["source"] == "inline" and sb[3]["source"] == "models/axis4" and sb[3]["kind"] == "lugre"
     t, q = _motion()
-    ra = simulate_servo(robot, t, q)
-    rb = simulate_servo(ref_robot, t, q)
-    assert np.allclose(ra.q_act, rb.q_act, atol=1e-12)
+    ra = simulate_drive(robot, t, q)
+    rb = simulate_drive(ref_robot, t, q)
+    assert np.allclose(ra.q, rb.q, atol=1e-12)
 
 
-def test_a_static_model_drives_the_servo(robot, tmp_path):
-    """A Coulomb-viscous model (no LuGre form) is that joint's friction: at constant velocity the
-    integrator carries exactly mu + nu v (the closed form)."""
+def test_a_static_model_drives_the_drive(robot, tmp_path):
+    """A Coulomb-viscous model (no LuGre form) is that joint's friction: at constant velocity it is
+    exactly mu + nu v (the closed form), on the simulated link velocity."""
     _saved(models.CoulombViscous, {"mu": 10.0, "nu": 1.0}, tmp_path / "cv")
     fr = list(robot.friction)
     fr[1] = FrictionSpec(model=str(tmp_path / "cv"))
@@ -54,7 +54,7 @@ def test_a_static_model_drives_the_servo(robot, tmp_path):
     v = 0.1
     q = np.tile(np.array([0, 0.5, 0.2, 0, 0.5, 0]), (len(t), 1))
     q[:, 1] += v * t
-    res = simulate_servo(r2, t, q, backlash=False)
+    res = simulate_drive(r2, t, q, backlash=False)
     assert res.tau_friction[-1, 1] == pytest.approx(10.0 + 1.0 * v, rel=1e-6)
 
 

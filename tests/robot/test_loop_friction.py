@@ -80,3 +80,40 @@ def test_loop_friction_equals_the_models_predict(record, tmp_path, kind):
     # the same arithmetic: round-off; the LSTM's torch weights are float32 (the loop runs float64).
     # Run continuously instead of in the model's windows, the LSTM would be 1.2e-3 of its RMS off.
     assert err <= (1e-4 if kind == "lstm" else 1e-6) * rms
+
+
+def test_static_curve_is_the_held_velocity_steady_state_and_scales():
+    """static_friction (the NC's feed-forward curve) equals each form's friction after a long held
+    velocity (closed forms for coulomb-viscous and Stribeck, the relaxed bristles for LuGre and the
+    direction asymmetry of lugre-extended); scale_levels doubles it minus the viscous part; an LSTM
+    has no level to scale."""
+    from simulate.robot import loop_friction as lf
+
+    rows = []
+    for kind in (lf.FrictionKind.COULOMB_VISCOUS, lf.FrictionKind.STRIBECK, lf.FrictionKind.LUGRE,
+                 lf.FrictionKind.LUGRE_EXTENDED):
+        row = lf._empty()
+        row["kind"] = int(kind)
+        sc = row["scal"]
+        sc[[lf.FC, lf.FS, lf.VS, lf.DELTA, lf.S0, lf.S1, lf.NU, lf.MU]] = [30.0, 45.0, 0.05, 2.0, 1e5, 300.0, 8.0, 25.0]
+        if kind is lf.FrictionKind.LUGRE_EXTENDED:
+            sc[lf.ASYM], sc[lf.EXT_FLAGS] = 0.2, float(lf.EXT_ASYMMETRY)
+        rows.append(row)
+    p = lf.assemble(rows + [None, None])
+    n = 4000
+    for v in (0.02, -0.3):
+        for j in range(4):
+            st = lf.new_state(p)
+            out = lf.friction_series(p, j, st, np.full(n, v), np.zeros(n), np.zeros(n), np.full(n, 1e-3))
+            assert out[-1] == pytest.approx(lf.static_friction(p, j, v), rel=1e-9), (j, v)
+        expect = {0: 25.0 * np.sign(v) + 8.0 * v,
+                  1: np.sign(v) * (30.0 + 15.0 * np.exp(-(v / 0.05) ** 2)) + 8.0 * v}
+        for j, f in expect.items():
+            assert lf.static_friction(p, j, v) == pytest.approx(f, rel=1e-12)
+        p2 = lf.scale_levels(p, 2.0)
+        for j in range(4):
+            assert lf.static_friction(p2, j, v) - 8.0 * v == pytest.approx(2 * (lf.static_friction(p, j, v) - 8.0 * v),
+                                                                            rel=1e-12)
+    lstm = p._replace(kind=np.array([lf.FrictionKind.LSTM] + [0] * 5, np.int64))
+    with pytest.raises(ValueError):
+        lf.scale_levels(lstm, 2.0)

@@ -216,10 +216,10 @@ def test_options_answers_with_allow_and_the_job_union_is_one_of_with_a_discrimin
     schema = doc["paths"]["/jobs/{job_id}"]["get"]["responses"]["200"]["content"]["application/json"]["schema"]
     assert {s["$ref"].rsplit("/", 1)[1] for s in schema["oneOf"]} == {"SimulationJobStatus", "DiagnoseJobStatus",
                                                                       "ExplainJobStatus", "CompensationJobStatus",
-                                                                      "PlacementSearchJobStatus"}
+                                                                      "PlacementSearchJobStatus", "CircleJobStatus"}
     assert schema["discriminator"]["propertyName"] == "kind"
     assert set(schema["discriminator"]["mapping"]) == {"simulation", "diagnose", "explain", "compensation",
-                                                        "placement_search"}
+                                                        "placement_search", "circle"}
 
 
 def test_schemathesis_default_checks_over_the_served_schema_find_nothing(srv, tmp_path):
