@@ -20,7 +20,7 @@ motor_inertia      kg m^2       rotor (+ gear input) inertia, motor side
 stiffness          Nm/rad       joint (gear) stiffness; ``inf`` for a rigid joint
 backlash           rad          total gear play, joint side
 [joint.servo]                   ``kv`` [1/s], ``kp_vel`` [Nm s/rad], ``ki_vel`` [Nm/rad],
-                                ``ff_vel`` [-], ``ff_tau`` [-] (see :mod:`simulate.robot.servo`)
+                                ``ff_vel`` [-], ``ff_tau`` [-] (the cascaded control of :mod:`simulate.robot.drive`)
 [joint.drive]                   optional (all joints or none), the two-mass drive model
                                 (:mod:`simulate.robot.drive`): ``damping`` [Nm s/rad] gear
                                 damping, ``rated_torque`` [Nm] of the reducer,
