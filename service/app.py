@@ -549,7 +549,10 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         limits = settings.cost_limits()
         text, source = _program(body, limits)
         stock_text, stock_source = _stock(body)
-        _cost(body, text, source, stock_text, stock_source, body.spacing_mm, "spacing_mm", 1 + body.max_sims, limits)
+        from simulate.explain.pipeline import simulations_needed
+
+        _cost(body, text, source, stock_text, stock_source, body.spacing_mm, "spacing_mm",
+              simulations_needed(body.max_sims), limits)
         robot = _robot(body.robot)
         scan = _read_csv(body.scan_csv, "scan.csv")
         for col in ("feature", "x", "y", "z"):

@@ -9,7 +9,7 @@ from typing import Optional
 import typer
 from rich.table import Table
 
-from greybench.support import DATA_DIR, emit_json, guarded, out, progress, resolve_robot
+from greybench.support import DATA_DIR, check_cost, emit_json, guarded, out, progress, resolve_robot
 from identify.errors import InputError
 from simulate import defaults as DEFAULTS
 
@@ -46,6 +46,10 @@ def explain(
         raise InputError("must be >= 1", field="--max-sims")
     if out_dir is not None and out_dir.exists() and not out_dir.is_dir():
         raise InputError("output path exists and is not a folder", source=str(out_dir), field="--out")
+    from simulate.explain.pipeline import simulations_needed
+
+    # refused before any work: the nominal run, the re-machined sensitivities and the calibration
+    check_cost(program, None, spacing, simulations=simulations_needed(max_sims))
     rob = load_robot(resolve_robot(robot))
     setup = load_setup(program, pose, name, spacing=spacing * 1e-3, size=size)
     if is_table(measured):

@@ -113,6 +113,17 @@ def _feature_rows(cmp: PointComparison, piece, residual_after=None) -> dict | No
     return {r.name: (r.deviation, ts[r.name].deviation) for r in tm.rows}
 
 
+def simulations_needed(max_sims: int, causes: list[Cause] | None = None) -> int:
+    """Machining simulations :func:`explain_part` runs [-]: the nominal one, one per re-machined
+    sensitivity column (stiffness and backlash of every joint) and up to ``max_sims`` for the
+    calibration; for the cost check before any work."""
+    if causes is None:
+        again = 12   # stiffness and backlash of six joints (simulate.explain.causes.all_causes)
+    else:
+        again = sum(c.kind in ("stiffness", "backlash") for c in causes)
+    return 1 + again + max(1, int(max_sims))
+
+
 def explain_part(measured, robot: Robot, setup: PartSetup, *, nominal: PartSimulation | None = None,
                  causes: list[Cause] | None = None, max_sims: int = 3, advance=None) -> Explanation:
     """Run the whole explanation (module docstring).

@@ -240,7 +240,9 @@ def test_costly_machining_commands_are_refused_before_any_work(tmp_path):
     cases = [(["machine", "--program", str(ISO160), "--pose", str(ISO_POSES), "--name", "pose1",
                "--spacing", "0.01"], "--spacing"),
              (["rank-poses", "--program", str(ISO160), "--poses", str(ISO_POSES), "--spacing", "0.01"], "--spacing"),
-             (["machine", "--program", str(prog), "--pose", str(ISO_POSES), "--name", "pose1"], "--program")]
+             (["machine", "--program", str(prog), "--pose", str(ISO_POSES), "--name", "pose1"], "--program"),
+             (["explain", "--measured", str(tmp_path / "scan.csv"), "--program", str(ISO160), "--pose",
+               str(ISO_POSES), "--name", "pose1", "--spacing", "0.01"], "--spacing")]
     for args, option in cases:
         out = tmp_path / "out"
         t0 = time.perf_counter()
@@ -252,3 +254,13 @@ def test_costly_machining_commands_are_refused_before_any_work(tmp_path):
         if option == "--program":
             assert "line" in r.output and "mm/min" in r.output, r.output
     check_cost(ISO160, None, 1.0, simulations=4)   # within the limits: no error
+
+
+def test_explain_counts_every_simulation_it_runs():
+    """explain machines the part once, again for each joint's stiffness and backlash column, and up to
+    max_sims times for the calibration: the count its cost check uses."""
+    from simulate.explain.causes import Cause
+    from simulate.explain.pipeline import simulations_needed
+
+    assert simulations_needed(3) == 1 + 12 + 3
+    assert simulations_needed(2, [Cause("stiffness", 1), Cause("backlash", 2), Cause("tool_radius")]) == 1 + 2 + 2
