@@ -1,7 +1,6 @@
-"""Evaluation commands: ``rank-poses``, ``trace``; ``bench ranking`` (paper 3.8, 4, Table 2)."""
+"""Evaluation commands: ``rank-poses``, ``trace`` (paper 3.8, 4, Table 2)."""
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Optional
 
@@ -174,42 +173,6 @@ def trace_cmd(
         err.print("no machined surface near that point (stock surface or empty space)")
 
 
-def bench_ranking(
-    program: Path = typer.Option(Path(__file__).resolve().parents[2] / "data" / "programs" / "iso320.nc",
-                                 "--program", help="G-code program."),
-    poses: Path = typer.Option(Path(__file__).resolve().parents[2] / "data" / "poses" / "iso320.json", "--poses",
-                               help="Pose file (JSON) [m, rad]."),
-    spacing: float = typer.Option(DEFAULTS.RANKING_DEXEL_SPACING * 1e3, "--spacing",
-                                  help="Dexel spacing [mm] (coarser grids make the cutting force, hence the "
-                                       "deflection, jumpy)."),
-) -> None:
-    """Rank the poses with 2 and 1 worker processes, and with 2 plus the component re-runs (``--shares``, what
-    ``make demo`` runs): wall times [s] and ratios, one run each."""
-    from simulate.toolpath.placement import load_poses
-
-    placements = load_poses(poses)
-    robot_path = resolve_robot("max100")
-    settings = RankSettings(spacing=spacing * MM)
-    t = Table(title=f"bench ranking: {len(placements)} poses of {program.name}, dexel {spacing:g} mm "
-                    "(target <= 120 s on 2 cores)")
-    for c in ("workers", "component re-runs", "simulations", "wall \\[s]", "per simulation \\[s]", "ratio to 1 worker",
-              "best pose"):
-        t.add_column(c, justify="right")
-    rows = []
-    for w, sh in ((2, False), (1, False), (2, True)):
-        c0 = time.perf_counter()
-        r = rank_poses(program, robot_path, placements, settings=settings, workers=w, shares=sh)
-        n_sim = len(placements) * (1 + (len(COMPONENTS) if sh else 0))
-        rows.append((w, sh, n_sim, time.perf_counter() - c0, r.best))
-    base = next(x[3] / x[2] for x in rows if x[0] == 1)
-    for w, sh, n_sim, s, best in rows:
-        t.add_row(str(w), "yes" if sh else "no", str(n_sim), f"{s:.1f}", f"{s / n_sim:.1f}",
-                  f"{base / (s / n_sim):.2f}", best)
-    out.print(t)
-    out.print("ratio to 1 worker: simulations per second relative to the 1-worker run.")
-
-
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+def register(app: typer.Typer) -> None:
     app.command("rank-poses")(guarded(rank_poses_cmd))
     app.command("trace")(guarded(trace_cmd))
-    bench_app.command("ranking")(guarded(bench_ranking))
