@@ -44,8 +44,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.ndimage import median_filter
-from scipy.signal import butter, savgol_filter, sosfiltfilt, welch
 
 from identify.errors import InputError
 from identify.files import as_created
@@ -200,6 +198,9 @@ def choose_cutoff(t: np.ndarray, q: np.ndarray, margin: float = NOISE_MARGIN) ->
     cut-off is the lowest frequency above which the log-median-smoothed ``S`` stays below
     ``margin`` times the floor for an octave, within ``[10/duration, fs/4]``.
     """
+    from scipy.ndimage import median_filter  # scipy.signal/ndimage: seconds to import, only when deriving
+    from scipy.signal import welch
+
     dt = float(np.median(np.diff(t)))
     fs = 1.0 / dt
     n = q.size
@@ -243,6 +244,8 @@ def derive_derivatives(t: np.ndarray, q: np.ndarray, cutoff_hz: float | None = N
     qd, qdd : ndarray
         [rad/s], [rad/s^2] (m-based on linear axes).
     """
+    from scipy.signal import butter, savgol_filter, sosfiltfilt
+
     dt = float(np.median(np.diff(t)))
     fs = 1.0 / dt
     fc = choose_cutoff(t, q).cutoff_hz if cutoff_hz is None else float(cutoff_hz)

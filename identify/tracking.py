@@ -154,6 +154,11 @@ def load_tracked_model(ref: str) -> FrictionModel:
     return load_model(_find_model_folder(local))
 
 
+def load_any_model(ref: str) -> FrictionModel:
+    """A friction model from a saved folder or an MLflow model URI (``runs:/...``, ``models:/...``)."""
+    return load_tracked_model(ref) if is_tracked_ref(ref) else load_model(ref)
+
+
 # ---- plots -----------------------------------------------------------------------------
 def analyse_residual(record: AxisRecord, pred) -> ResidualAnalysis:
     """Residual analysis of a prediction ``pred`` [Nm] on ``record``: the residual

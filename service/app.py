@@ -18,6 +18,7 @@ import io
 import json
 import math
 import sqlite3
+import sys
 import threading
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -585,7 +586,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         return _status(request.app.state.manager.cancel(job_id))
 
     from service.compensation import add_routes as add_compensation_routes
-    add_compensation_routes(app, settings, keyed)
+    add_compensation_routes(app, settings, keyed, sys.modules[__name__])
     return app
 
 

@@ -328,12 +328,6 @@ def fit(
             out.print(f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}")
 
 
-def _load_any_model(ref: str) -> FrictionModel:
-    from identify.tracking import is_tracked_ref, load_tracked_model
-
-    return load_tracked_model(ref) if is_tracked_ref(ref) else load_model(ref)
-
-
 def predict(
     model_ref: str = typer.Option(..., "--model", help="Saved model folder, runs:/<run_id>/model or models:/<name>@<alias>."),
     data: Path = typer.Option(..., "--data", help="Axis record to predict (.csv/.parquet), or a robot log with --axis."),
@@ -355,7 +349,9 @@ def predict(
     without tau_rb co-identified an inertia J [kg m^2] and an offset c [Nm]:
     tau_pred = tau_friction_pred + J*qdd + c. The metrics compare tau_pred with tau."""
     _check_axis(axis)
-    est = _load_any_model(model_ref)
+    from identify.tracking import load_any_model
+
+    est = load_any_model(model_ref)
     rec = load_axis_record(data, axis, linear=getattr(est, "linear_", None) or None,
                            cutoff_hz=cutoff or getattr(est, "cutoff_hz_", None))
     if getattr(est, "linear_", False) != rec.linear:

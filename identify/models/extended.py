@@ -59,6 +59,7 @@ from identify.models.base import FrictionModel
 from identify.models.lugre import LuGre
 from identify.models.lugre_kernel import _advance, _initial_state, stribeck_level_scalar
 from identify.records import AxisRecord
+from identify.ripple import ripple_periodogram
 
 #: Extensions in their fixed order, with their coefficients and units.
 EXTENSIONS: dict[str, dict[str, str]] = {
@@ -167,8 +168,6 @@ class LuGreExtended(FrictionModel):
         if "position" in self.causes:
             order = self.ripple_order
             if order is None:
-                from identify.diagnosis import ripple_periodogram
-
                 order = ripple_periodogram(record.q, record.tau - baseline.predict(record)).best
             p["ripple_order"] = float(order)
         self.params_ = p
