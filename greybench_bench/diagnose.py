@@ -9,7 +9,8 @@ import typer
 from rich.table import Table
 
 from greybench.support import out, progress
-from identify.diagnosis import Cause, diagnose as run_diagnosis, save_diagnosis
+from identify.diagnosis import Cause, save_diagnosis
+from identify.diagnosis import diagnose as run_diagnosis
 from identify.diagnosis_cases import generated_cases, run_case
 
 
@@ -32,19 +33,19 @@ def confusion_table(rows: list[tuple[str, str]]) -> Table:
 def bench_diagnose(
     cases: int = typer.Option(36, "--cases", help="Generated cases for the confusion matrix [-]."),
     duration: float = typer.Option(25.0, "--duration", help="Length of each generated record [s] (1 kHz)."),
-    speed_samples: int = typer.Option(60_000, "--speed-samples", help="Samples of the timed train and test records [-]."),
+    speed_samples: int = typer.Option(60_000, "--speed-samples", help="Samples of the timed train and test records "
+                                                                      "[-]."),
     seed: int = typer.Option(0, "--seed", help="Seed of the case generator [-]."),
 ) -> None:
     """Confusion matrix over generated hidden-effect cases (2x..10x noise RMS) and the diagnosis time on
     60,000-sample train and test records (target <= 60 s on 2 cores)."""
     import tempfile
 
+    from greybench.support import DATA_DIR
     from identify.axis_limits import load_axis_limits
     from identify.plant import synthesize
     from identify.records import validate_frame
     from identify.trajectories import test_trajectory, universal_trajectory
-
-    from greybench.support import DATA_DIR
 
     limits = load_axis_limits(DATA_DIR / "robots" / "max100.toml", 1)
     tr, te = universal_trajectory(limits, duration=duration), test_trajectory(limits, duration=duration)
@@ -94,7 +95,8 @@ def bench_diagnose(
     for col in ("item", "measured", "target", "note"):
         table.add_column(col)
     table.add_row("right cause named (hidden effect)", f"{right}/{len(effect_rows)} = "
-                  f"{100 * right / max(len(effect_rows), 1):.1f} %", ">= 95 %", "identifiable effect RMS 2x..10x the 0.02 Nm noise")
+                  f"{100 * right / max(len(effect_rows), 1):.1f} "
+                  "%", ">= 95 %", "identifiable effect RMS 2x..10x the 0.02 Nm noise")
     table.add_row("clean records give none", f"{clean_ok}/{len(clean_rows)} = "
                   f"{100 * clean_ok / max(len(clean_rows), 1):.1f} %", ">= 95 %", "")
     if gains:
@@ -105,5 +107,6 @@ def bench_diagnose(
     timing = ", ".join(f"{k} {v:.1f} s" for k, v in res.timings.items())
     table.add_row(f"diagnose, {a.n} + {b.n} samples", f"{t_diag:.1f} s", "<= 60 s (2 cores)", timing)
     table.add_row("  + report, plots, models written", f"{t_save:.1f} s", "", f"cause named: {res.cause.value}")
-    table.add_row("  + MLflow logging of both runs", f"{t_track - t_save:.1f} s", "", "identify.tracking (pyfunc models)")
+    table.add_row("  + MLflow logging of both "
+                  "runs", f"{t_track - t_save:.1f} s", "", "identify.tracking (pyfunc models)")
     out.print(table)

@@ -25,7 +25,8 @@ def _bench_greybox(pass_samples: int, recurrent_samples: int, fit_samples: int, 
 
     limits = AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0)
     tr = universal_trajectory(limits, duration=pass_samples / 1000.0)
-    as_t = lambda x: torch.tensor(np.asarray(x, dtype=float), dtype=torch.float64)
+    def as_t(x):
+        return torch.tensor(np.asarray(x, dtype=float), dtype=torch.float64)
     qd, qdd, dt = as_t(tr.qd), as_t(tr.qdd), torch.full((tr.t.size,), 1e-3, dtype=torch.float64)
     y = as_t(np.sign(tr.qd) * 2.0 + 0.5 * tr.qd)
     net = GreyBoxLuGreNet(float(np.abs(tr.qd).max()), 1.0, 1.0, s0=1.7e4, s1=10.0, nu=0.5, J=0.5, c=0.05)
@@ -96,12 +97,15 @@ def bench_friction(
     pass_samples: int = typer.Option(100_000, "--pass-samples", help="Record length [samples] of the grey-box "
                                                                      "forward+backward timing."),
     recurrent_samples: int = typer.Option(3_000, "--recurrent-samples", help="Samples [count] the step-by-step "
-                                                                             "recurrent pass is timed on (scaled linearly)."),
+                                                                             "recurrent pass is timed on (scaled "
+                                                                             "linearly)."),
     greybox_fit_samples: int = typer.Option(60_000, "--greybox-fit-samples", help="UT record length [samples] of the "
-                                                                                  "full grey-box fit timing (0 skips)."),
+                                                                                  "full grey-box fit timing (0 "
+                                                                                  "skips)."),
     greybox_only: bool = typer.Option(False, "--greybox-only", help="Only the grey-box rows."),
     neighbour_samples: int = typer.Option(10_000, "--neighbour-samples", help="UT record length [samples] of the "
-                                                                              "fits beside a busy neighbour (0 skips)."),
+                                                                              "fits beside a busy neighbour (0 "
+                                                                              "skips)."),
 ) -> None:
     """LuGre simulation speed (samples/s) vs scipy solve_ivp (LSODA); GA + polish fit time;
     grey-box forward+backward time [ms] vs a step-by-step recurrent pass, and grey-box fit time [s]."""

@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
-
 import typer
 from rich.table import Table
 
@@ -167,12 +166,15 @@ def bench_realdata(
     data: Path = typer.Option(..., "--data", help="Folder with joint<J>_train.csv, joint<J>_test.csv (t [s], q [rad], "
                                                   "qd [rad/s], qdd [rad/s^2], tau [Nm], tau_rb [Nm]) and "
                                                   "published_friction_joint<J>_test.csv (t [s], tau_f [Nm])."),
-    models: str | None = typer.Option(None, "--models", help=f"Comma-separated models (default: {','.join(COMPARE_MODELS)})."),
-    joints: str | None = typer.Option(None, "--joints", help="Comma-separated joints (default: every joint in --data)."),
+    models: str | None = typer.Option(None, "--models", help="Comma-separated models (default: "
+                                                             f"{','.join(COMPARE_MODELS)})."),
+    joints: str | None = typer.Option(None, "--joints", help="Comma-separated joints (default: every joint in "
+                                                             "--data)."),
     epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] of the learned models "
                                                                 "(default: the benchmark's modest settings)."),
     seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
-    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "summary": {...}} (RMSE in Nm) as one JSON object.'),
+    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "summary": {...}} (RMSE in Nm) as one '
+                                                       'JSON object.'),
 ) -> None:
     """Fit every model type on every joint of a real log and print, per joint, the test RMSE [Nm] of
     tau - tau_rb - tau_friction_pred beside the published friction model's (same samples)."""
@@ -215,7 +217,8 @@ def bench_realdata(
     out.print(table)
     out.print("* at or below the published model", highlight=False)
     if "greybox_at_or_below_published" in summ:
-        line = f"grey-box at or below the published model on {summ['greybox_at_or_below_published']}/{summ['joints']} joints"
+        n_ok = summ["greybox_at_or_below_published"]
+        line = f"grey-box at or below the published model on {n_ok}/{summ['joints']} joints"
         if "residual_over_greybox_max" in summ:
             line += f"; residual / grey-box at most {summ['residual_over_greybox_max']:.3f} (goal <= 1.1)"
         out.print(line, highlight=False)

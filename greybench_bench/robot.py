@@ -88,12 +88,14 @@ def bench_robot(
     table = Table(title=f"bench robot ({r.name}), one run, 1 thread")
     for col in ("item", "per wall s", "per CPU s", "target", "ratio / note"):
         table.add_column(col)
-    table.add_row("batch IK (ik_nearest, numba)", f"{ik_rate[0] / 1e6:.2f} M poses/s", f"{ik_rate[1] / 1e6:.2f} M poses/s",
+    table.add_row("batch IK (ik_nearest, "
+                  "numba)", f"{ik_rate[0] / 1e6:.2f} M poses/s", f"{ik_rate[1] / 1e6:.2f} M poses/s",
                   ">= 1 M poses/s",
                   (f"{ik_rate[1] / ref[1]:.1f}x py-opw-kinematics (target >= 2x)" if ref else "py-opw missing")
                   + f"; FK(IK) max err {err:.1e} m")
     if ref:
-        table.add_row("py-opw-kinematics batch_inverse", f"{ref[0] / 1e6:.3f} M poses/s", f"{ref[1] / 1e6:.3f} M poses/s",
+        table.add_row("py-opw-kinematics "
+                      "batch_inverse", f"{ref[0] / 1e6:.3f} M poses/s", f"{ref[1] / 1e6:.3f} M poses/s",
                       "", f"{min(ref_poses, poses)} poses")
     table.add_row("RNEA (numba)", f"{rn_rate[0] / 1e6:.2f} M samples/s", f"{rn_rate[1] / 1e6:.2f} M samples/s",
                   ">= 0.5 M samples/s", f"{rn_rate[1] / 5e5:.1f}x target")

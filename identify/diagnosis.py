@@ -168,7 +168,7 @@ class References:
     temp: float
 
     @classmethod
-    def of(cls, record: AxisRecord) -> "References":
+    def of(cls, record: AxisRecord) -> References:
         load = float(np.mean(np.abs(record.tau_load))) if record.tau_load is not None else 0.0
         temp = float(np.mean(record.temp)) if record.temp is not None else 0.0
         return cls(load=load, temp=temp)
@@ -196,7 +196,7 @@ class BaselineParts:
     residual: np.ndarray
 
     @classmethod
-    def of(cls, model: FrictionModel, record: AxisRecord) -> "BaselineParts":
+    def of(cls, model: FrictionModel, record: AxisRecord) -> BaselineParts:
         friction = model.predict_friction(record)
         viscous = model.params_.get("nu", 0.0) * record.qd
         total = friction + model.rigid_part(record)
@@ -460,7 +460,7 @@ def _coefficients(cause: Cause, beta: np.ndarray, order: float) -> dict[str, flo
              Cause.POSITION: ["a_sin [Nm]", "a_cos [Nm]"], Cause.ASYMMETRY: ["asym [-]"],
              Cause.INERTIA: ["k_J [kg m^2/Nm]"], Cause.DRIFT: ["drift [Nm/s]"],
              Cause.GRAVITY: ["grav_cos [Nm]", "grav_sin [Nm]"]}[cause]
-    out = {n: float(b) for n, b in zip(names, beta)}
+    out = {n: float(b) for n, b in zip(names, beta, strict=True)}
     if cause is Cause.POSITION:
         out["order [1/rad]"] = order
     return out
@@ -654,7 +654,8 @@ def residual_plot(result: DiagnosisResult, test: AxisRecord, cause: Cause, path)
     fig, ax = plt.subplots(figsize=(8, 4.5))
     step = max(1, int(m.sum()) // 4000)
     ax.scatter(view.x[m][::step], before[m][::step], s=2, alpha=0.15, color="C0")
-    for y, lab, col in ((before, f"before: {result.baseline.name}", "C0"), (after, f"after: {result.extended_label}", "C3")):
+    for y, lab, col in ((before, f"before: {result.baseline.name}", "C0"),
+                        (after, f"after: {result.extended_label}", "C3")):
         xc, yc = _binned(view.x[m], y[m])
         ax.plot(xc, yc, "-o", ms=3, color=col, label=f"{lab} (binned mean)")
     ax.axhline(0.0, color="k", lw=0.6)
@@ -683,8 +684,10 @@ def _plain_words(cause: Cause, p: dict) -> str:
     if cause is Cause.POSITION:
         amp = float(np.hypot(p["ripple_sin"], p["ripple_cos"]))
         n = p["ripple_order"]
-        return (f"A torque ripple repeats with the joint position: order {n:.3f} per rad (period {2 * np.pi / n:.4f} rad), "
-                f"amplitude {amp:.4f} Nm, phase {np.arctan2(p['ripple_cos'], p['ripple_sin']):.2f} rad (gear meshing or "
+        return (f"A torque ripple repeats with the joint position: order {n:.3f} per rad (period {2 * np.pi / n:.4f} "
+                "rad), "
+                f"amplitude {amp:.4f} Nm, phase {np.arctan2(p['ripple_cos'], p['ripple_sin']):.2f} rad (gear meshing "
+                "or "
                 "cyclic transmission error). The baseline depends on velocity only and cannot see it.")
     if cause is Cause.ASYMMETRY:
         return (f"The friction is not the same in both directions: the levels for negative velocity are "
@@ -723,7 +726,8 @@ def render_report(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, 
              f"Training record `{train.source}` ({train.n} samples), test record `{test.source}` ({test.n} samples). "
              f"Baseline: conventional LuGre (GA + least squares, paper 2.2.1).", "", "## What was wrong", ""]
     if not a.causes:
-        lines.append(f"Nothing the candidates can name. No candidate explains more than {a.threshold * 1e3:.3g} {mu} RMS "
+        lines.append(f"Nothing the candidates can name. No candidate explains more than {a.threshold * 1e3:.3g} {mu} "
+                     "RMS "
                      f"of the held-out torque; the baseline's held-out residual is {result.baseline_test.rmse:.4f} Nm "
                      "RMS, which is what is left as noise (or as an effect none of the candidates describes).")
     for c in a.causes:
@@ -745,8 +749,10 @@ def render_report(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, 
         lines += ["", f"Position ripple order from the residual periodogram: {a.ripple.best:.3f} per rad."]
     lines += ["", "## What the extension bought", "",
               "| model | test RMSE [Nm] | train RMSE [Nm] |", "|---|---|---|",
-              f"| {result.baseline.name} | {result.baseline_test.rmse:.5f} | {result.baseline.train_metrics_.rmse:.5f} |",
-              f"| {result.extended_label} | {result.extended_test.rmse:.5f} | {result.extended.train_metrics_.rmse:.5f} |",
+              f"| {result.baseline.name} | {result.baseline_test.rmse:.5f} | {result.baseline.train_metrics_.rmse:.5f} "
+              "|",
+              f"| {result.extended_label} | {result.extended_test.rmse:.5f} | "
+              f"{result.extended.train_metrics_.rmse:.5f} |",
               "", f"Gain on the test record: **{result.gain * 100:+.1f} %** of the baseline's RMSE "
               "(relative reduction; negative would mean the extension predicts the held-out record worse).", ""]
     ext = result.extended.extension_parameters() if a.causes else {}
@@ -777,14 +783,15 @@ class SavedDiagnosis:
         MLflow run ids of the ``baseline`` and ``extended`` runs (empty when not tracked).
     """
 
-    directory: "object"
-    report: "object"
+    directory: object
+    report: object
     plots: list
     runs: dict[str, str]
 
 
 def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, directory, *,
-                   track: bool = True, experiment: str = "diagnose", extra_params: dict | None = None) -> SavedDiagnosis:
+                   track: bool = True, experiment: str = "diagnose",
+                   extra_params: dict | None = None) -> SavedDiagnosis:
     """Write the extended model, the baseline, ``report.md`` with plots and ``diagnosis.json``.
 
     Everything is staged in a temporary folder beside ``directory`` and renamed into place,

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from identify.diagnosis import CANDIDATES, diagnose as run_diagnosis
+from identify.diagnosis import CANDIDATES
+from identify.diagnosis import diagnose as run_diagnosis
 
 
 def effect_rms(effect: str, t, q, qd, qdd, seed: int, magnitude: float = 1.0, identifiable: bool = True) -> float:

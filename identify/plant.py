@@ -146,7 +146,7 @@ class PlantConfig:
     inertia_step: float = 0.3
     drift_rate: float = 0.006
 
-    def validate(self, source: str = "<config>") -> "PlantConfig":
+    def validate(self, source: str = "<config>") -> PlantConfig:
         positive = ("inertia", "s0", "fc", "fs", "vs", "delta", "substeps", "thermal_capacity", "thermal_resistance",
                     "load_period", "ripple_order")
         for name in positive:
@@ -163,7 +163,7 @@ class PlantConfig:
         return self
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> "PlantConfig":
+    def from_toml(cls, path: str | Path) -> PlantConfig:
         """Defaults overridden by the keys of a TOML file; unknown keys are refused."""
         p = Path(path)
         if not p.exists():

@@ -135,7 +135,7 @@ class AxisRecord:
         """Torque left for friction (+ inertia and offset when ``tau_rb`` is absent) [Nm]."""
         return self.tau - self.tau_rb if self.tau_rb is not None else self.tau
 
-    def slice(self, start: int, stop: int) -> "AxisRecord":
+    def slice(self, start: int, stop: int) -> AxisRecord:
         """A contiguous part of the record (e.g. a train/validation split)."""
         sl = slice(start, stop)
         opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl])
@@ -342,7 +342,8 @@ def split_unit_headers(df: pd.DataFrame, source: str) -> tuple[pd.DataFrame, dic
         if fam is not None:
             rot, lin = UNIT_CHOICES[fam]
             if unit not in rot + lin:
-                raise InputError(f"unit '{unit}' of column '{col}' is not SI: use {' or '.join(dict.fromkeys(rot + lin))}",
+                raise InputError(f"unit '{unit}' of column '{col}' is not SI: use "
+                                 f"{' or '.join(dict.fromkeys(rot + lin))}",
                                  source=source, field=str(col))
         rename[col] = name
         units[name] = unit

@@ -44,8 +44,8 @@ def ripple_periodogram(q: np.ndarray, r: np.ndarray, orders: tuple[float, float]
     For each order n the pair ``sin(n q), cos(n q)`` (plus a constant) is fitted by least
     squares and the explained share of variance recorded; the grid step is a quarter of
     the resolution ``2 pi / range(q)``, and the peak is refined on a 32x finer grid around
-    it and a parabola through the finest neighbours. Unlike an FFT it needs no uniform sampling in q (the trajectory dwells
-    near its centre).
+    it and a parabola through the finest neighbours. Unlike an FFT it needs no uniform sampling
+    in q (the trajectory dwells near its centre).
 
     Parameters
     ----------

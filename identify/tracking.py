@@ -29,6 +29,7 @@ challenger's test RMSE is lower.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 import warnings
@@ -173,7 +174,7 @@ def analyse_residual(record: AxisRecord, pred) -> ResidualAnalysis:
     return residual_analysis(record.tau - np.asarray(pred, dtype=float), record.qd, dt, max_lag=max_lag)
 
 
-def overlay_figure(record: AxisRecord, preds: dict[str, "object"], label: str):
+def overlay_figure(record: AxisRecord, preds: dict[str, object], label: str):
     """Measured torque and every model's prediction [Nm] over time on one record (top), their
     errors (bottom), and a zoom on the 2 s around the largest error (right)."""
     import matplotlib
@@ -210,7 +211,7 @@ def overlay_figure(record: AxisRecord, preds: dict[str, "object"], label: str):
     return fig
 
 
-def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> dict[str, "object"]:
+def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> dict[str, object]:
     """The three diagnostic figures of a fit on ``record`` (matplotlib, Agg).
 
     Returns a dict file name -> Figure: ``prediction_time.png`` (measured and predicted
@@ -299,10 +300,8 @@ def _pip_requirements() -> list[str]:
 
     reqs = []
     for pkg in ("torch", "numpy", "pandas", "scipy", "numba", "pygad", "mlflow"):
-        try:
+        with contextlib.suppress(PackageNotFoundError):
             reqs.append(f"{pkg}=={version(pkg)}")
-        except PackageNotFoundError:  # pragma: no cover
-            pass
     return reqs
 
 
@@ -328,10 +327,9 @@ def log_fit(model: FrictionModel, train: AxisRecord, test: AxisRecord | None = N
         Nest the run under this parent (``train-robot``).
     """
     mlflow = _mlflow()
+    import matplotlib.pyplot as plt
     from mlflow.entities import Metric
     from mlflow.tracking import MlflowClient
-
-    import matplotlib.pyplot as plt
 
     exp_id = ensure_experiment(experiment)
     tags = {"mlflow.parentRunId": parent_run_id} if parent_run_id else {}
@@ -550,11 +548,10 @@ def log_comparison(parent_run_id: str, models: dict[str, FrictionModel], record:
     prediction over the measurement) and ``plots/residual_analysis.png`` (all models' residual
     correlations with their bands). Returns the residual analyses by model name.
     """
-    mlflow = _mlflow()
+    _mlflow()  # configured tracking store
+    import matplotlib.pyplot as plt
     from mlflow.entities import Metric
     from mlflow.tracking import MlflowClient
-
-    import matplotlib.pyplot as plt
 
     client = MlflowClient()
     preds = {name: model.predict(record) for name, model in models.items()}

@@ -15,8 +15,8 @@ continuous acceleration (a C3 smoothstep window), and is sampled at ``rate`` [Hz
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import pandas as pd

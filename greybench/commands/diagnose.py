@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.markup import escape
@@ -10,14 +9,16 @@ from rich.table import Table
 
 from greybench.commands.friction import derivative_note, record_params
 from greybench.support import emit_json, guarded, out, progress
-from identify.diagnosis import SCORE_THRESHOLD, diagnose as run_diagnosis, save_diagnosis
+from identify.diagnosis import SCORE_THRESHOLD, save_diagnosis
+from identify.diagnosis import diagnose as run_diagnosis
 from identify.errors import InputError
 from identify.records import load_record
 
 
 def diagnose(
     train: Path = typer.Option(..., "--train", help="Training axis record (.csv/.parquet; t [s], q [rad], tau [Nm], "
-                                                      "optional qd [rad/s], qdd [rad/s^2], temp [degC], tau_load [Nm])."),
+                                                      "optional qd [rad/s], qdd [rad/s^2], temp [degC], tau_load "
+                                                      "[Nm])."),
     test: Path = typer.Option(..., "--test", help="Held-out axis record of the same joint (same columns, SI units)."),
     out_dir: Path = typer.Option(..., "--out", help="Output folder: the extended model (params.json), baseline/, "
                                                     "report.md with PNG plots, diagnosis.json."),
@@ -29,7 +30,7 @@ def diagnose(
                                          "other units)."),
     track: bool = typer.Option(True, "--track/--no-track", help="Log both models as runs of the MLflow experiment "
                                                                 "'diagnose' (gain [-] as a metric)."),
-    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
+    cutoff: float | None = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
                                                                    "qd/qdd (default: chosen from the training "
                                                                    "record's sampling rate and position spectrum)."),
     linear: bool = typer.Option(False, "--linear", help="A linear axis: q [m], qd [m/s], tau [N] (also declared by "

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.table import Table
@@ -77,7 +76,7 @@ def rank_poses_cmd(
     robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
     poses: Path = typer.Option(..., "--poses", help="Pose file (JSON): workpiece frame in the robot base frame "
                                                     "[m, rad]."),
-    out_dir: Optional[Path] = typer.Option(None, "--out", help="Output folder: report.md, images/, per pose "
+    out_dir: Path | None = typer.Option(None, "--out", help="Output folder: report.md, images/, per pose "
                                                                "scan.csv [m] and workpiece.npz."),
     spacing: float = typer.Option(DEFAULTS.RANKING_DEXEL_SPACING * 1e3, "--spacing",
                                   help="Dexel spacing [mm] (coarser grids make the cutting force, hence the "
@@ -132,7 +131,7 @@ def trace_cmd(
                                                             "or the .npz itself."),
     point: str = typer.Option(..., "--point", help="Point x,y,z [mm], workpiece frame."),
     radius: float = typer.Option(1.5, "--radius", help="Search radius around the point [mm]."),
-    program: Optional[Path] = typer.Option(None, "--program", help="G-code program to show line texts (default: "
+    program: Path | None = typer.Option(None, "--program", help="G-code program to show line texts (default: "
                                                                    "the one recorded in meta.json)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object with the lines and times."),
 ) -> None:

@@ -3,7 +3,6 @@ about a measured part, calibrate it, and measure the gain."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.table import Table
@@ -20,14 +19,14 @@ def explain(
                                                         "<stem>.stock.json [m] must sit next to it."),
     robot: str = typer.Option("max100", "--robot", help="Nominal robot: name in data/robots or a TOML path [SI]."),
     pose: Path = typer.Option(..., "--pose", help="Pose file (JSON) [m, rad]."),
-    name: Optional[str] = typer.Option(None, "--name", help="Pose name in the pose file (default: the first)."),
-    out_dir: Optional[Path] = typer.Option(None, "--out", help="Output folder: report.md with PNGs, the calibrated "
+    name: str | None = typer.Option(None, "--name", help="Pose name in the pose file (default: the first)."),
+    out_dir: Path | None = typer.Option(None, "--out", help="Output folder: report.md with PNGs, the calibrated "
                                                                "robot file robot_calibrated.toml, explain.json."),
     spacing: float = typer.Option(DEFAULTS.DEXEL_SPACING * 1e3, "--spacing",
                                   help="Dexel spacing of the simulation [mm]; use the spacing the scan was simulated "
                                        "at (greybench machine: the same default): a coarser grid alone differs by "
                                        "some micrometres, which explain would try to attribute to a cause."),
-    size: Optional[int] = typer.Option(None, "--size", help="Test piece size [mm] (160 or 320; default: size_mm of "
+    size: int | None = typer.Option(None, "--size", help="Test piece size [mm] (160 or 320; default: size_mm of "
                                                             "the stock file)."),
     max_sims: int = typer.Option(3, "--max-sims", help="Re-simulations for the calibration [-] (>= 1)."),
     as_json: bool = typer.Option(False, "--json", help='Print {"cause", "ranking", "calibrated", "rms_before", '

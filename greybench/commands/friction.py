@@ -6,7 +6,6 @@ import sys
 import time
 from enum import Enum
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import pandas as pd
@@ -17,7 +16,7 @@ from greybench.support import emit_json, err, guarded, out, progress, resolve_ro
 from identify.axis_limits import load_axis_limits
 from identify.errors import InputError
 from identify.metrics import Metrics
-from identify.models import MODELS, FrictionModel, load_model, make_model
+from identify.models import MODELS, FrictionModel, make_model
 from identify.plant import Effect, PlantConfig, synthesize
 from identify.records import load_record, read_table, validate_frame, write_table
 from identify.trajectories import TRAJECTORIES
@@ -73,7 +72,8 @@ def trajectory(
     robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
     duration: float = typer.Option(60.0, "--duration", help="Duration [s] (universal, test, presliding)."),
     rate: float = typer.Option(1000.0, "--rate", help="Sampling rate [Hz]."),
-    out_file: Path = typer.Option(..., "--out", help="Output table, .csv or .parquet: t [s], q [rad], qd [rad/s], qdd [rad/s^2]."),
+    out_file: Path = typer.Option(..., "--out", help="Output table, .csv or .parquet: t [s], q [rad], qd [rad/s], qdd "
+                                                     "[rad/s^2]."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object with the peaks."),
 ) -> None:
     """Generate an excitation trajectory within the axis's position, velocity [rad/s],
@@ -102,14 +102,17 @@ def trajectory(
 
 
 def synth(
-    trajectory_file: Path = typer.Option(..., "--trajectory", help="Trajectory table (t [s], q [rad], optional qd, qdd)."),
+    trajectory_file: Path = typer.Option(..., "--trajectory", help="Trajectory table (t [s], q [rad], optional qd, "
+                                                                   "qdd)."),
     out_file: Path = typer.Option(..., "--out", help="Output axis record, .csv or .parquet."),
     effect: Effect = typer.Option(Effect.NONE, "--effect", help="Hidden effect the plain LuGre model does not know."),
     magnitude: float = typer.Option(1.0, "--magnitude", help="Scale of the effect's strength (1 = default)."),
     seed: int = typer.Option(0, "--seed", help="Seed of noise, start temperature and load phase."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Plant parameters TOML (keys of PlantConfig, SI)."),
-    static_curve: Optional[str] = typer.Option(None, "--static-curve", help="stribeck | lorentzian | hump (overrides config)."),
-    noise: Optional[float] = typer.Option(None, "--noise", help="Torque noise standard deviation [Nm] (overrides config)."),
+    config: Path | None = typer.Option(None, "--config", help="Plant parameters TOML (keys of PlantConfig, SI)."),
+    static_curve: str | None = typer.Option(None, "--static-curve", help="stribeck | lorentzian | hump (overrides "
+                                                                         "config)."),
+    noise: float | None = typer.Option(None, "--noise", help="Torque noise standard deviation [Nm] (overrides "
+                                                             "config)."),
     positions_only: bool = typer.Option(False, "--positions-only", help="Write no qd/qdd (they must then be derived)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object describing the record."),
 ) -> None:
@@ -145,7 +148,7 @@ def synth(
 COMPARE_MODELS = ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox")
 
 
-def _check_axis(axis: Optional[int]) -> None:
+def _check_axis(axis: int | None) -> None:
     if axis is not None and axis < 1:
         raise InputError(f"axis must be >= 1, got {axis}", field="--axis")
 
@@ -162,8 +165,8 @@ def _log_axes(columns) -> list[int]:
     return sorted(axes)
 
 
-def load_axis_record(path: Path, axis: Optional[int], *, linear: Optional[bool] = None,
-                     cutoff_hz: Optional[float] = None):
+def load_axis_record(path: Path, axis: int | None, *, linear: bool | None = None,
+                     cutoff_hz: float | None = None):
     """An axis record from a file: a plain axis record, or joint ``axis`` of a robot log with any
     number of joints (``t, q1..qN, tau1..tauN``, optional ``qdN, qddN, tempN, tau_rbN, tau_loadN``;
     headers may declare units, ``q7 [m]``). ``linear`` declares a linear axis (m, N); ``cutoff_hz``
@@ -199,7 +202,7 @@ def load_axis_record(path: Path, axis: Optional[int], *, linear: Optional[bool] 
     return rec
 
 
-def _make(model: str, seed: int, epochs: Optional[int]) -> FrictionModel:
+def _make(model: str, seed: int, epochs: int | None) -> FrictionModel:
     if model not in MODELS:
         raise InputError(f"unknown model '{model}' (known: {', '.join(MODELS)})", field="--model")
     hp = MODELS[model]().get_hyperparameters()
@@ -223,7 +226,7 @@ def _robot_name(robot: str) -> str:
 GRAVITY_SHARE = 0.02
 
 
-def coupling_warnings(record, robot: str, axis: Optional[int]) -> list[str]:
+def coupling_warnings(record, robot: str, axis: int | None) -> list[str]:
     """Why a record without ``tau_rb`` would mix the arm's torques into the friction (empty when
     it has ``tau_rb``): the robot model says gravity loads the axis (its torque varies over the
     joint limits), or the robot log moves other joints (their coupling loads this one)."""
@@ -259,26 +262,30 @@ def fit(
     model: str = typer.Option(..., "--model", help=f"Model name: {', '.join(MODELS)}."),
     train: Path = typer.Option(..., "--train", help="Training axis record, or robot log (t, q1..qN, tau1..tauN) with "
                                                     "--axis (.csv/.parquet; SI: t [s], q [rad], tau [Nm], ...)."),
-    test: Optional[Path] = typer.Option(None, "--test", help="Test record (same format) for held-out metrics [Nm]."),
-    out_dir: Optional[Path] = typer.Option(None, "--out", help="Folder for the fitted model (params.json with units, "
+    test: Path | None = typer.Option(None, "--test", help="Test record (same format) for held-out metrics [Nm]."),
+    out_dir: Path | None = typer.Option(None, "--out", help="Folder for the fitted model (params.json with units, "
                                                                "+ model files); the MLflow run holds it too."),
-    axis: Optional[int] = typer.Option(None, "--axis", help="Joint N >= 1 (picks q<N>, tau<N> [rad, Nm; m, N when "
+    axis: int | None = typer.Option(None, "--axis", help="Joint N >= 1 (picks q<N>, tau<N> [rad, Nm; m, N when "
                                                             "linear] from a robot log with any number of joints; "
                                                             "names the registered model). Default 1."),
     robot: str = typer.Option("max100", "--robot", help="Robot name or file; names the registered model."),
-    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
+    cutoff: float | None = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
                                                                    "qd/qdd (default: chosen from each record's "
                                                                    "sampling rate and position spectrum)."),
     linear: bool = typer.Option(False, "--linear", help="A linear axis: q [m], qd [m/s], tau [N] (also declared by "
                                                         "record headers such as 'q [m]', 'tau [N]')."),
     seed: int = typer.Option(0, "--seed", help="Random seed of the identification (GA, torch)."),
-    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models (default per model)."),
+    epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models (default per "
+                                                             "model)."),
     experiment: str = typer.Option("friction", "--experiment", help="MLflow experiment name."),
     track: bool = typer.Option(True, "--track/--no-track", help="Record the fit as an MLflow run (default on)."),
-    register: bool = typer.Option(True, "--register/--no-register", help="Register the model as <robot>-axis<N>-friction "
-                                                                         "with alias challenger (greybench promote makes "
+    register: bool = typer.Option(True, "--register/--no-register", help="Register the model as "
+                                                                         "<robot>-axis<N>-friction "
+                                                                         "with alias challenger (greybench promote "
+                                                                         "makes "
                                                                          "the champion)."),
-    as_json: bool = typer.Option(False, "--json", help='Print {"model", "params", "train", "test", "run"} as one JSON object.'),
+    as_json: bool = typer.Option(False, "--json", help='Print {"model", "params", "train", "test", "run"} as one JSON '
+                                                       'object.'),
 ) -> None:
     """Fit a friction model (co-identifying inertia J [kg m^2] and offset c [Nm] unless the
     record has tau_rb [Nm]); track it in MLflow, save it, print RMSE [Nm], R^2, NRMSE, max error [Nm]."""
@@ -329,14 +336,17 @@ def fit(
 
 
 def predict(
-    model_ref: str = typer.Option(..., "--model", help="Saved model folder, runs:/<run_id>/model or models:/<name>@<alias>."),
-    data: Path = typer.Option(..., "--data", help="Axis record to predict (.csv/.parquet), or a robot log with --axis."),
+    model_ref: str = typer.Option(..., "--model", help="Saved model folder, runs:/<run_id>/model or "
+                                                       "models:/<name>@<alias>."),
+    data: Path = typer.Option(..., "--data", help="Axis record to predict (.csv/.parquet), or a robot log with "
+                                                  "--axis."),
     out_file: Path = typer.Option(..., "--out", help="Output table: the input columns plus tau_friction_pred [Nm] "
                                                      "(the friction) and tau_pred [Nm] (the total joint torque: "
                                                      "tau_friction_pred + tau_rb when the model was fitted with "
                                                      "tau_rb, else tau_friction_pred + J*qdd + c)."),
-    axis: Optional[int] = typer.Option(None, "--axis", help="Joint N >= 1 when --data is a robot log (t, q1..qN, tau1..tauN)."),
-    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
+    axis: int | None = typer.Option(None, "--axis", help="Joint N >= 1 when --data is a robot log (t, q1..qN, "
+                                                         "tau1..tauN)."),
+    cutoff: float | None = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
                                                                    "(default: the one the model was fitted with, "
                                                                    "else chosen from the record)."),
     as_json: bool = typer.Option(False, "--json", help="Print metrics as one JSON object."),
@@ -371,7 +381,7 @@ def predict(
         out.print(_metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"]))
 
 
-def _parse_models(models: Optional[str]) -> list[str]:
+def _parse_models(models: str | None) -> list[str]:
     if not models:
         return list(COMPARE_MODELS)
     names = [m.strip() for m in models.split(",") if m.strip()]
@@ -387,15 +397,18 @@ def _parse_models(models: Optional[str]) -> list[str]:
 
 def compare(
     train: Path = typer.Option(..., "--train", help="Training axis record (or robot log with --axis), SI units."),
-    test: Path = typer.Option(..., "--test", help="Test axis record (same format); the table is sorted by its RMSE [Nm]."),
-    models: Optional[str] = typer.Option(None, "--models", help=f"Comma-separated models (default: {','.join(COMPARE_MODELS)})."),
-    axis: Optional[int] = typer.Option(None, "--axis", help="Joint N >= 1 (robot logs; recorded in the runs)."),
-    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
+    test: Path = typer.Option(..., "--test", help="Test axis record (same format); the table is sorted by its RMSE "
+                                                  "[Nm]."),
+    models: str | None = typer.Option(None, "--models", help="Comma-separated models (default: "
+                                                             f"{','.join(COMPARE_MODELS)})."),
+    axis: int | None = typer.Option(None, "--axis", help="Joint N >= 1 (robot logs; recorded in the runs)."),
+    cutoff: float | None = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
                                                                    "(default: chosen from the training record)."),
     linear: bool = typer.Option(False, "--linear", help="A linear axis: q [m], tau [N]."),
     robot: str = typer.Option("max100", "--robot", help="Robot name or file (recorded in the runs)."),
     seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
-    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for the learned models (default per model)."),
+    epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] for the learned models (default per "
+                                                             "model)."),
     experiment: str = typer.Option("compare", "--experiment", help="MLflow experiment holding the runs."),
     track: bool = typer.Option(True, "--track/--no-track", help="Record every fit as an MLflow run (default on)."),
     as_json: bool = typer.Option(False, "--json", help='Print {"rows": [...]} sorted by test RMSE as one JSON object.'),
@@ -468,12 +481,13 @@ def train_robot(
     log: Path = typer.Option(..., "--log", help="Six-axis log: t [s], q1..q6 [rad], tau1..tau6 [Nm] (.csv/.parquet)."),
     robot: str = typer.Option("max100", "--robot", help="Robot name (data/robots) or robot file (.toml)."),
     model: str = typer.Option("greybox", "--model", help=f"Model name: {', '.join(MODELS)}."),
-    test: Optional[Path] = typer.Option(None, "--test", help="Six-axis test log (same format) for test metrics [Nm]."),
+    test: Path | None = typer.Option(None, "--test", help="Six-axis test log (same format) for test metrics [Nm]."),
     axes: str = typer.Option("1,2,3,4,5,6", "--axes", help="Comma-separated joints 1..6 to fit."),
     seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
-    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models."),
+    epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models."),
     experiment: str = typer.Option("train-robot", "--experiment", help="MLflow experiment name."),
-    register: bool = typer.Option(True, "--register/--no-register", help="Register each axis as <robot>-axis<N>-friction."),
+    register: bool = typer.Option(True, "--register/--no-register", help="Register each axis as "
+                                                                         "<robot>-axis<N>-friction."),
     as_json: bool = typer.Option(False, "--json", help='Print {"parent_run_id", "axes": [...]} as one JSON object.'),
 ) -> None:
     """Fit one friction model per robot axis from a six-axis log (split by ``greybench prepare``:

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import pandas as pd
@@ -14,8 +13,14 @@ from identify.errors import InputError
 from simulate.robot.kinematics import IKStatus, fk, ik_nearest, ik_path
 from simulate.robot.model import load_robot
 from simulate.robot.prepare import prepare_log
-from simulate.robot.tables import (JOINT_COLUMNS, frame_from_poses, numeric_columns, poses_from_frame, read_table,
-                                   write_table)
+from simulate.robot.tables import (
+    JOINT_COLUMNS,
+    frame_from_poses,
+    numeric_columns,
+    poses_from_frame,
+    read_table,
+    write_table,
+)
 
 robot_app = typer.Typer(no_args_is_help=True, help="Robot kinematics: poses (m, unit quaternion) <-> joints (rad).")
 
@@ -65,7 +70,7 @@ def ik_cmd(
     robot: str = typer.Option("max100", "--robot", help="Robot name (data/robots) or robot file (.toml)."),
     in_file: Path = typer.Option(..., "--in", help="Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, qz."),
     out_file: Path = typer.Option(..., "--out", help="Joint table (.csv/.parquet): q1..q6 (rad), ok, status."),
-    q_start: Optional[str] = typer.Option(None, "--q-start",
+    q_start: str | None = typer.Option(None, "--q-start",
                                           help="Start configuration 'q1,..,q6' (rad); default: mid of the limits "
                                                "for axes 2, 3, 5 (0 for 1, 4, 6)."),
     independent: bool = typer.Option(False, "--independent",

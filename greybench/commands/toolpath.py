@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import pandas as pd
@@ -61,8 +60,9 @@ def testpiece(
 def interpolate_cmd(
     program: Path = typer.Option(..., "--program", help="G-code program (lengths in mm or inch as programmed)."),
     robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
-    pose: Path = typer.Option(..., "--pose", help="Pose file (JSON): workpiece frame in the robot base frame [m, rad]."),
-    name: Optional[str] = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
+    pose: Path = typer.Option(..., "--pose", help="Pose file (JSON): workpiece frame in the robot base frame [m, "
+                                                  "rad]."),
+    name: str | None = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
     out_file: Path = typer.Option(..., "--out", help="Output .csv or .parquet: t [s], line, x y z [m], q1..q6 [rad], "
                                                      "qd1..qd6 [rad/s], switch."),
     acceleration: float = typer.Option(2.0, "--acceleration", help="Path acceleration limit A [m/s^2]."),

@@ -62,7 +62,7 @@ class FrictionModel:
         return {k: v for k, v in vars(self).items() if not k.endswith("_") and not k.startswith("_")}
 
     # ---- fitting ---------------------------------------------------------------------
-    def fit(self, record: AxisRecord) -> "FrictionModel":
+    def fit(self, record: AxisRecord) -> FrictionModel:
         """Identify the model on a training record; returns self."""
         self.rigid_ = record.tau_rb is None
         self.linear_ = bool(record.linear)
@@ -180,7 +180,7 @@ class FrictionModel:
         pass
 
     @classmethod
-    def from_document(cls, doc: dict, directory: Path) -> "FrictionModel":
+    def from_document(cls, doc: dict, directory: Path) -> FrictionModel:
         model = cls(**doc.get("hyperparameters", {}))
         model.rigid_ = bool(doc["rigid"])
         model.linear_ = bool(doc.get("linear", False))
@@ -193,7 +193,7 @@ class FrictionModel:
         return model
 
     @classmethod
-    def load(cls, directory: str | os.PathLike) -> "FrictionModel":
+    def load(cls, directory: str | os.PathLike) -> FrictionModel:
         doc = read_params(directory)
         if doc["model"] != cls.name:
             raise InputError(f"holds a '{doc['model']}' model, not '{cls.name}'", source=str(directory), field="model")

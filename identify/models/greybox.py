@@ -254,7 +254,8 @@ def forward_recurrent(net: GreyBoxLuGreNet, qd: torch.Tensor, qdd: torch.Tensor,
 
 def record_tensors(record: AxisRecord) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """(qd, qdd, dt, friction target) of a record as float64 tensors."""
-    as_t = lambda x: torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)
+    def as_t(x):
+        return torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)
     return as_t(record.qd), as_t(record.qdd), as_t(record.dt), as_t(record.friction_target)
 
 

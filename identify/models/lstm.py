@@ -34,7 +34,7 @@ from torch import nn
 
 from identify.errors import InputError
 from identify.models.base import FrictionModel
-from identify.models.sequence_features import DEFAULT_PLAY_WIDTHS, FeatureScales, TANH_VELOCITY, sequence_features
+from identify.models.sequence_features import DEFAULT_PLAY_WIDTHS, TANH_VELOCITY, FeatureScales, sequence_features
 from identify.records import AxisRecord
 from identify.training import TrainingHistory, count_parameters, deterministic, torch_threads, train
 
@@ -138,7 +138,7 @@ class WindowLayout:
     scored: np.ndarray
 
     @classmethod
-    def of(cls, n: int, window: int, warmup: int) -> "WindowLayout":
+    def of(cls, n: int, window: int, warmup: int) -> WindowLayout:
         count = max(1, -(-n // window))
         pos = np.arange(count)[:, None] * window + np.arange(warmup + window)[None, :] - warmup
         scored = (pos >= 0) & (pos < n)

@@ -105,7 +105,8 @@ class ResidualLuGre(FrictionModel):
         f = lugre_stribeck(qd, np.ascontiguousarray(record.dt, dtype=float), p["s0"], p["s1"], p["nu"], p["fc"],
                            p["fs"], p["vs"], p["delta"], z) + self.base_.offset()
         g = self.base_.static_curve(qd)
-        as_t = lambda x: torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)
+        def as_t(x):
+            return torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)
         return as_t(qd), as_t(p["s0"] * z / g), as_t(f)
 
     def _fit(self, record: AxisRecord) -> None:

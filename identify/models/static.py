@@ -72,7 +72,8 @@ class Stribeck(FrictionModel):
     def _solve_linear(self, record, log_vs, delta):
         shape = np.sign(record.qd) * np.exp(-np.abs(record.qd / 10.0**log_vs) ** delta)
         cols = [np.sign(record.qd), shape, record.qd] + _rigid_columns(record, self.rigid_)
-        return _bounded_lsq(cols, record.friction_target, [True, True, True] + ([True, False] if self.rigid_ else [False]))
+        nonneg = [True, True, True] + ([True, False] if self.rigid_ else [False])
+        return _bounded_lsq(cols, record.friction_target, nonneg)
 
     def _fit(self, record: AxisRecord) -> None:
         lo = np.log10(self.vs_bounds)
@@ -84,7 +85,8 @@ class Stribeck(FrictionModel):
         log_vs = float(np.clip(res.x[0], *lo))
         delta = float(np.clip(res.x[1], *self.delta_bounds))
         x, _ = self._solve_linear(record, log_vs, delta)
-        self.params_ = {"fc": float(x[0]), "fs": float(x[0] + x[1]), "vs": 10.0**log_vs, "delta": delta, "nu": float(x[2])}
+        self.params_ = {"fc": float(x[0]), "fs": float(x[0] + x[1]), "vs": 10.0**log_vs, "delta": delta,
+                        "nu": float(x[2])}
         if self.rigid_:
             self.params_.update(J=float(x[3]), c=float(x[4]))
         else:
