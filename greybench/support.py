@@ -47,7 +47,7 @@ class _Console(Console):
 
     @size.setter
     def size(self, new_size) -> None:  # pragma: no cover - rich's own setter
-        Console.size.fset(self, new_size)
+        Console.size.fset(self, new_size)  # type: ignore[attr-defined]  # a property; its setter
 
 
 out = _Console()
@@ -135,7 +135,8 @@ class _PlainAdvance(Advance):
     at the end."""
 
     def __init__(self, description: str, total: float | None, interval: float) -> None:
-        self.description, self.stage, self.total, self.interval = description, None, total, interval
+        self.description, self.total, self.interval = description, total, interval
+        self.stage: str | None = None
         self.done = 0.0
         self.t0 = self.last = time.monotonic()
         self.lock = threading.Lock()

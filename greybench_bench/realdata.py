@@ -21,10 +21,10 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from greybench.commands.friction import COMPARE_MODELS, _parse_models
+from greybench.commands.friction import COMPARE_MODELS
 from greybench.support import emit_json, out, progress
 from identify.errors import InputError
-from identify.models import make_model
+from identify.models import make_model, parse_model_names
 from identify.records import load_record, read_table
 
 #: Model types in the order of the table.
@@ -108,7 +108,7 @@ def _rmse(x: np.ndarray) -> float:
 
 
 def run_joint(data: Path, joint: int, models=MODELS, *, seed: int = 0, epochs: int | None = None,
-              advance: Callable[[float], None] = lambda n=1: None) -> JointResult:
+              advance: Callable[[float], None] | None = None) -> JointResult:
     """Fit ``models`` on one joint's training record and score them on its test record."""
     data = Path(data)
     train = load_record(data / f"joint{joint}_train.csv")
@@ -135,7 +135,8 @@ def run_joint(data: Path, joint: int, models=MODELS, *, seed: int = 0, epochs: i
         res.fit_time[name] = time.perf_counter() - t0
         friction, _ = est.predict_parts(test)
         res.rmse[name] = _rmse(y - friction)
-        advance(1)
+        if advance is not None:
+            advance(1)
     return res
 
 
@@ -153,7 +154,7 @@ def _one_torch_thread() -> None:
 def summary(results: list[JointResult], grey: str = "greybox", residual: str = "residual") -> dict:
     """The benchmark's goals: grey-box at or below the published model on every joint, the
     residual model within 1.1x of the grey-box."""
-    out = {}
+    out: dict[str, float] = {}
     if results and grey in results[0].rmse:
         out["greybox_at_or_below_published"] = sum(r.rmse[grey] <= r.published for r in results)
         out["joints"] = len(results)
@@ -178,7 +179,7 @@ def bench_realdata(
 ) -> None:
     """Fit every model type on every joint of a real log and print, per joint, the test RMSE [Nm] of
     tau - tau_rb - tau_friction_pred beside the published friction model's (same samples)."""
-    names = _parse_models(models)
+    names = parse_model_names(models, COMPARE_MODELS, "--models")
     found = joints_in(data)
     if joints:
         try:

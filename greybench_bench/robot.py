@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 import typer
@@ -44,7 +45,7 @@ def bench_robot(
     q = rng.uniform(r.lower, r.upper, size=(poses, 6))
     T = fk(r, q)
     ik_nearest(r, T[:100], q[0])   # compile / load cache
-    box = {}
+    box: dict[str, Any] = {}
     with progress("batch IK", enabled=not as_json):
         ik_w, ik_c = _timed(lambda: box.update(res=ik_nearest(r, T, q[0])))
     res = box["res"]

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 import typer
@@ -40,7 +41,8 @@ def bench_toolpath(
         t_int, t_ik = min(t_int, t1 - t0), min(t_ik, t2 - t1)
     n = len(ip)
     rows = {"interpolation": t_int, "inverse kinematics + qd + switching": t_ik, "together": t_int + t_ik}
-    res = {name: {"seconds": s, "points_per_s": n / s, "us_per_point": s / n * 1e6} for name, s in rows.items()}
+    res: dict[str, Any] = {name: {"seconds": s, "points_per_s": n / s, "us_per_point": s / n * 1e6}
+                           for name, s in rows.items()}
     res["points"] = n
     res["segments"] = len(prog.segments)
     res["target_points_per_s"] = 1e6

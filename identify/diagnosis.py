@@ -73,15 +73,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from identify.errors import InputError
-from identify.files import as_created
+from identify.files import atomic_folder
 from identify.metrics import Metrics
 from identify.models.base import FrictionModel
-from identify.records import AxisRecord
+from identify.records import AxisRecord, markdown_table
 from identify.ripple import RIPPLE_ORDERS, Periodogram, ripple_periodogram
+
+if TYPE_CHECKING:
+    from identify.models.extended import LuGreExtended
 
 
 class Cause(str, Enum):
@@ -226,13 +230,6 @@ def _refine_order(p: Periodogram, q: np.ndarray, base: np.ndarray, r: np.ndarray
     return Periodogram(orders=p.orders, power=p.power, best=best, resolved=p.resolved)
 
 
-def _column(record: AxisRecord, name: str) -> np.ndarray:
-    val = getattr(record, name)
-    if val is None:
-        raise InputError(f"the column '{name}' is needed and missing", source=record.source, field=name)
-    return val
-
-
 def base_regressors(record: AxisRecord, parts: BaselineParts, rigid: bool) -> np.ndarray:
     """The base set every candidate is tested with: ``F_dry, qd, 1`` (+ ``qdd`` when rigid); the
     offset is in both cases, as the baseline co-identifies it with or without ``tau_rb``."""
@@ -247,9 +244,9 @@ def candidate_regressors(cause: Cause, record: AxisRecord, parts: BaselineParts,
                          ripple_order: float | None = None) -> np.ndarray:
     """The physically structured regressors of one cause (module docstring table), (n, k) [Nm-scaled]."""
     if cause is Cause.LOAD:
-        return ((np.abs(_column(record, "tau_load")) - refs.load) * parts.dry)[:, None]
+        return ((np.abs(record.require("tau_load")) - refs.load) * parts.dry)[:, None]
     if cause is Cause.TEMPERATURE:
-        dT = _column(record, "temp") - refs.temp
+        dT = record.require("temp") - refs.temp
         return np.column_stack([dT * record.qd, dT * parts.dry])
     if cause is Cause.POSITION:
         if ripple_order is None:
@@ -258,7 +255,7 @@ def candidate_regressors(cause: Cause, record: AxisRecord, parts: BaselineParts,
     if cause is Cause.ASYMMETRY:
         return (parts.dry * (record.qd < 0))[:, None]
     if cause is Cause.INERTIA:
-        return ((np.abs(_column(record, "tau_load")) - refs.load) * record.qdd)[:, None]
+        return ((np.abs(record.require("tau_load")) - refs.load) * record.qdd)[:, None]
     if cause is Cause.DRIFT:
         return (record.t - record.t[0])[:, None]
     if cause is Cause.GRAVITY:
@@ -507,7 +504,7 @@ class DiagnosisResult:
 
     analysis: ResidualAnalysis
     baseline: FrictionModel
-    extended: FrictionModel
+    extended: LuGreExtended
     baseline_test: Metrics
     extended_test: Metrics
     gain: float
@@ -611,17 +608,17 @@ def variable_view(cause: Cause, record: AxisRecord) -> VariableView:
     u = record.units
     moving = np.abs(record.qd) > MOVING_SHARE * float(np.max(np.abs(record.qd)))
     if cause is Cause.LOAD:
-        return VariableView(np.abs(record.tau_load), f"|tau_load| [{u['tau_load']}]", "sgn(qd)", moving,
+        return VariableView(np.abs(record.require("tau_load")), f"|tau_load| [{u['tau_load']}]", "sgn(qd)", moving,
                             np.sign(record.qd))
     if cause is Cause.TEMPERATURE:
-        return VariableView(record.temp, "temperature [degC]", "sgn(qd)", moving, np.sign(record.qd))
+        return VariableView(record.require("temp"), "temperature [degC]", "sgn(qd)", moving, np.sign(record.qd))
     if cause in (Cause.POSITION, Cause.GRAVITY):
         return VariableView(record.q, f"q [{u['q']}]", "1", all_, ones)
     if cause is Cause.ASYMMETRY:
         return VariableView(record.qd, f"qd [{u['qd']}]", "1", all_, ones)
     if cause is Cause.INERTIA:
         acc = np.abs(record.qdd) > 0.1 * np.max(np.abs(record.qdd))
-        return VariableView(np.abs(record.tau_load), f"|tau_load| [{u['tau_load']}]", "sgn(qdd)", acc,
+        return VariableView(np.abs(record.require("tau_load")), f"|tau_load| [{u['tau_load']}]", "sgn(qdd)", acc,
                             np.sign(record.qdd))
     return VariableView(record.t, "t [s]", "1", all_, ones)
 
@@ -740,26 +737,23 @@ def render_report(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, 
               "a drift is additive; load scales the friction levels, an inertia error scales the acceleration. "
               "After the best candidate is accepted the others are re-scored *given* it, so a candidate that only "
               f"echoes the accepted one scores about zero. Threshold: {a.threshold * 1e3:.3g} {mu} "
-              f"({SCORE_THRESHOLD:g} x the held-out residual's noise RMS of {a.noise * 1e3:.3g} {mu}).", "",
-              f"| cause | score [{mu}] | alone [{mu}] | named | evidence |", "|---|---|---|---|---|"]
-    for s in a.ranking:
-        lines.append(f"| {s.cause.value} | {s.score * 1e3:+.2f} | {s.alone * 1e3:+.2f} | "
-                     f"{'yes' if s.selected else 'no'} | {s.evidence} |")
+              f"({SCORE_THRESHOLD:g} x the held-out residual's noise RMS of {a.noise * 1e3:.3g} {mu}).", ""]
+    lines += markdown_table(("cause", f"score [{mu}]", f"alone [{mu}]", "named", "evidence"),
+                            [(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}",
+                              "yes" if s.selected else "no", s.evidence) for s in a.ranking])
     if Cause.POSITION in a.causes:
         lines += ["", f"Position ripple order from the residual periodogram: {a.ripple.best:.3f} per rad."]
-    lines += ["", "## What the extension bought", "",
-              "| model | test RMSE [Nm] | train RMSE [Nm] |", "|---|---|---|",
-              f"| {result.baseline.name} | {result.baseline_test.rmse:.5f} | {result.baseline.train_metrics_.rmse:.5f} "
-              "|",
-              f"| {result.extended_label} | {result.extended_test.rmse:.5f} | "
-              f"{result.extended.train_metrics_.rmse:.5f} |",
-              "", f"Gain on the test record: **{result.gain * 100:+.1f} %** of the baseline's RMSE "
+    lines += ["", "## What the extension bought", ""]
+    lines += markdown_table(("model", "test RMSE [Nm]", "train RMSE [Nm]"), [
+        (result.baseline.name, f"{result.baseline_test.rmse:.5f}", f"{result.baseline.train_metrics_.rmse:.5f}"),
+        (result.extended_label, f"{result.extended_test.rmse:.5f}", f"{result.extended.train_metrics_.rmse:.5f}")])
+    lines += ["", f"Gain on the test record: **{result.gain * 100:+.1f} %** of the baseline's RMSE "
               "(relative reduction; negative would mean the extension predicts the held-out record worse).", ""]
     ext = result.extended.extension_parameters() if a.causes else {}
     if ext:
-        lines += ["Identified extension parameters (refitted jointly with the LuGre parameters):", "",
-                  "| parameter | value | unit |", "|---|---|---|"]
-        lines += [f"| {k} | {v:.6g} | {result.extended.units.get(k, '')} |" for k, v in ext.items()]
+        lines += ["Identified extension parameters (refitted jointly with the LuGre parameters):", ""]
+        lines += markdown_table(("parameter", "value", "unit"),
+                                [(k, f"{v:.6g}", result.extended.units.get(k, "")) for k, v in ext.items()])
         lines.append("")
     lines += ["## Plots", ""]
     for c, fname in plots.items():
@@ -803,9 +797,6 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
     derivative cut-off) as params of both.
     """
     import json
-    import os
-    import shutil
-    import tempfile
     from pathlib import Path
 
     target = Path(directory)
@@ -815,10 +806,7 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
         if any(target.iterdir()) and not (target / RESULT_FILE).exists():
             raise InputError("folder exists, is not empty and is not a diagnosis output: choose another --out",
                              source=str(target))
-    target.parent.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    as_created(stage, directory=True)
-    try:
+    with atomic_folder(target) as stage:
         result.extended.save(stage)
         result.baseline.save(stage / BASELINE_DIR)
         shown = list(result.analysis.causes) or [Cause.NONE]
@@ -834,12 +822,6 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
         doc = {**result.to_json(), "causes": [c.value for c in result.analysis.causes],
                "threshold": result.analysis.threshold, "timings": result.timings, "mlflow_runs": runs}
         (stage / RESULT_FILE).write_text(json.dumps(doc, indent=2) + "\n")
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(stage, target)
-    finally:
-        if stage.exists():
-            shutil.rmtree(stage)
     return SavedDiagnosis(directory=target, report=target / REPORT_FILE, plots=[target / f for f in plots.values()],
                           runs=runs)
 

@@ -1,6 +1,8 @@
-"""File modes of atomically written outputs.
+"""Atomic writes, and the file modes of what they write.
 
-The atomic writers create a temporary file (``tempfile.mkstemp``: mode 0600) or folder
+:func:`atomic_file` and :func:`atomic_folder` are the one way outputs are written here: a
+temporary beside the target, renamed into place only when complete, so a failure leaves nothing
+half-written. The atomic writers create a temporary file (``tempfile.mkstemp``: mode 0600) or folder
 (``tempfile.mkdtemp``: 0700) and rename it into place, so without help every output would be
 private whatever the user's umask. :func:`as_created` gives the temporary the mode an ordinary
 ``open()``/``mkdir()`` would have (0644 and 0755 under umask 022) before the rename.
@@ -8,7 +10,12 @@ private whatever the user's umask. :func:`as_created` gives the temporary the mo
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
 
 _LOCK = threading.Lock()
 
@@ -32,3 +39,48 @@ def current_umask() -> int:
 def as_created(path: str | os.PathLike, directory: bool = False) -> None:
     """Set ``path`` to the mode a new file (0666) or folder (0777) gets under the umask."""
     os.chmod(path, (0o777 if directory else 0o666) & ~current_umask())
+
+
+@contextmanager
+def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
+    """Write a file atomically: yields a temporary path beside ``path`` (same folder, so the rename
+    stays on one file system); when the block ends without an error it gets the mode of a new file
+    and is renamed onto ``path``, otherwise it is removed and ``path`` is left as it was."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        as_created(tmp)
+        os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+@contextmanager
+def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
+    """Write a folder atomically: yields an empty temporary folder beside ``path``; when the block ends
+    without an error it gets the mode of a new folder and replaces ``path`` (an existing folder is
+    removed first), otherwise it is removed and ``path`` is left as it was."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    try:
+        yield tmp
+        as_created(tmp, directory=True)
+        if target.exists():
+            shutil.rmtree(target)
+        os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically (:func:`atomic_file`); returns the path."""
+    with atomic_file(path) as tmp:
+        tmp.write_text(text)
+    return Path(path)

@@ -52,8 +52,8 @@ def cgroup_cores(root: Path = Path("/sys/fs/cgroup")) -> float | None:
     ``cpu.cfs_period_us`` (quota -1 = unlimited).
     """
     try:
-        quota, period = (root / "cpu.max").read_text().split()[:2]
-        return None if quota == "max" else int(quota) / int(period)
+        quota_text, period_text = (root / "cpu.max").read_text().split()[:2]
+        return None if quota_text == "max" else int(quota_text) / int(period_text)
     except (OSError, ValueError):
         pass
     try:

@@ -35,13 +35,15 @@ import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Protocol
 
+import numpy as np
 import pandas as pd
 
 from identify.errors import InputError
 from identify.metrics import Metrics
 from identify.models import FrictionModel, load_model
-from identify.records import AxisRecord, validate_frame
+from identify.records import AxisRecord, markdown_table, record_params, validate_frame
 from identify.residual_analysis import ResidualAnalysis, residual_analysis
 from identify.residual_analysis import figure as residual_figure
 
@@ -110,6 +112,7 @@ def is_tracked_ref(ref: str) -> bool:
 
 
 # ---- pyfunc ----------------------------------------------------------------------------
+_PythonModel: type
 try:
     import mlflow.pyfunc as _pyfunc
 
@@ -174,7 +177,7 @@ def analyse_residual(record: AxisRecord, pred) -> ResidualAnalysis:
     return residual_analysis(record.tau - np.asarray(pred, dtype=float), record.qd, dt, max_lag=max_lag)
 
 
-def overlay_figure(record: AxisRecord, preds: dict[str, object], label: str):
+def overlay_figure(record: AxisRecord, preds: dict[str, np.ndarray], label: str):
     """Measured torque and every model's prediction [Nm] over time on one record (top), their
     errors (bottom), and a zoom on the 2 s around the largest error (right)."""
     import matplotlib
@@ -211,7 +214,7 @@ def overlay_figure(record: AxisRecord, preds: dict[str, object], label: str):
     return fig
 
 
-def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> dict[str, object]:
+def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> dict[str, Any]:
     """The three diagnostic figures of a fit on ``record`` (matplotlib, Agg).
 
     Returns a dict file name -> Figure: ``prediction_time.png`` (measured and predicted
@@ -568,20 +571,21 @@ def log_comparison(parent_run_id: str, models: dict[str, FrictionModel], record:
     metrics.append(Metric("best_test_rmse", float(best["test_rmse"]), now, 0))
     client.log_batch(parent_run_id, metrics=metrics)
     client.set_tag(parent_run_id, "best_model", best["model"])
-    header = "| rank | model | test RMSE [Nm] | test R^2 | fit time [s] | residual ACF outside band [%] |"
-    lines = [f"Comparison of {len(rows)} friction models on the {label}, sorted by test RMSE.", "", header,
-             "|---|---|---|---|---|---|"]
+    cells = []
     table = []
     for i, row in enumerate(sorted(rows, key=lambda r: r["test_rmse"]), 1):
         a = analyses.get(row["model"])
         outside = a.auto_outside_pct if a else float("nan")
-        lines.append(f"| {i} | {row['model']} | {row['test_rmse']:.4f} | {row['test_r2']:.5f} | "
-                     f"{row['fit_time_s']:.1f} | {outside:.0f} |")
+        cells.append((i, row["model"], f"{row['test_rmse']:.4f}", f"{row['test_r2']:.5f}", f"{row['fit_time_s']:.1f}",
+                      f"{outside:.0f}"))
         table.append({"rank": i, "model": row["model"], "test_rmse_nm": row["test_rmse"], "test_r2": row["test_r2"],
                       "train_rmse_nm": row.get("train_rmse"), "fit_time_s": row["fit_time_s"],
                       "n_parameters": row.get("n_parameters"), "resid_acf_outside_pct": outside,
                       "resid_xcorr_outside_pct": a.cross_outside_pct if a else float("nan"),
                       "run_id": row.get("run_id")})
+    lines = [f"Comparison of {len(rows)} friction models on the {label}, sorted by test RMSE.", ""]
+    lines += markdown_table(("rank", "model", "test RMSE [Nm]", "test R^2", "fit time [s]",
+                             "residual ACF outside band [%]"), cells)
     client.set_tag(parent_run_id, "mlflow.note.content", "\n".join(lines))
     client.log_table(parent_run_id, data=pd.DataFrame(table), artifact_file="comparison.json")
     client.log_dict(parent_run_id, {name: {"record": label, **a.to_dict()} for name, a in analyses.items()},
@@ -603,3 +607,63 @@ def ui_command(host: str = "127.0.0.1", port: int = 5000) -> list[str]:
     if root:
         cmd += ["--default-artifact-root", root]
     return cmd
+
+
+class _Progress(Protocol):
+    def __call__(self, n: float = 1) -> None: ...
+
+    def describe(self, text: str) -> None: ...
+
+
+def compare_models(models: list[FrictionModel], train: AxisRecord, test: AxisRecord, *, track: bool = True,
+                   experiment: str = "compare", axis: int = 1, robot: str | None = None,
+                   advance: _Progress | None = None, params: dict | None = None) -> tuple[list[dict], str | None]:
+    """Fit every (unfitted) model on ``train`` and score it on ``test``: rows ``{"model", "test_rmse",
+    "test_r2", "train_rmse", "train_r2", "fit_time_s", "n_parameters"[, "run_id"]}`` (RMSE in the
+    record's torque unit, times in s) sorted by test RMSE, and the parent run id (None without
+    ``track``). With ``track`` each fit is a child run of one parent run in ``experiment``, and the
+    parent logs the comparison (:func:`log_comparison`); a failure marks the parent FAILED.
+    ``advance`` (``advance(n)``, ``advance.describe(text)``) is told of every model and log."""
+    import time
+
+    names = [m.name for m in models]
+    parent = None
+    if track:
+        parent = start_parent_run(experiment, "compare", {**(params or {}), "models": ",".join(names),
+                                                          "axis": axis, "robot": robot or ""})
+    rows: list[dict[str, Any]] = []
+    fitted = {}
+    try:
+        for i, est in enumerate(models, 1):
+            if advance:
+                advance.describe(f"fitting {est.name}, model {i} of {len(models)}")
+            t0 = time.perf_counter()
+            est.fit(train)
+            fit_time = time.perf_counter() - t0
+            te = est.score(test)
+            row = {"model": est.name, "test_rmse": te.rmse, "test_r2": te.r2, "train_rmse": est.train_metrics_.rmse,
+                   "train_r2": est.train_metrics_.r2, "fit_time_s": fit_time, "n_parameters": est.n_parameters()}
+            if parent is not None:
+                if advance:
+                    advance.describe(f"logging {est.name} to MLflow")
+                run = log_fit(est, train, test, fit_time=fit_time, experiment=experiment, axis=axis, robot=robot,
+                              parent_run_id=parent, extra_params=record_params(train))
+                row["run_id"] = run.run_id
+                fitted[est.name] = est
+            rows.append(row)
+            if advance:
+                advance(1)
+        if parent is not None:
+            if advance:
+                advance.describe("logging the comparison (overlay, residual analysis) to MLflow")
+            log_comparison(parent, fitted, test, rows)
+            if advance:
+                advance(1)
+    except BaseException:
+        if parent:
+            end_run(parent, status="FAILED")
+        raise
+    rows.sort(key=lambda r: r["test_rmse"])
+    if parent:
+        end_run(parent)
+    return rows, parent

@@ -7,12 +7,11 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from greybench.commands.friction import derivative_note, record_params
 from greybench.support import emit_json, guarded, out, progress
 from identify.diagnosis import SCORE_THRESHOLD, save_diagnosis
 from identify.diagnosis import diagnose as run_diagnosis
 from identify.errors import InputError
-from identify.records import load_record
+from identify.records import derivative_note, load_record, record_params
 
 
 def diagnose(

@@ -55,16 +55,14 @@ def explain(
         ex = explain_part(meas, rob, setup, max_sims=max_sims)
     if out_dir is not None:
         import json
-        import os
 
+        from identify.files import write_text_atomic
         from simulate.explain.report import write_report
 
         out_dir.mkdir(parents=True, exist_ok=True)
         save_robot(ex.calibrated_robot, out_dir / "robot_calibrated.toml")
         write_report(ex, out_dir, str(measured))
-        tmp = out_dir / ".explain.json.tmp"
-        tmp.write_text(json.dumps(ex.as_json(), indent=1))
-        os.replace(tmp, out_dir / "explain.json")
+        write_text_atomic(out_dir / "explain.json", json.dumps(ex.as_json(), indent=1))
     if as_json:
         emit_json(ex.as_json())
         return
@@ -77,13 +75,13 @@ def explain(
     ft = Table(title="RMS measured - simulated \\[um]")
     for c in ("feature", "before", "after"):
         ft.add_column(c, justify="left" if c == "feature" else "right")
-    for f, (b, a) in ex.rms_by_feature().items():
-        ft.add_row(f, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}")
+    for feature, (b, a) in ex.rms_by_feature().items():
+        ft.add_row(feature, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}")
     ft.add_row("all", f"{ex.rms_before * 1e6:.2f}", f"{ex.rms_after * 1e6:.2f}")
     out.print(ft)
     if ex.calibration is not None:
-        c = ex.calibration
-        out.print(f"calibrated {c.before.param}: {c.before.value:.6g} -> {c.after.value:.6g} {c.before.unit}")
+        cal = ex.calibration
+        out.print(f"calibrated {cal.before.param}: {cal.before.value:.6g} -> {cal.after.value:.6g} {cal.before.unit}")
     out.print(f"gain (1 - rms_after/rms_before): {ex.gain * 100:.1f} %" +
               (f"; report {out_dir / 'report.md'}" if out_dir is not None else ""))
 

@@ -6,9 +6,8 @@ import sys
 import time
 from enum import Enum
 from pathlib import Path
+from typing import Any
 
-import numpy as np
-import pandas as pd
 import typer
 from rich.table import Table
 
@@ -16,9 +15,18 @@ from greybench.support import emit_json, err, guarded, out, progress, resolve_ro
 from identify.axis_limits import load_axis_limits
 from identify.errors import InputError
 from identify.metrics import Metrics
-from identify.models import MODELS, FrictionModel, make_model
+from identify.models import MODELS, FrictionModel, make_seeded, parse_model_names
 from identify.plant import Effect, PlantConfig, synthesize
-from identify.records import load_record, read_table, validate_frame, write_table
+from identify.records import (
+    AxisRecord,
+    derivative_note,
+    load_axis_record,
+    load_record,
+    read_table,
+    record_params,
+    validate_frame,
+    write_table,
+)
 from identify.trajectories import TRAJECTORIES
 
 
@@ -47,22 +55,6 @@ def _params_table(model: FrictionModel) -> Table:
     for k, v in model.params_.items():
         table.add_row(k, f"{v:.6g}", units.get(k, ""))
     return table
-
-
-def derivative_note(record) -> str:
-    """One line: how the record's velocity and acceleration were obtained (the cut-off [Hz])."""
-    if record.cutoff_hz is None:
-        return f"derivatives: qd, qdd read from {record.source} (no cut-off applied)"
-    return (f"derivatives: {', '.join(record.derived)} derived with cut-off {record.cutoff_hz:.3g} Hz "
-            f"(zero-phase low-pass at {1.0 / record.sample_time:.4g} Hz sampling)")
-
-
-def record_params(record) -> dict:
-    """MLflow params describing a training record: derivative cut-off [Hz] and axis units."""
-    units = record.units
-    return {"deriv_cutoff_hz": "record" if record.cutoff_hz is None else f"{record.cutoff_hz:.6g}",
-            "axis_kind": "linear" if record.linear else "rotary",
-            "unit_position": units["q"], "unit_torque": units["tau"]}
 
 
 def trajectory(
@@ -119,7 +111,7 @@ def synth(
     """Simulate one joint (inertia, LuGre friction, sensor noise, optional hidden effect) following
     a trajectory; writes t [s], q [rad], qd [rad/s], qdd [rad/s^2], tau [Nm], temp [degC], tau_load [Nm]."""
     cfg = PlantConfig.from_toml(config) if config else PlantConfig()
-    overrides = {}
+    overrides: dict[str, Any] = {}
     if static_curve is not None:
         overrides["static_curve"] = static_curve
     if noise is not None:
@@ -153,109 +145,16 @@ def _check_axis(axis: int | None) -> None:
         raise InputError(f"axis must be >= 1, got {axis}", field="--axis")
 
 
-def _log_axes(columns) -> list[int]:
-    """Joint numbers N of the ``qN`` columns of a robot log (headers may carry units)."""
-    import re
-
-    axes = set()
-    for c in columns:
-        m = re.match(r"^\s*q(\d+)\s*(\[.*\])?\s*$", str(c))
-        if m:
-            axes.add(int(m.group(1)))
-    return sorted(axes)
-
-
-def load_axis_record(path: Path, axis: int | None, *, linear: bool | None = None,
-                     cutoff_hz: float | None = None):
-    """An axis record from a file: a plain axis record, or joint ``axis`` of a robot log with any
-    number of joints (``t, q1..qN, tau1..tauN``, optional ``qdN, qddN, tempN, tau_rbN, tau_loadN``;
-    headers may declare units, ``q7 [m]``). ``linear`` declares a linear axis (m, N); ``cutoff_hz``
-    [Hz] fixes the derivative cut-off (else chosen from the record)."""
-    from identify.records import split_unit_headers
-
-    df = read_table(path)
-    plain, units = split_unit_headers(df, str(path))
-    axes = _log_axes(plain.columns)
-    is_log = "q" not in plain.columns and bool(axes)
-    if not is_log:
-        return validate_frame(df, source=str(path), linear=linear, cutoff_hz=cutoff_hz)
-    if axis is None:
-        raise InputError(f"this is a robot log with joints {axes[0]}..{axes[-1]} (q{axes[0]}..q{axes[-1]}): choose "
-                         f"the joint with --axis", source=str(path), field="--axis")
-    cols = {"t": "t", f"q{axis}": "q", f"tau{axis}": "tau", f"qd{axis}": "qd", f"qdd{axis}": "qdd",
-            f"temp{axis}": "temp", f"tau_rb{axis}": "tau_rb", f"tau_load{axis}": "tau_load"}
-    for need in ("t", f"q{axis}", f"tau{axis}"):
-        if need not in plain.columns:
-            have = f" (the log has joints {', '.join(map(str, axes))})" if need != "t" else ""
-            raise InputError(f"robot log has no column '{need}' for axis {axis}{have}", source=str(path), field=need)
-    keep = [c for c in cols if c in plain.columns]
-    sub = plain[keep].rename(columns={c: (f"{cols[c]} [{units[c]}]" if c in units else cols[c]) for c in keep})
-    rec = validate_frame(sub, source=f"{path} (axis {axis})", linear=linear, cutoff_hz=cutoff_hz)
-    own = float(np.ptp(rec.q)) or 1.0
-    moving = []
-    for j in axes:
-        if j != axis and f"q{j}" in plain.columns:
-            qj = pd.to_numeric(plain[f"q{j}"], errors="coerce").to_numpy(dtype=float)
-            if np.isfinite(qj).all() and float(np.ptp(qj)) > 0.01 * own:
-                moving.append(j)
-    rec.other_joints_moving = tuple(moving)
-    return rec
-
-
 def _make(model: str, seed: int, epochs: int | None) -> FrictionModel:
-    if model not in MODELS:
-        raise InputError(f"unknown model '{model}' (known: {', '.join(MODELS)})", field="--model")
-    hp = MODELS[model]().get_hyperparameters()
-    kwargs = {}
-    if "seed" in hp:
-        kwargs["seed"] = seed
-    if epochs is not None:
-        if epochs < 1:
-            raise InputError("must be >= 1", field="--epochs")
-        if "epochs" in hp:
-            kwargs["epochs"] = epochs
-    return make_model(model, **kwargs)
+    return make_seeded(model, seed, epochs, model_field="--model", epochs_field="--epochs")
+
+
+def _load(path: Path, axis: int | None, **kw: Any) -> AxisRecord:
+    return load_axis_record(path, axis, axis_field="--axis", **kw)
 
 
 def _robot_name(robot: str) -> str:
     return Path(resolve_robot(robot)).stem
-
-
-#: An axis whose gravity torque over the arm's workspace exceeds this share of the largest
-#: joint's is taken to be loaded by the arm (so a fit without tau_rb takes gravity for friction) [-].
-GRAVITY_SHARE = 0.02
-
-
-def coupling_warnings(record, robot: str, axis: int | None) -> list[str]:
-    """Why a record without ``tau_rb`` would mix the arm's torques into the friction (empty when
-    it has ``tau_rb``): the robot model says gravity loads the axis (its torque varies over the
-    joint limits), or the robot log moves other joints (their coupling loads this one)."""
-    if record.tau_rb is not None:
-        return []
-    msgs = []
-    a = axis or 1
-    fix = "give a tau_rb column or split the log with `greybench prepare`"
-    try:
-        from simulate.robot.dynamics import gravity_torque
-        from simulate.robot.model import load_robot
-
-        rob = load_robot(resolve_robot(robot))
-        n_joints = len(rob.lower)
-    except (InputError, OSError, ValueError):
-        rob, n_joints = None, 0
-    if rob is not None and a <= n_joints:
-        rng = np.random.default_rng(0)  # seeded poses within the joint limits
-        poses = rng.uniform(rob.lower, rob.upper, size=(256, n_joints))
-        g = gravity_torque(rob, poses)
-        peak = np.abs(g).max(axis=0)
-        if peak[a - 1] > GRAVITY_SHARE * peak.max():
-            msgs.append(f"{record.source}: axis {a} of {Path(resolve_robot(robot)).stem} carries gravity torque up to "
-                        f"{peak[a - 1]:.3g} Nm and the record has no tau_rb: the fit takes it for friction; {fix}")
-    moving = getattr(record, "other_joints_moving", ())
-    if moving:
-        msgs.append(f"{record.source}: joints {', '.join(map(str, moving))} move in the log and their coupling loads "
-                    f"axis {a}, but the record has no tau_rb; {fix}")
-    return msgs
 
 
 def fit(
@@ -291,12 +190,14 @@ def fit(
     record has tau_rb [Nm]); track it in MLflow, save it, print RMSE [Nm], R^2, NRMSE, max error [Nm]."""
     _check_axis(axis)
     est = _make(model, seed, epochs)
-    train_rec = load_axis_record(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
+    train_rec = _load(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
     # the test record is differentiated like the training record (the model learned on that filter)
-    test_rec = (load_axis_record(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
+    test_rec = (_load(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
                 if test else None)
     robot_name = _robot_name(robot)
-    warnings = coupling_warnings(train_rec, robot, axis)
+    from simulate.coupling import coupling_warnings
+
+    warnings = coupling_warnings(train_rec, resolve_robot(robot), axis)
     for w in warnings:
         err.print(f"[bold yellow]warning:[/] {w}", highlight=False, markup=True, soft_wrap=True)
     if not as_json:
@@ -362,12 +263,13 @@ def predict(
     from identify.tracking import load_any_model
 
     est = load_any_model(model_ref)
-    rec = load_axis_record(data, axis, linear=getattr(est, "linear_", None) or None,
+    rec = _load(data, axis, linear=getattr(est, "linear_", None) or None,
                            cutoff_hz=cutoff or getattr(est, "cutoff_hz_", None))
     if getattr(est, "linear_", False) != rec.linear:
         raise InputError(f"mixed units: the model was fitted on a {'linear' if est.linear_ else 'rotary'} axis and "
                          f"the record is {'linear' if rec.linear else 'rotary'}", source=str(data), field="q")
     friction, tau_pred = est.predict_parts(rec)
+    assert rec.frame is not None  # records read from a file keep their frame
     frame = rec.frame.copy()
     frame["tau_friction_pred"] = friction
     frame["tau_pred"] = tau_pred
@@ -379,20 +281,6 @@ def predict(
     else:
         out.print(derivative_note(rec), highlight=False)
         out.print(_metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"]))
-
-
-def _parse_models(models: str | None) -> list[str]:
-    if not models:
-        return list(COMPARE_MODELS)
-    names = [m.strip() for m in models.split(",") if m.strip()]
-    if not names:
-        raise InputError("no model named", field="--models")
-    for m in names:
-        if m not in MODELS:
-            raise InputError(f"unknown model '{m}' (known: {', '.join(MODELS)})", field="--models")
-    if len(set(names)) != len(names):
-        raise InputError("a model is named twice", field="--models")
-    return names
 
 
 def compare(
@@ -416,49 +304,17 @@ def compare(
     """Fit several friction models on one record and rank them by test RMSE [Nm], with R^2,
     fit time [s] and parameter count; every fit is a run of one MLflow experiment."""
     _check_axis(axis)
-    names = _parse_models(models)
-    train_rec = load_axis_record(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
-    test_rec = load_axis_record(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
+    names = parse_model_names(models, COMPARE_MODELS, "--models")
+    train_rec = _load(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
+    test_rec = _load(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
     robot_name = _robot_name(robot)
-    parent = None
-    if track:
-        from identify.tracking import end_run, log_comparison, log_fit, start_parent_run
+    from identify.tracking import compare_models
 
-        parent = start_parent_run(experiment, "compare", {"train_file": str(train), "test_file": str(test),
-                                                           "models": ",".join(names), "axis": axis or 1,
-                                                           "robot": robot_name})
-    rows = []
-    fitted = {}
-    try:
-        with progress("compare", total=len(names) + (1 if track else 0)) as advance:
-            for i, name in enumerate(names, 1):
-                advance.describe(f"fitting {name}, model {i} of {len(names)}")
-                est = _make(name, seed, epochs)
-                t0 = time.perf_counter()
-                est.fit(train_rec)
-                fit_time = time.perf_counter() - t0
-                te = est.score(test_rec)
-                row = {"model": name, "test_rmse": te.rmse, "test_r2": te.r2, "train_rmse": est.train_metrics_.rmse,
-                       "train_r2": est.train_metrics_.r2, "fit_time_s": fit_time, "n_parameters": est.n_parameters()}
-                if track:
-                    advance.describe(f"logging {name} to MLflow")
-                    run = log_fit(est, train_rec, test_rec, fit_time=fit_time, experiment=experiment, axis=axis or 1,
-                                  robot=robot_name, parent_run_id=parent, extra_params=record_params(train_rec))
-                    row["run_id"] = run.run_id
-                    fitted[name] = est
-                rows.append(row)
-                advance(1)
-            if track:
-                advance.describe("logging the comparison (overlay, residual analysis) to MLflow")
-                log_comparison(parent, fitted, test_rec, rows)
-                advance(1)
-    except BaseException:
-        if parent:
-            end_run(parent, status="FAILED")
-        raise
-    rows.sort(key=lambda r: r["test_rmse"])
-    if parent:
-        end_run(parent)
+    models_ = [_make(name, seed, epochs) for name in names]  # unknown names and bad --epochs fail first
+    with progress("compare", total=len(names) + (1 if track else 0)) as advance:
+        rows, parent = compare_models(models_, train_rec, test_rec, track=track, experiment=experiment,
+                                      axis=axis or 1, robot=robot_name, advance=advance,
+                                      params={"train_file": str(train), "test_file": str(test)})
     if as_json:
         emit_json({"experiment": experiment if track else None, "parent_run_id": parent, "axis": axis or 1,
                    "rows": rows})

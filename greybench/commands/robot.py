@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -87,7 +88,7 @@ def ik_cmd(
     else:
         q0 = np.where([False, True, True, False, True, False], 0.5 * (r.lower + r.upper), 0.0)
     res = ik_nearest(r, T, q0) if independent else ik_path(r, T, q0)
-    cols = {c: res.q[:, i] for i, c in enumerate(JOINT_COLUMNS)}
+    cols: dict[str, Any] = {c: res.q[:, i] for i, c in enumerate(JOINT_COLUMNS)}
     cols["ok"] = res.ok
     cols["status"] = [IKStatus(s).name for s in res.status]
     write_table(pd.DataFrame(cols), out_file)

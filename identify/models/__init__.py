@@ -99,6 +99,24 @@ def parse_model_names(text: str | None, default: tuple[str, ...], field: str) ->
     return names
 
 
+def make_seeded(model: str, seed: int, epochs: int | None, *, model_field: str = "model",
+                epochs_field: str = "epochs") -> FrictionModel:
+    """A new model by name with its ``seed`` and, when it trains by epochs, ``epochs`` [passes] (the
+    model's default when None); ``InputError`` naming ``model_field`` / ``epochs_field``."""
+    if model not in MODELS:
+        raise InputError(f"unknown model '{model}' (known: {', '.join(MODELS)})", field=model_field)
+    hp = MODELS[model]().get_hyperparameters()
+    kwargs: dict[str, Any] = {}
+    if "seed" in hp:
+        kwargs["seed"] = seed
+    if epochs is not None:
+        if epochs < 1:
+            raise InputError("must be >= 1", field=epochs_field)
+        if "epochs" in hp:
+            kwargs["epochs"] = epochs
+    return make_model(model, **kwargs)
+
+
 def load_model(ref: str | os.PathLike) -> FrictionModel:
     """Load a fitted model from a saved folder (``params.json`` + model files). MLflow model URIs
     (``runs:/<run_id>/model``, ``models:/<name>@<alias>``) are opened by
@@ -115,4 +133,4 @@ def load_model(ref: str | os.PathLike) -> FrictionModel:
 
 __all__ = ["MODELS", "FrictionModel", "LuGre", "LuGreTable", "LuGreExtended", "CoulombViscous", "Stribeck",
            "GreyBoxLuGre", "ResidualLuGre", "LSTMFriction", "ModelRegistry", "load_model", "make_model",
-           "parse_model_names", "register"]
+           "make_seeded", "parse_model_names", "register"]

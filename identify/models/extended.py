@@ -243,9 +243,9 @@ class LuGreExtended(FrictionModel):
         mult = np.ones(record.n)
         nu = np.full(record.n, q["nu"])
         if "load" in self.causes:
-            mult *= np.maximum(1.0 + q["k_load"] * (np.abs(record.tau_load) - q["load_ref"]), LEVEL_FLOOR)
+            mult *= np.maximum(1.0 + q["k_load"] * (np.abs(record.require("tau_load")) - q["load_ref"]), LEVEL_FLOOR)
         if "temperature" in self.causes:
-            dT = record.temp - q["temp_ref"]
+            dT = record.require("temp") - q["temp_ref"]
             mult *= np.maximum(1.0 + q["k_dry_temp"] * dT, LEVEL_FLOOR)
             nu = nu * np.exp(np.clip(q["k_nu_temp"] * dT, -30.0, 30.0))
         if "asymmetry" in self.causes:
@@ -269,7 +269,7 @@ class LuGreExtended(FrictionModel):
         """Non-friction torque: J*qdd + c (when ``base``) plus the inertia and drift extensions."""
         out = q["J"] * record.qdd + q["c"] if base else np.zeros(record.n)
         if "inertia" in self.causes:
-            out = out + q["k_J"] * (np.abs(record.tau_load) - q["load_ref"]) * record.qdd
+            out = out + q["k_J"] * (np.abs(record.require("tau_load")) - q["load_ref"]) * record.qdd
         if "drift" in self.causes:
             out = out + q["drift"] * (record.t - record.t[0])
         if "gravity" in self.causes:

@@ -72,6 +72,12 @@ class LSTMFrictionNet(nn.Module):
         Initial inertia [kg m^2] and offset [Nm].
     """
 
+    # buffers (register_buffer), declared for the type checker
+    v_scale: torch.Tensor
+    a_scale: torch.Tensor
+    tau_scale: torch.Tensor
+    play_widths: torch.Tensor
+
     def __init__(self, v_scale: float, a_scale: float, tau_scale: float,
                  play_widths: tuple[float, ...] = DEFAULT_PLAY_WIDTHS, hidden: int = 16, head: int = 32,
                  rigid: bool = True, J: float = 0.0, c: float = 0.0):

@@ -165,10 +165,13 @@ def _cli(*args: str) -> str:
 
 def test_no_torch_until_a_learned_model_is_used():
     """The model registry, a LuGre model, ``greybench --help``, a command's and the benchmarks' help:
-    in one interpreter (one start-up), so no step loads torch."""
+    in one interpreter (one start-up), so no step loads torch; the benchmark package loads only for
+    ``greybench bench``."""
     code = ("import identify.models\nfrom identify.models import MODELS, LuGre, make_model\n"
             "list(MODELS); make_model('lugre')\nfrom greybench.cli import main\n"
-            + _cli("--help") + _cli("fit", "--help") + _cli("bench", "--help"))
+            + _cli("--help") + _cli("fit", "--help")
+            + "assert 'greybench_bench' not in sys.modules, 'benchmarks loaded without greybench bench'\n"
+            + _cli("bench", "--help") + "assert 'greybench_bench.friction' in sys.modules\n")
     assert _heavy_modules(code) == []
 
 
