@@ -33,6 +33,7 @@ import contextlib
 import os
 import tempfile
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -43,7 +44,7 @@ import pandas as pd
 from identify.errors import InputError
 from identify.metrics import Metrics
 from identify.models import FrictionModel, load_model
-from identify.records import AxisRecord, markdown_table, record_params, validate_frame
+from identify.records import AxisRecord, load_record, markdown_table, record_params, validate_frame
 from identify.residual_analysis import ResidualAnalysis, residual_analysis
 from identify.residual_analysis import figure as residual_figure
 
@@ -666,4 +667,47 @@ def compare_models(models: list[FrictionModel], train: AxisRecord, test: AxisRec
     rows.sort(key=lambda r: r["test_rmse"])
     if parent:
         end_run(parent)
+    return rows, parent
+
+
+def fit_axes(make: Callable[[], FrictionModel], train: dict[int, Path], test: dict[int, Path] | None = None, *,
+             experiment: str = "train-robot", robot: str = "", register: bool = True,
+             advance: _Progress | None = None, params: dict | None = None) -> tuple[list[dict], str]:
+    """Fit one new model (``make()``) per axis on the axis records ``train[axis]`` and score it on
+    ``test[axis]``: one child run per axis (registered as ``<robot>-axis<N>-friction`` with
+    ``register``) under one parent run of ``experiment``. Rows ``{"axis", "train_rmse", "train_r2",
+    "fit_time_s"[, "test_rmse", "test_r2"], "run_id", ...}`` (RMSE in Nm, times in s) in axis order,
+    and the parent run id; a failure marks the parent FAILED."""
+    import time
+
+    axes = sorted(train)
+    kind = make().name
+    parent = start_parent_run(experiment, f"train-robot {robot} {kind}",
+                              {**(params or {}), "robot": robot, "model": kind, "axes": ",".join(map(str, axes))})
+    rows = []
+    try:
+        for a in axes:
+            if advance:
+                advance.describe(f"axis {a}: fitting and logging")
+            rec = load_record(train[a])
+            rec_t = load_record(test[a]) if test else None
+            est = make()
+            t0 = time.perf_counter()
+            est.fit(rec)
+            fit_time = time.perf_counter() - t0
+            run = log_fit(est, rec, rec_t, fit_time=fit_time, experiment=experiment, axis=a, robot=robot,
+                          run_name=f"{kind} axis {a}", parent_run_id=parent,
+                          register=registered_name(robot, a) if register else None)
+            row = {"axis": a, "train_rmse": est.train_metrics_.rmse, "train_r2": est.train_metrics_.r2,
+                   "fit_time_s": fit_time, **run.to_dict()}
+            if rec_t is not None:
+                m = est.score(rec_t)
+                row.update(test_rmse=m.rmse, test_r2=m.r2)
+            rows.append(row)
+            if advance:
+                advance(1)
+    except BaseException:
+        end_run(parent, status="FAILED")
+        raise
+    end_run(parent)
     return rows, parent

@@ -21,7 +21,6 @@ from identify.records import (
     AxisRecord,
     derivative_note,
     load_axis_record,
-    load_record,
     read_table,
     record_params,
     validate_frame,
@@ -350,7 +349,7 @@ def train_robot(
     tau_rb [Nm] from the rigid-body model), one MLflow run per axis under a parent run."""
     import tempfile
 
-    from identify.tracking import end_run, log_fit, registered_name, start_parent_run
+    from identify.tracking import fit_axes
     from simulate.robot.model import load_robot
     from simulate.robot.prepare import prepare_log
 
@@ -368,39 +367,16 @@ def train_robot(
         if a > 6:
             raise InputError(f"--axis {a}: the robot model and `prepare` handle joints 1..6", field="--axes")
     robot_name = _robot_name(robot)
-    ext = Path(log).suffix.lower()
     with tempfile.TemporaryDirectory(prefix="greybench-train-robot-") as tmp:
         with progress("train-robot: splitting the logs (rigid-body model)"):
             train_paths = prepare_log(rob, log, Path(tmp) / "train").paths
             test_paths = prepare_log(rob, test, Path(tmp) / "test").paths if test else None
-        parent = start_parent_run(experiment, f"train-robot {robot_name} {model}",
-                                  {"log": str(log), "test_log": str(test) if test else "", "robot": robot_name,
-                                   "model": model, "axes": ",".join(map(str, axis_list)), "format": ext})
-        rows = []
-        try:
-            with progress(f"train-robot {model}", total=len(axis_list)) as advance:
-                for a in axis_list:
-                    advance.describe(f"axis {a}: fitting and logging")
-                    rec = load_record(train_paths[a - 1])
-                    rec_t = load_record(test_paths[a - 1]) if test_paths else None
-                    est = _make(model, seed, epochs)
-                    t0 = time.perf_counter()
-                    est.fit(rec)
-                    fit_time = time.perf_counter() - t0
-                    run = log_fit(est, rec, rec_t, fit_time=fit_time, experiment=experiment, axis=a, robot=robot_name,
-                                  run_name=f"{model} axis {a}", parent_run_id=parent,
-                                  register=registered_name(robot_name, a) if register else None)
-                    row = {"axis": a, "train_rmse": est.train_metrics_.rmse, "train_r2": est.train_metrics_.r2,
-                           "fit_time_s": fit_time, **run.to_dict()}
-                    if rec_t is not None:
-                        m = est.score(rec_t)
-                        row.update(test_rmse=m.rmse, test_r2=m.r2)
-                    rows.append(row)
-                    advance(1)
-        except BaseException:
-            end_run(parent, status="FAILED")
-            raise
-        end_run(parent)
+        with progress(f"train-robot {model}", total=len(axis_list)) as advance:
+            rows, parent = fit_axes(lambda: _make(model, seed, epochs), {a: train_paths[a - 1] for a in axis_list},
+                                    {a: test_paths[a - 1] for a in axis_list} if test_paths else None,
+                                    experiment=experiment, robot=robot_name, register=register, advance=advance,
+                                    params={"log": str(log), "test_log": str(test) if test else "",
+                                            "format": Path(log).suffix.lower()})
     if as_json:
         emit_json({"parent_run_id": parent, "experiment": experiment, "model": model, "robot": robot_name,
                    "axes": rows})
