@@ -92,7 +92,7 @@ def emit_json(obj: Any) -> None:
 
 
 #: Longest gap [s] between two plain progress lines off a terminal (``GREYBENCH_PROGRESS_INTERVAL_S``
-#: overrides it; the issue asks for at most 30 s, 10 s keeps a margin for a busy machine).
+#: overrides it; the contract is at most 30 s, 10 s keeps a margin for a busy machine).
 PROGRESS_INTERVAL_S = 10.0
 #: Shortest gap [s] between plain lines written on ``advance`` (a per-step advance must not flood a log).
 PROGRESS_MIN_GAP_S = 2.0

@@ -520,7 +520,7 @@ class DiagnosisResult:
         return f"{self.extended.name}[{'+'.join(causes)}]" if causes else self.extended.name
 
     def to_json(self) -> dict:
-        """The issue's JSON: cause, ranking, baseline, extended, gain."""
+        """The diagnosis JSON contract: cause, ranking, baseline, extended, gain."""
         return {"cause": self.cause.value,
                 "ranking": [s.to_dict() for s in self.analysis.ranking],
                 "baseline": {"model": self.baseline.name, "test_rmse": self.baseline_test.rmse},
