@@ -1,11 +1,12 @@
-# Quick start: `make demo` runs the end-to-end demo, `make test` runs the tests.
-# Both create .venv and install the project on first use.
+# Quick start: `make demo` runs the end-to-end demo, `make test` runs the tests, `make lint` runs
+# ruff and mypy.
+# Each creates .venv and installs the project on first use.
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-all bench clean
+.PHONY: demo test test-all lint bench clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -16,6 +17,10 @@ $(STAMP): pyproject.toml
 
 demo: $(STAMP)
 	bash scripts/demo.sh
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/mypy
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -1,7 +1,7 @@
 """The ``greybench`` console script: one typer app composing identify, simulate and service.
 
 Each area registers its commands from its own module in :mod:`greybench.commands`;
-``greybench bench ...`` holds the benchmarks.
+``greybench bench ...`` holds the benchmarks, loaded from :mod:`greybench_bench` only when asked for.
 """
 from __future__ import annotations
 
@@ -15,52 +15,71 @@ from identify.resources import configure_process
 
 configure_process()
 
+from typing import Any  # noqa: E402
+
 import typer  # noqa: E402
+from typer.core import TyperGroup  # noqa: E402
+
+
+class _LazyBench(TyperGroup):
+    """``greybench bench``: the benchmark package is imported when a benchmark (or its list) is asked for."""
+
+    _loaded: TyperGroup | None = None
+
+    def _group(self) -> TyperGroup:
+        if self._loaded is None:
+            from greybench_bench import build_app
+
+            group = typer.main.get_command(build_app())
+            assert isinstance(group, TyperGroup)
+            self._loaded = group
+        return self._loaded
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        return self._group().list_commands(ctx)
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        return self._group().get_command(ctx, cmd_name)
+
 
 app = typer.Typer(no_args_is_help=True, pretty_exceptions_enable=False, add_completion=False, rich_markup_mode=None,
                   help="greybench: friction identification and robot machining simulation (SI units).")
-bench_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Benchmarks: tables with ratios measured in one run.")
-app.add_typer(bench_app, name="bench")
+app.add_typer(typer.Typer(cls=_LazyBench, no_args_is_help=True, rich_markup_mode=None,
+                          help="Benchmarks: tables with ratios measured in one run."), name="bench")
 
-# Areas, in the order of the workflow. Each module defines register(app, bench_app).
+# Areas, in the order of the workflow. Each module defines register(app).
 _AREAS = ["friction", "diagnose", "robot", "toolpath", "machining", "evaluation", "placement", "circle", "compensate",
           "explain", "serve"]
-#: The area of each command (``bench <name>`` for the benchmarks): a console run of one command loads
-#: only its own area, so ``greybench machine`` does not import torch, pandas or scipy.signal for the
-#: friction commands (seconds of start-up). ``tests/cli/test_lazy_areas.py`` checks it against what
-#: every area registers; a command missing here still works (every area is loaded).
+#: The area of each command: a console run of one command loads only its own area, so ``greybench
+#: machine`` does not import torch, pandas or scipy.signal for the friction commands (seconds of
+#: start-up); ``bench`` loads none (greybench_bench is imported when a benchmark is asked for).
+#: ``tests/cli/test_lazy_areas.py`` checks it against what every area registers; a command missing
+#: here still works (every area is loaded).
 COMMAND_AREAS = {
     "trajectory": "friction", "synth": "friction", "fit": "friction", "predict": "friction", "compare": "friction",
-    "train-robot": "friction", "promote": "friction", "ui": "friction", "bench friction": "friction",
-    "bench realdata": "friction", "diagnose": "diagnose", "bench diagnose": "diagnose", "robot": "robot",
-    "prepare": "robot", "bench robot": "robot", "testpiece": "toolpath", "interpolate": "toolpath",
-    "bench toolpath": "toolpath", "machine": "machining", "bench machining": "machining",
-    "rank-poses": "evaluation", "trace": "evaluation", "bench ranking": "evaluation", "circle": "circle",
-    "optimize-pose": "placement", "bench circle": "circle", "compensate": "compensate", "bench compensate": "compensate", "explain": "explain",
-    "bench explain": "explain", "serve": "serve", "bench service": "serve",
+    "train-robot": "friction", "promote": "friction", "ui": "friction", "diagnose": "diagnose", "robot": "robot",
+    "prepare": "robot", "testpiece": "toolpath", "interpolate": "toolpath", "machine": "machining",
+    "rank-poses": "evaluation", "trace": "evaluation", "optimize-pose": "placement", "circle": "circle",
+    "compensate": "compensate", "explain": "explain", "serve": "serve",
 }
 
 
 def areas_for(argv: list[str]) -> list[str]:
     """The areas to load for a console run with ``argv`` (``sys.argv``): the one area of the
-    command named, or every area (``--help``, an unknown command, an import as a library)."""
+    command named, none for ``bench``, or every area (``--help``, an unknown command, an import as
+    a library)."""
     from pathlib import Path
 
     if len(argv) < 2 or Path(argv[0]).name not in ("greybench", "cli.py"):
         return list(_AREAS)
-    words = argv[1:3] if argv[1] == "bench" else argv[1:2]
-    area = COMMAND_AREAS.get(" ".join(words))
+    if argv[1] == "bench":
+        return []
+    area = COMMAND_AREAS.get(argv[1])
     return [area] if area in _AREAS else list(_AREAS)
 
 
 for _name in areas_for(sys.argv):
-    try:
-        _mod = importlib.import_module(f"greybench.commands.{_name}")
-    except ModuleNotFoundError as exc:  # an area not built yet
-        if exc.name != f"greybench.commands.{_name}":
-            raise
-        continue
-    _mod.register(app, bench_app)
+    importlib.import_module(f"greybench.commands.{_name}").register(app)
 
 
 def main() -> None:

@@ -19,10 +19,11 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from datetime import datetime
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import typer
 from rich.console import Console, ConsoleDimensions
@@ -46,7 +47,7 @@ class _Console(Console):
 
     @size.setter
     def size(self, new_size) -> None:  # pragma: no cover - rich's own setter
-        Console.size.fset(self, new_size)
+        Console.size.fset(self, new_size)  # type: ignore[attr-defined]  # a property; its setter
 
 
 out = _Console()
@@ -91,7 +92,7 @@ def emit_json(obj: Any) -> None:
 
 
 #: Longest gap [s] between two plain progress lines off a terminal (``GREYBENCH_PROGRESS_INTERVAL_S``
-#: overrides it; the issue asks for at most 30 s, 10 s keeps a margin for a busy machine).
+#: overrides it; the contract is at most 30 s, 10 s keeps a margin for a busy machine).
 PROGRESS_INTERVAL_S = 10.0
 #: Shortest gap [s] between plain lines written on ``advance`` (a per-step advance must not flood a log).
 PROGRESS_MIN_GAP_S = 2.0
@@ -134,7 +135,8 @@ class _PlainAdvance(Advance):
     at the end."""
 
     def __init__(self, description: str, total: float | None, interval: float) -> None:
-        self.description, self.stage, self.total, self.interval = description, None, total, interval
+        self.description, self.total, self.interval = description, total, interval
+        self.stage: str | None = None
         self.done = 0.0
         self.t0 = self.last = time.monotonic()
         self.lock = threading.Lock()

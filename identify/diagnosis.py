@@ -73,14 +73,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from identify.errors import InputError
-from identify.files import as_created
+from identify.files import atomic_folder
 from identify.metrics import Metrics
 from identify.models.base import FrictionModel
-from identify.records import AxisRecord
+from identify.records import AxisRecord, markdown_table
+from identify.ripple import RIPPLE_ORDERS, Periodogram, ripple_periodogram
+
+if TYPE_CHECKING:
+    from identify.models.extended import LuGreExtended
 
 
 class Cause(str, Enum):
@@ -125,9 +130,6 @@ MIN_RIPPLE_PERIODS = 2.0
 MIN_RIPPLE_SAMPLES = 4.0
 #: Most ripple periods searched inside the travel [-] (bounds the periodogram's cost).
 MAX_RIPPLE_PERIODS = 200.0
-#: Default ripple orders of :func:`ripple_periodogram` when called alone [1/rad] (spatial
-#: angular frequency: cycles per radian times 2 pi); the diagnosis uses :func:`ripple_orders`.
-RIPPLE_ORDERS = (0.5, 80.0)
 
 
 def noise_rms(r: np.ndarray) -> float:
@@ -170,7 +172,7 @@ class References:
     temp: float
 
     @classmethod
-    def of(cls, record: AxisRecord) -> "References":
+    def of(cls, record: AxisRecord) -> References:
         load = float(np.mean(np.abs(record.tau_load))) if record.tau_load is not None else 0.0
         temp = float(np.mean(record.temp)) if record.temp is not None else 0.0
         return cls(load=load, temp=temp)
@@ -198,95 +200,11 @@ class BaselineParts:
     residual: np.ndarray
 
     @classmethod
-    def of(cls, model: FrictionModel, record: AxisRecord) -> "BaselineParts":
+    def of(cls, model: FrictionModel, record: AxisRecord) -> BaselineParts:
         friction = model.predict_friction(record)
         viscous = model.params_.get("nu", 0.0) * record.qd
         total = friction + model.rigid_part(record)
         return cls(total=total, dry=friction - viscous, viscous=viscous, residual=record.tau - total)
-
-
-@dataclass(frozen=True)
-class Periodogram:
-    """Least-squares periodogram of a residual against position.
-
-    Attributes
-    ----------
-    orders : ndarray
-        Spatial orders n [1/rad].
-    power : ndarray
-        Share of the residual's variance explained by ``sin(n q), cos(n q)`` [-].
-    best : float
-        Order of the largest power [1/rad].
-    resolved : bool
-        The peak lies inside the searched range (a power still rising at the range's edge is a
-        trend over fewer periods than the range allows, not a resolved ripple).
-    """
-
-    orders: np.ndarray
-    power: np.ndarray
-    best: float
-    resolved: bool = True
-
-
-def ripple_periodogram(q: np.ndarray, r: np.ndarray, orders: tuple[float, float] = RIPPLE_ORDERS,
-                       max_samples: int = 8000) -> Periodogram:
-    """Least-squares (Lomb-Scargle type) periodogram of the residual ``r`` vs position ``q``.
-
-    For each order n the pair ``sin(n q), cos(n q)`` (plus a constant) is fitted by least
-    squares and the explained share of variance recorded; the grid step is a quarter of
-    the resolution ``2 pi / range(q)``, and the peak is refined on a 32x finer grid around
-    it and a parabola through the finest neighbours. Unlike an FFT it needs no uniform sampling in q (the trajectory dwells
-    near its centre).
-
-    Parameters
-    ----------
-    q : ndarray
-        Position [rad].
-    r : ndarray
-        Residual torque [Nm].
-    orders : (float, float)
-        Searched range of n [1/rad].
-    max_samples : int
-        The periodogram uses at most this many samples, evenly strided (speed; the ripple
-        order needs the position range, not every sample).
-    """
-    step = max(1, q.size // max_samples)
-    qs, rs = q[::step], r[::step] - np.mean(r[::step])
-    span = float(np.ptp(qs)) or 1.0
-    dn = 2 * np.pi / span / 4.0
-    grid = np.arange(orders[0], orders[1] + dn, dn)
-    var = float(np.dot(rs, rs)) or 1.0
-
-    def powers(orders_: np.ndarray) -> np.ndarray:
-        out = np.empty(orders_.size)
-        for lo in range(0, orders_.size, 64):
-            n = orders_[lo:lo + 64, None]
-            s, c = np.sin(n * qs[None, :]), np.cos(n * qs[None, :])
-            s -= s.mean(axis=1, keepdims=True)
-            c -= c.mean(axis=1, keepdims=True)
-            ss, cc, sc = (s * s).sum(1), (c * c).sum(1), (s * c).sum(1)
-            sr, cr = s @ rs, c @ rs
-            det = ss * cc - sc * sc
-            det = np.where(det > 1e-12 * ss * cc, det, np.inf)
-            out[lo:lo + 64] = (cc * sr * sr - 2 * sc * sr * cr + ss * cr * cr) / det / var
-        return out
-
-    power = powers(grid)
-    k = int(np.argmax(power))
-    resolved = 0 < k < grid.size - 1
-    # the peak, refined on a grid 32x finer within one coarse step either side (a parabola
-    # through coarse points is biased by the peak's sinc shape, and a misplaced order leaves
-    # a residual that other candidates would pick up)
-    fine = np.linspace(max(grid[k] - dn, orders[0]), min(grid[k] + dn, orders[1]), 65)
-    pf = powers(fine)
-    j = int(np.argmax(pf))
-    best = float(fine[j])
-    if 0 < j < fine.size - 1:
-        a, b, c = pf[j - 1], pf[j], pf[j + 1]
-        den = a - 2 * b + c
-        if den < 0:
-            best += 0.5 * (fine[1] - fine[0]) * (a - c) / den
-    return Periodogram(orders=grid, power=power, best=best, resolved=resolved)
 
 
 def _refine_order(p: Periodogram, q: np.ndarray, base: np.ndarray, r: np.ndarray) -> Periodogram:
@@ -312,13 +230,6 @@ def _refine_order(p: Periodogram, q: np.ndarray, base: np.ndarray, r: np.ndarray
     return Periodogram(orders=p.orders, power=p.power, best=best, resolved=p.resolved)
 
 
-def _column(record: AxisRecord, name: str) -> np.ndarray:
-    val = getattr(record, name)
-    if val is None:
-        raise InputError(f"the column '{name}' is needed and missing", source=record.source, field=name)
-    return val
-
-
 def base_regressors(record: AxisRecord, parts: BaselineParts, rigid: bool) -> np.ndarray:
     """The base set every candidate is tested with: ``F_dry, qd, 1`` (+ ``qdd`` when rigid); the
     offset is in both cases, as the baseline co-identifies it with or without ``tau_rb``."""
@@ -333,9 +244,9 @@ def candidate_regressors(cause: Cause, record: AxisRecord, parts: BaselineParts,
                          ripple_order: float | None = None) -> np.ndarray:
     """The physically structured regressors of one cause (module docstring table), (n, k) [Nm-scaled]."""
     if cause is Cause.LOAD:
-        return ((np.abs(_column(record, "tau_load")) - refs.load) * parts.dry)[:, None]
+        return ((np.abs(record.require("tau_load")) - refs.load) * parts.dry)[:, None]
     if cause is Cause.TEMPERATURE:
-        dT = _column(record, "temp") - refs.temp
+        dT = record.require("temp") - refs.temp
         return np.column_stack([dT * record.qd, dT * parts.dry])
     if cause is Cause.POSITION:
         if ripple_order is None:
@@ -344,7 +255,7 @@ def candidate_regressors(cause: Cause, record: AxisRecord, parts: BaselineParts,
     if cause is Cause.ASYMMETRY:
         return (parts.dry * (record.qd < 0))[:, None]
     if cause is Cause.INERTIA:
-        return ((np.abs(_column(record, "tau_load")) - refs.load) * record.qdd)[:, None]
+        return ((np.abs(record.require("tau_load")) - refs.load) * record.qdd)[:, None]
     if cause is Cause.DRIFT:
         return (record.t - record.t[0])[:, None]
     if cause is Cause.GRAVITY:
@@ -512,6 +423,7 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
     design = _Design(base, cands, p_tr.residual, p_te.residual)
 
     accepted: list[Cause] = []
+    first = 0.0  # what the first named cause explains [Nm]
     while True:
         rest = [c for c in available if c not in accepted]
         if not rest:
@@ -545,7 +457,7 @@ def _coefficients(cause: Cause, beta: np.ndarray, order: float) -> dict[str, flo
              Cause.POSITION: ["a_sin [Nm]", "a_cos [Nm]"], Cause.ASYMMETRY: ["asym [-]"],
              Cause.INERTIA: ["k_J [kg m^2/Nm]"], Cause.DRIFT: ["drift [Nm/s]"],
              Cause.GRAVITY: ["grav_cos [Nm]", "grav_sin [Nm]"]}[cause]
-    out = {n: float(b) for n, b in zip(names, beta)}
+    out = {n: float(b) for n, b in zip(names, beta, strict=True)}
     if cause is Cause.POSITION:
         out["order [1/rad]"] = order
     return out
@@ -592,7 +504,7 @@ class DiagnosisResult:
 
     analysis: ResidualAnalysis
     baseline: FrictionModel
-    extended: FrictionModel
+    extended: LuGreExtended
     baseline_test: Metrics
     extended_test: Metrics
     gain: float
@@ -608,7 +520,7 @@ class DiagnosisResult:
         return f"{self.extended.name}[{'+'.join(causes)}]" if causes else self.extended.name
 
     def to_json(self) -> dict:
-        """The issue's JSON: cause, ranking, baseline, extended, gain."""
+        """The diagnosis JSON contract: cause, ranking, baseline, extended, gain."""
         return {"cause": self.cause.value,
                 "ranking": [s.to_dict() for s in self.analysis.ranking],
                 "baseline": {"model": self.baseline.name, "test_rmse": self.baseline_test.rmse},
@@ -696,17 +608,17 @@ def variable_view(cause: Cause, record: AxisRecord) -> VariableView:
     u = record.units
     moving = np.abs(record.qd) > MOVING_SHARE * float(np.max(np.abs(record.qd)))
     if cause is Cause.LOAD:
-        return VariableView(np.abs(record.tau_load), f"|tau_load| [{u['tau_load']}]", "sgn(qd)", moving,
+        return VariableView(np.abs(record.require("tau_load")), f"|tau_load| [{u['tau_load']}]", "sgn(qd)", moving,
                             np.sign(record.qd))
     if cause is Cause.TEMPERATURE:
-        return VariableView(record.temp, "temperature [degC]", "sgn(qd)", moving, np.sign(record.qd))
+        return VariableView(record.require("temp"), "temperature [degC]", "sgn(qd)", moving, np.sign(record.qd))
     if cause in (Cause.POSITION, Cause.GRAVITY):
         return VariableView(record.q, f"q [{u['q']}]", "1", all_, ones)
     if cause is Cause.ASYMMETRY:
         return VariableView(record.qd, f"qd [{u['qd']}]", "1", all_, ones)
     if cause is Cause.INERTIA:
         acc = np.abs(record.qdd) > 0.1 * np.max(np.abs(record.qdd))
-        return VariableView(np.abs(record.tau_load), f"|tau_load| [{u['tau_load']}]", "sgn(qdd)", acc,
+        return VariableView(np.abs(record.require("tau_load")), f"|tau_load| [{u['tau_load']}]", "sgn(qdd)", acc,
                             np.sign(record.qdd))
     return VariableView(record.t, "t [s]", "1", all_, ones)
 
@@ -739,7 +651,8 @@ def residual_plot(result: DiagnosisResult, test: AxisRecord, cause: Cause, path)
     fig, ax = plt.subplots(figsize=(8, 4.5))
     step = max(1, int(m.sum()) // 4000)
     ax.scatter(view.x[m][::step], before[m][::step], s=2, alpha=0.15, color="C0")
-    for y, lab, col in ((before, f"before: {result.baseline.name}", "C0"), (after, f"after: {result.extended_label}", "C3")):
+    for y, lab, col in ((before, f"before: {result.baseline.name}", "C0"),
+                        (after, f"after: {result.extended_label}", "C3")):
         xc, yc = _binned(view.x[m], y[m])
         ax.plot(xc, yc, "-o", ms=3, color=col, label=f"{lab} (binned mean)")
     ax.axhline(0.0, color="k", lw=0.6)
@@ -768,8 +681,10 @@ def _plain_words(cause: Cause, p: dict) -> str:
     if cause is Cause.POSITION:
         amp = float(np.hypot(p["ripple_sin"], p["ripple_cos"]))
         n = p["ripple_order"]
-        return (f"A torque ripple repeats with the joint position: order {n:.3f} per rad (period {2 * np.pi / n:.4f} rad), "
-                f"amplitude {amp:.4f} Nm, phase {np.arctan2(p['ripple_cos'], p['ripple_sin']):.2f} rad (gear meshing or "
+        return (f"A torque ripple repeats with the joint position: order {n:.3f} per rad (period {2 * np.pi / n:.4f} "
+                "rad), "
+                f"amplitude {amp:.4f} Nm, phase {np.arctan2(p['ripple_cos'], p['ripple_sin']):.2f} rad (gear meshing "
+                "or "
                 "cyclic transmission error). The baseline depends on velocity only and cannot see it.")
     if cause is Cause.ASYMMETRY:
         return (f"The friction is not the same in both directions: the levels for negative velocity are "
@@ -808,7 +723,8 @@ def render_report(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, 
              f"Training record `{train.source}` ({train.n} samples), test record `{test.source}` ({test.n} samples). "
              f"Baseline: conventional LuGre (GA + least squares, paper 2.2.1).", "", "## What was wrong", ""]
     if not a.causes:
-        lines.append(f"Nothing the candidates can name. No candidate explains more than {a.threshold * 1e3:.3g} {mu} RMS "
+        lines.append(f"Nothing the candidates can name. No candidate explains more than {a.threshold * 1e3:.3g} {mu} "
+                     "RMS "
                      f"of the held-out torque; the baseline's held-out residual is {result.baseline_test.rmse:.4f} Nm "
                      "RMS, which is what is left as noise (or as an effect none of the candidates describes).")
     for c in a.causes:
@@ -821,24 +737,23 @@ def render_report(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, 
               "a drift is additive; load scales the friction levels, an inertia error scales the acceleration. "
               "After the best candidate is accepted the others are re-scored *given* it, so a candidate that only "
               f"echoes the accepted one scores about zero. Threshold: {a.threshold * 1e3:.3g} {mu} "
-              f"({SCORE_THRESHOLD:g} x the held-out residual's noise RMS of {a.noise * 1e3:.3g} {mu}).", "",
-              f"| cause | score [{mu}] | alone [{mu}] | named | evidence |", "|---|---|---|---|---|"]
-    for s in a.ranking:
-        lines.append(f"| {s.cause.value} | {s.score * 1e3:+.2f} | {s.alone * 1e3:+.2f} | "
-                     f"{'yes' if s.selected else 'no'} | {s.evidence} |")
+              f"({SCORE_THRESHOLD:g} x the held-out residual's noise RMS of {a.noise * 1e3:.3g} {mu}).", ""]
+    lines += markdown_table(("cause", f"score [{mu}]", f"alone [{mu}]", "named", "evidence"),
+                            [(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}",
+                              "yes" if s.selected else "no", s.evidence) for s in a.ranking])
     if Cause.POSITION in a.causes:
         lines += ["", f"Position ripple order from the residual periodogram: {a.ripple.best:.3f} per rad."]
-    lines += ["", "## What the extension bought", "",
-              "| model | test RMSE [Nm] | train RMSE [Nm] |", "|---|---|---|",
-              f"| {result.baseline.name} | {result.baseline_test.rmse:.5f} | {result.baseline.train_metrics_.rmse:.5f} |",
-              f"| {result.extended_label} | {result.extended_test.rmse:.5f} | {result.extended.train_metrics_.rmse:.5f} |",
-              "", f"Gain on the test record: **{result.gain * 100:+.1f} %** of the baseline's RMSE "
+    lines += ["", "## What the extension bought", ""]
+    lines += markdown_table(("model", "test RMSE [Nm]", "train RMSE [Nm]"), [
+        (result.baseline.name, f"{result.baseline_test.rmse:.5f}", f"{result.baseline.train_metrics_.rmse:.5f}"),
+        (result.extended_label, f"{result.extended_test.rmse:.5f}", f"{result.extended.train_metrics_.rmse:.5f}")])
+    lines += ["", f"Gain on the test record: **{result.gain * 100:+.1f} %** of the baseline's RMSE "
               "(relative reduction; negative would mean the extension predicts the held-out record worse).", ""]
     ext = result.extended.extension_parameters() if a.causes else {}
     if ext:
-        lines += ["Identified extension parameters (refitted jointly with the LuGre parameters):", "",
-                  "| parameter | value | unit |", "|---|---|---|"]
-        lines += [f"| {k} | {v:.6g} | {result.extended.units.get(k, '')} |" for k, v in ext.items()]
+        lines += ["Identified extension parameters (refitted jointly with the LuGre parameters):", ""]
+        lines += markdown_table(("parameter", "value", "unit"),
+                                [(k, f"{v:.6g}", result.extended.units.get(k, "")) for k, v in ext.items()])
         lines.append("")
     lines += ["## Plots", ""]
     for c, fname in plots.items():
@@ -862,14 +777,15 @@ class SavedDiagnosis:
         MLflow run ids of the ``baseline`` and ``extended`` runs (empty when not tracked).
     """
 
-    directory: "object"
-    report: "object"
+    directory: object
+    report: object
     plots: list
     runs: dict[str, str]
 
 
 def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, directory, *,
-                   track: bool = True, experiment: str = "diagnose", extra_params: dict | None = None) -> SavedDiagnosis:
+                   track: bool = True, experiment: str = "diagnose",
+                   extra_params: dict | None = None) -> SavedDiagnosis:
     """Write the extended model, the baseline, ``report.md`` with plots and ``diagnosis.json``.
 
     Everything is staged in a temporary folder beside ``directory`` and renamed into place,
@@ -881,9 +797,6 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
     derivative cut-off) as params of both.
     """
     import json
-    import os
-    import shutil
-    import tempfile
     from pathlib import Path
 
     target = Path(directory)
@@ -893,10 +806,7 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
         if any(target.iterdir()) and not (target / RESULT_FILE).exists():
             raise InputError("folder exists, is not empty and is not a diagnosis output: choose another --out",
                              source=str(target))
-    target.parent.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    as_created(stage, directory=True)
-    try:
+    with atomic_folder(target) as stage:
         result.extended.save(stage)
         result.baseline.save(stage / BASELINE_DIR)
         shown = list(result.analysis.causes) or [Cause.NONE]
@@ -912,12 +822,6 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
         doc = {**result.to_json(), "causes": [c.value for c in result.analysis.causes],
                "threshold": result.analysis.threshold, "timings": result.timings, "mlflow_runs": runs}
         (stage / RESULT_FILE).write_text(json.dumps(doc, indent=2) + "\n")
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(stage, target)
-    finally:
-        if stage.exists():
-            shutil.rmtree(stage)
     return SavedDiagnosis(directory=target, report=target / REPORT_FILE, plots=[target / f for f in plots.values()],
                           runs=runs)
 

@@ -146,7 +146,7 @@ class PlantConfig:
     inertia_step: float = 0.3
     drift_rate: float = 0.006
 
-    def validate(self, source: str = "<config>") -> "PlantConfig":
+    def validate(self, source: str = "<config>") -> PlantConfig:
         positive = ("inertia", "s0", "fc", "fs", "vs", "delta", "substeps", "thermal_capacity", "thermal_resistance",
                     "load_period", "ripple_order")
         for name in positive:
@@ -163,7 +163,7 @@ class PlantConfig:
         return self
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> "PlantConfig":
+    def from_toml(cls, path: str | Path) -> PlantConfig:
         """Defaults overridden by the keys of a TOML file; unknown keys are refused."""
         p = Path(path)
         if not p.exists():
@@ -181,7 +181,8 @@ class PlantConfig:
                     raise InputError("must be a string", source=str(p), field=key)
             elif not isinstance(val, (int, float)) or isinstance(val, bool):
                 raise InputError("must be a number", source=str(p), field=key)
-        cfg = replace(cls(), **{k: (int(v) if k == "substeps" else v) for k, v in data.items()})
+        # each value's type checked above against its field
+        cfg = replace(cls(), **{k: (int(v) if k == "substeps" else v) for k, v in data.items()})  # type: ignore[arg-type]
         return cfg.validate(str(p))
 
     def to_dict(self) -> dict:
@@ -298,9 +299,8 @@ def _thermal(cfg: PlantConfig, v: np.ndarray, dt: np.ndarray, temp0: float) -> n
     """
     p_loss = np.abs(v) * (cfg.fc + cfg.nu * np.abs(v))
     tau_th = cfg.thermal_capacity * cfg.thermal_resistance
-    a = np.exp(-dt / tau_th)
     # T[k+1] = a*T[k] + (1 - a)*T_ss[k]: a first-order filter (sampling is regular).
-    a = float(np.median(a))
+    a = float(np.median(np.exp(-dt / tau_th)))
     drive = temp0 + cfg.thermal_resistance * p_loss
     temp, _ = lfilter([0.0, 1.0 - a], [1.0, -a], drive, zi=[a * temp0])
     return temp

@@ -38,17 +38,16 @@ window is too short at 250 Hz and too long at 4 kHz.
 from __future__ import annotations
 
 import os
-import tempfile
+import re
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.ndimage import median_filter
-from scipy.signal import butter, savgol_filter, sosfiltfilt, welch
 
 from identify.errors import InputError
-from identify.files import as_created
+from identify.files import atomic_file
 
 REQUIRED = ("t", "q", "tau")
 OPTIONAL = ("qd", "qdd", "temp", "tau_load", "tau_rb")
@@ -122,6 +121,14 @@ class AxisRecord:
     def n(self) -> int:
         return int(self.t.size)
 
+    def require(self, name: str) -> np.ndarray:
+        """The optional column ``name`` (``temp``, ``tau_load``, ...); ``InputError`` naming the record
+        and the column when the record has none."""
+        val = getattr(self, name)
+        if val is None:
+            raise InputError(f"the column '{name}' is needed and missing", source=self.source, field=name)
+        return val
+
     @property
     def dt(self) -> np.ndarray:
         """Interval to the next sample [s], per sample (the last repeats the one before)."""
@@ -137,7 +144,7 @@ class AxisRecord:
         """Torque left for friction (+ inertia and offset when ``tau_rb`` is absent) [Nm]."""
         return self.tau - self.tau_rb if self.tau_rb is not None else self.tau
 
-    def slice(self, start: int, stop: int) -> "AxisRecord":
+    def slice(self, start: int, stop: int) -> AxisRecord:
         """A contiguous part of the record (e.g. a train/validation split)."""
         sl = slice(start, stop)
         opt = {k: (None if getattr(self, k) is None else getattr(self, k)[sl])
@@ -200,6 +207,9 @@ def choose_cutoff(t: np.ndarray, q: np.ndarray, margin: float = NOISE_MARGIN) ->
     cut-off is the lowest frequency above which the log-median-smoothed ``S`` stays below
     ``margin`` times the floor for an octave, within ``[10/duration, fs/4]``.
     """
+    from scipy.ndimage import median_filter  # scipy.signal/ndimage: seconds to import, only when deriving
+    from scipy.signal import welch
+
     dt = float(np.median(np.diff(t)))
     fs = 1.0 / dt
     n = q.size
@@ -243,6 +253,8 @@ def derive_derivatives(t: np.ndarray, q: np.ndarray, cutoff_hz: float | None = N
     qd, qdd : ndarray
         [rad/s], [rad/s^2] (m-based on linear axes).
     """
+    from scipy.signal import butter, savgol_filter, sosfiltfilt
+
     dt = float(np.median(np.diff(t)))
     fs = 1.0 / dt
     fc = choose_cutoff(t, q).cutoff_hz if cutoff_hz is None else float(cutoff_hz)
@@ -277,20 +289,26 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
     ext = p.suffix.lower()
     if ext not in (".csv", ".parquet", ".pq"):
         raise InputError(f"unsupported output type '{ext or '(none)'}': use .csv or .parquet", source=str(p))
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", dir=p.parent)
-    os.close(fd)
-    try:
+    with atomic_file(p) as tmp:
         if ext == ".csv":
             df.to_csv(tmp, index=False, float_format="%.10g")
         else:
             df.to_parquet(tmp, index=False)
-        as_created(tmp)
-        os.replace(tmp, p)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return p
+
+
+def markdown_table(columns: Sequence[str], rows: Iterable[Sequence[object]]) -> list[str]:
+    """Lines of a markdown table (header, separator, one line per row) for reports: cells as given
+    (format numbers before), a ``|`` inside a cell escaped so it cannot split the row."""
+    def line(cells: Sequence[object]) -> str:
+        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+
+    out = [line(columns), "|" + "---|" * len(columns)]
+    for row in rows:
+        if len(row) != len(columns):
+            raise ValueError(f"a row of {len(row)} cells in a table of {len(columns)} columns")
+        out.append(line(row))
+    return out
 
 
 def _numeric_column(df: pd.DataFrame, name: str, source: str) -> np.ndarray:
@@ -339,7 +357,8 @@ def split_unit_headers(df: pd.DataFrame, source: str) -> tuple[pd.DataFrame, dic
         if fam is not None:
             rot, lin = UNIT_CHOICES[fam]
             if unit not in rot + lin:
-                raise InputError(f"unit '{unit}' of column '{col}' is not SI: use {' or '.join(dict.fromkeys(rot + lin))}",
+                raise InputError(f"unit '{unit}' of column '{col}' is not SI: use "
+                                 f"{' or '.join(dict.fromkeys(rot + lin))}",
                                  source=source, field=str(col))
         rename[col] = name
         units[name] = unit
@@ -475,3 +494,64 @@ def record_from_arrays(t, q, tau, *, qd=None, qdd=None, temp=None, tau_load=None
         if val is not None:
             data[name] = val
     return validate_frame(pd.DataFrame(data), source=source)
+
+
+def log_axes(columns) -> list[int]:
+    """Joint numbers N of the ``qN`` columns of a robot log (headers may carry units)."""
+    axes = set()
+    for c in columns:
+        m = re.match(r"^\s*q(\d+)\s*(\[.*\])?\s*$", str(c))
+        if m:
+            axes.add(int(m.group(1)))
+    return sorted(axes)
+
+
+def load_axis_record(path: str | os.PathLike, axis: int | None, *, linear: bool | None = None,
+                     cutoff_hz: float | None = None, axis_field: str = "axis") -> AxisRecord:
+    """An axis record from a file: a plain axis record, or joint ``axis`` of a robot log with any
+    number of joints (``t, q1..qN, tau1..tauN``, optional ``qdN, qddN, tempN, tau_rbN, tau_loadN``;
+    headers may declare units, ``q7 [m]``). ``linear`` declares a linear axis (m, N); ``cutoff_hz``
+    [Hz] fixes the derivative cut-off (else chosen from the record); ``axis_field`` names the axis in errors."""
+    df = read_table(path)
+    plain, units = split_unit_headers(df, str(path))
+    axes = log_axes(plain.columns)
+    is_log = "q" not in plain.columns and bool(axes)
+    if not is_log:
+        return validate_frame(df, source=str(path), linear=linear, cutoff_hz=cutoff_hz)
+    if axis is None:
+        raise InputError(f"this is a robot log with joints {axes[0]}..{axes[-1]} (q{axes[0]}..q{axes[-1]}): choose "
+                         f"the joint with --axis", source=str(path), field=axis_field)
+    cols = {"t": "t", f"q{axis}": "q", f"tau{axis}": "tau", f"qd{axis}": "qd", f"qdd{axis}": "qdd",
+            f"temp{axis}": "temp", f"tau_rb{axis}": "tau_rb", f"tau_load{axis}": "tau_load"}
+    for need in ("t", f"q{axis}", f"tau{axis}"):
+        if need not in plain.columns:
+            have = f" (the log has joints {', '.join(map(str, axes))})" if need != "t" else ""
+            raise InputError(f"robot log has no column '{need}' for axis {axis}{have}", source=str(path), field=need)
+    keep = [c for c in cols if c in plain.columns]
+    sub = plain[keep].rename(columns={c: (f"{cols[c]} [{units[c]}]" if c in units else cols[c]) for c in keep})
+    rec = validate_frame(sub, source=f"{path} (axis {axis})", linear=linear, cutoff_hz=cutoff_hz)
+    own = float(np.ptp(rec.q)) or 1.0
+    moving = []
+    for j in axes:
+        if j != axis and f"q{j}" in plain.columns:
+            qj = pd.to_numeric(plain[f"q{j}"], errors="coerce").to_numpy(dtype=float)
+            if np.isfinite(qj).all() and float(np.ptp(qj)) > 0.01 * own:
+                moving.append(j)
+    rec.other_joints_moving = tuple(moving)
+    return rec
+
+
+def derivative_note(record: AxisRecord) -> str:
+    """One line: how the record's velocity and acceleration were obtained (the cut-off [Hz])."""
+    if record.cutoff_hz is None:
+        return f"derivatives: qd, qdd read from {record.source} (no cut-off applied)"
+    return (f"derivatives: {', '.join(record.derived)} derived with cut-off {record.cutoff_hz:.3g} Hz "
+            f"(zero-phase low-pass at {1.0 / record.sample_time:.4g} Hz sampling)")
+
+
+def record_params(record: AxisRecord) -> dict:
+    """MLflow params describing a training record: derivative cut-off [Hz] and axis units."""
+    units = record.units
+    return {"deriv_cutoff_hz": "record" if record.cutoff_hz is None else f"{record.cutoff_hz:.6g}",
+            "axis_kind": "linear" if record.linear else "rotary",
+            "unit_position": units["q"], "unit_torque": units["tau"]}

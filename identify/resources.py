@@ -18,6 +18,7 @@ a busy neighbour, with passive waiting 5-9 s (``greybench bench friction`` measu
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import sys
@@ -51,8 +52,8 @@ def cgroup_cores(root: Path = Path("/sys/fs/cgroup")) -> float | None:
     ``cpu.cfs_period_us`` (quota -1 = unlimited).
     """
     try:
-        quota, period = (root / "cpu.max").read_text().split()[:2]
-        return None if quota == "max" else int(quota) / int(period)
+        quota_text, period_text = (root / "cpu.max").read_text().split()[:2]
+        return None if quota_text == "max" else int(quota_text) / int(period_text)
     except (OSError, ValueError):
         pass
     try:
@@ -137,16 +138,12 @@ def configure_threads(n: int) -> int:
     torch = sys.modules.get("torch")
     if torch is not None:
         torch.set_num_threads(n)
-        try:
+        with contextlib.suppress(RuntimeError):  # already used: the inter-op pool keeps its size
             torch.set_num_interop_threads(n)
-        except RuntimeError:  # already used: the inter-op pool keeps its size
-            pass
     numba = sys.modules.get("numba")
     if numba is not None:
-        try:
+        with contextlib.suppress(ValueError, AttributeError):
             numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
-        except (ValueError, AttributeError):
-            pass
     return n
 
 

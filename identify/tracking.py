@@ -29,18 +29,22 @@ challenger's test RMSE is lower.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Protocol
 
+import numpy as np
 import pandas as pd
 
 from identify.errors import InputError
 from identify.metrics import Metrics
 from identify.models import FrictionModel, load_model
-from identify.records import AxisRecord, validate_frame
+from identify.records import AxisRecord, load_record, markdown_table, record_params, validate_frame
 from identify.residual_analysis import ResidualAnalysis, residual_analysis
 from identify.residual_analysis import figure as residual_figure
 
@@ -109,6 +113,7 @@ def is_tracked_ref(ref: str) -> bool:
 
 
 # ---- pyfunc ----------------------------------------------------------------------------
+_PythonModel: type
 try:
     import mlflow.pyfunc as _pyfunc
 
@@ -154,6 +159,11 @@ def load_tracked_model(ref: str) -> FrictionModel:
     return load_model(_find_model_folder(local))
 
 
+def load_any_model(ref: str) -> FrictionModel:
+    """A friction model from a saved folder or an MLflow model URI (``runs:/...``, ``models:/...``)."""
+    return load_tracked_model(ref) if is_tracked_ref(ref) else load_model(ref)
+
+
 # ---- plots -----------------------------------------------------------------------------
 def analyse_residual(record: AxisRecord, pred) -> ResidualAnalysis:
     """Residual analysis of a prediction ``pred`` [Nm] on ``record``: the residual
@@ -168,7 +178,7 @@ def analyse_residual(record: AxisRecord, pred) -> ResidualAnalysis:
     return residual_analysis(record.tau - np.asarray(pred, dtype=float), record.qd, dt, max_lag=max_lag)
 
 
-def overlay_figure(record: AxisRecord, preds: dict[str, "object"], label: str):
+def overlay_figure(record: AxisRecord, preds: dict[str, np.ndarray], label: str):
     """Measured torque and every model's prediction [Nm] over time on one record (top), their
     errors (bottom), and a zoom on the 2 s around the largest error (right)."""
     import matplotlib
@@ -205,7 +215,7 @@ def overlay_figure(record: AxisRecord, preds: dict[str, "object"], label: str):
     return fig
 
 
-def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> dict[str, "object"]:
+def figures(model: FrictionModel, record: AxisRecord, label: str, pred=None) -> dict[str, Any]:
     """The three diagnostic figures of a fit on ``record`` (matplotlib, Agg).
 
     Returns a dict file name -> Figure: ``prediction_time.png`` (measured and predicted
@@ -294,10 +304,8 @@ def _pip_requirements() -> list[str]:
 
     reqs = []
     for pkg in ("torch", "numpy", "pandas", "scipy", "numba", "pygad", "mlflow"):
-        try:
+        with contextlib.suppress(PackageNotFoundError):
             reqs.append(f"{pkg}=={version(pkg)}")
-        except PackageNotFoundError:  # pragma: no cover
-            pass
     return reqs
 
 
@@ -323,10 +331,9 @@ def log_fit(model: FrictionModel, train: AxisRecord, test: AxisRecord | None = N
         Nest the run under this parent (``train-robot``).
     """
     mlflow = _mlflow()
+    import matplotlib.pyplot as plt
     from mlflow.entities import Metric
     from mlflow.tracking import MlflowClient
-
-    import matplotlib.pyplot as plt
 
     exp_id = ensure_experiment(experiment)
     tags = {"mlflow.parentRunId": parent_run_id} if parent_run_id else {}
@@ -545,11 +552,10 @@ def log_comparison(parent_run_id: str, models: dict[str, FrictionModel], record:
     prediction over the measurement) and ``plots/residual_analysis.png`` (all models' residual
     correlations with their bands). Returns the residual analyses by model name.
     """
-    mlflow = _mlflow()
+    _mlflow()  # configured tracking store
+    import matplotlib.pyplot as plt
     from mlflow.entities import Metric
     from mlflow.tracking import MlflowClient
-
-    import matplotlib.pyplot as plt
 
     client = MlflowClient()
     preds = {name: model.predict(record) for name, model in models.items()}
@@ -566,20 +572,21 @@ def log_comparison(parent_run_id: str, models: dict[str, FrictionModel], record:
     metrics.append(Metric("best_test_rmse", float(best["test_rmse"]), now, 0))
     client.log_batch(parent_run_id, metrics=metrics)
     client.set_tag(parent_run_id, "best_model", best["model"])
-    header = "| rank | model | test RMSE [Nm] | test R^2 | fit time [s] | residual ACF outside band [%] |"
-    lines = [f"Comparison of {len(rows)} friction models on the {label}, sorted by test RMSE.", "", header,
-             "|---|---|---|---|---|---|"]
+    cells = []
     table = []
     for i, row in enumerate(sorted(rows, key=lambda r: r["test_rmse"]), 1):
         a = analyses.get(row["model"])
         outside = a.auto_outside_pct if a else float("nan")
-        lines.append(f"| {i} | {row['model']} | {row['test_rmse']:.4f} | {row['test_r2']:.5f} | "
-                     f"{row['fit_time_s']:.1f} | {outside:.0f} |")
+        cells.append((i, row["model"], f"{row['test_rmse']:.4f}", f"{row['test_r2']:.5f}", f"{row['fit_time_s']:.1f}",
+                      f"{outside:.0f}"))
         table.append({"rank": i, "model": row["model"], "test_rmse_nm": row["test_rmse"], "test_r2": row["test_r2"],
                       "train_rmse_nm": row.get("train_rmse"), "fit_time_s": row["fit_time_s"],
                       "n_parameters": row.get("n_parameters"), "resid_acf_outside_pct": outside,
                       "resid_xcorr_outside_pct": a.cross_outside_pct if a else float("nan"),
                       "run_id": row.get("run_id")})
+    lines = [f"Comparison of {len(rows)} friction models on the {label}, sorted by test RMSE.", ""]
+    lines += markdown_table(("rank", "model", "test RMSE [Nm]", "test R^2", "fit time [s]",
+                             "residual ACF outside band [%]"), cells)
     client.set_tag(parent_run_id, "mlflow.note.content", "\n".join(lines))
     client.log_table(parent_run_id, data=pd.DataFrame(table), artifact_file="comparison.json")
     client.log_dict(parent_run_id, {name: {"record": label, **a.to_dict()} for name, a in analyses.items()},
@@ -601,3 +608,106 @@ def ui_command(host: str = "127.0.0.1", port: int = 5000) -> list[str]:
     if root:
         cmd += ["--default-artifact-root", root]
     return cmd
+
+
+class _Progress(Protocol):
+    def __call__(self, n: float = 1) -> None: ...
+
+    def describe(self, text: str) -> None: ...
+
+
+def compare_models(models: list[FrictionModel], train: AxisRecord, test: AxisRecord, *, track: bool = True,
+                   experiment: str = "compare", axis: int = 1, robot: str | None = None,
+                   advance: _Progress | None = None, params: dict | None = None) -> tuple[list[dict], str | None]:
+    """Fit every (unfitted) model on ``train`` and score it on ``test``: rows ``{"model", "test_rmse",
+    "test_r2", "train_rmse", "train_r2", "fit_time_s", "n_parameters"[, "run_id"]}`` (RMSE in the
+    record's torque unit, times in s) sorted by test RMSE, and the parent run id (None without
+    ``track``). With ``track`` each fit is a child run of one parent run in ``experiment``, and the
+    parent logs the comparison (:func:`log_comparison`); a failure marks the parent FAILED.
+    ``advance`` (``advance(n)``, ``advance.describe(text)``) is told of every model and log."""
+    import time
+
+    names = [m.name for m in models]
+    parent = None
+    if track:
+        parent = start_parent_run(experiment, "compare", {**(params or {}), "models": ",".join(names),
+                                                          "axis": axis, "robot": robot or ""})
+    rows: list[dict[str, Any]] = []
+    fitted = {}
+    try:
+        for i, est in enumerate(models, 1):
+            if advance:
+                advance.describe(f"fitting {est.name}, model {i} of {len(models)}")
+            t0 = time.perf_counter()
+            est.fit(train)
+            fit_time = time.perf_counter() - t0
+            te = est.score(test)
+            row = {"model": est.name, "test_rmse": te.rmse, "test_r2": te.r2, "train_rmse": est.train_metrics_.rmse,
+                   "train_r2": est.train_metrics_.r2, "fit_time_s": fit_time, "n_parameters": est.n_parameters()}
+            if parent is not None:
+                if advance:
+                    advance.describe(f"logging {est.name} to MLflow")
+                run = log_fit(est, train, test, fit_time=fit_time, experiment=experiment, axis=axis, robot=robot,
+                              parent_run_id=parent, extra_params=record_params(train))
+                row["run_id"] = run.run_id
+                fitted[est.name] = est
+            rows.append(row)
+            if advance:
+                advance(1)
+        if parent is not None:
+            if advance:
+                advance.describe("logging the comparison (overlay, residual analysis) to MLflow")
+            log_comparison(parent, fitted, test, rows)
+            if advance:
+                advance(1)
+    except BaseException:
+        if parent:
+            end_run(parent, status="FAILED")
+        raise
+    rows.sort(key=lambda r: r["test_rmse"])
+    if parent:
+        end_run(parent)
+    return rows, parent
+
+
+def fit_axes(make: Callable[[], FrictionModel], train: dict[int, Path], test: dict[int, Path] | None = None, *,
+             experiment: str = "train-robot", robot: str = "", register: bool = True,
+             advance: _Progress | None = None, params: dict | None = None) -> tuple[list[dict], str]:
+    """Fit one new model (``make()``) per axis on the axis records ``train[axis]`` and score it on
+    ``test[axis]``: one child run per axis (registered as ``<robot>-axis<N>-friction`` with
+    ``register``) under one parent run of ``experiment``. Rows ``{"axis", "train_rmse", "train_r2",
+    "fit_time_s"[, "test_rmse", "test_r2"], "run_id", ...}`` (RMSE in Nm, times in s) in axis order,
+    and the parent run id; a failure marks the parent FAILED."""
+    import time
+
+    axes = sorted(train)
+    kind = make().name
+    parent = start_parent_run(experiment, f"train-robot {robot} {kind}",
+                              {**(params or {}), "robot": robot, "model": kind, "axes": ",".join(map(str, axes))})
+    rows = []
+    try:
+        for a in axes:
+            if advance:
+                advance.describe(f"axis {a}: fitting and logging")
+            rec = load_record(train[a])
+            rec_t = load_record(test[a]) if test else None
+            est = make()
+            t0 = time.perf_counter()
+            est.fit(rec)
+            fit_time = time.perf_counter() - t0
+            run = log_fit(est, rec, rec_t, fit_time=fit_time, experiment=experiment, axis=a, robot=robot,
+                          run_name=f"{kind} axis {a}", parent_run_id=parent,
+                          register=registered_name(robot, a) if register else None)
+            row = {"axis": a, "train_rmse": est.train_metrics_.rmse, "train_r2": est.train_metrics_.r2,
+                   "fit_time_s": fit_time, **run.to_dict()}
+            if rec_t is not None:
+                m = est.score(rec_t)
+                row.update(test_rmse=m.rmse, test_r2=m.r2)
+            rows.append(row)
+            if advance:
+                advance(1)
+    except BaseException:
+        end_run(parent, status="FAILED")
+        raise
+    end_run(parent)
+    return rows, parent

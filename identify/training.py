@@ -17,8 +17,9 @@ import contextlib
 import logging
 import time
 import warnings
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Iterator, Sequence
+from typing import Literal
 
 import torch
 
@@ -163,7 +164,8 @@ def train(net: torch.nn.Module, loss_fn: LossFn, batches: Sequence[tuple], *, ep
     history = TrainingHistory()
     loader = torch.utils.data.DataLoader(_Batches(), batch_size=None, shuffle=False, num_workers=0)
     # the network's own floating-point type decides the precision ("64-true" would cast a float32 net)
-    precision = "64-true" if any(p.dtype == torch.float64 for p in net.parameters()) else "32-true"
+    wide = any(p.dtype == torch.float64 for p in net.parameters())
+    precision: Literal["64-true", "32-true"] = "64-true" if wide else "32-true"
     trainer = pl.Trainer(max_epochs=epochs, accelerator="cpu", devices=1, logger=False, enable_progress_bar=False,
                          enable_checkpointing=False, enable_model_summary=False, deterministic=True,
                          num_sanity_val_steps=0, precision=precision, gradient_clip_val=grad_clip,

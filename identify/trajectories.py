@@ -15,8 +15,8 @@ continuous acceleration (a C3 smoothstep window), and is sampled at ``rate`` [Hz
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import pandas as pd
@@ -234,7 +234,7 @@ def presliding_motion(limits: AxisLimits, duration: float = 40.0, rate: float = 
     return Trajectory("presliding", t, q, qd, qdd, qddd)
 
 
-test_trajectory.__test__ = False  # a trajectory for testing models, not a pytest test
+test_trajectory.__test__ = False  # type: ignore[attr-defined]  # a trajectory for testing models, not a pytest test
 
-TRAJECTORIES = {"universal": universal_trajectory, "test": test_trajectory,
+TRAJECTORIES: dict[str, Callable[..., Trajectory]] = {"universal": universal_trajectory, "test": test_trajectory,
                 "stribeck": stribeck_steps, "presliding": presliding_motion}

@@ -18,6 +18,7 @@ import io
 import json
 import math
 import sqlite3
+import sys
 import threading
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -588,14 +589,16 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         return _status(request.app.state.manager.cancel(job_id))
 
     from service.compensation import add_routes as add_compensation_routes
-    add_compensation_routes(app, settings, keyed)
+    # each job kind's routes share this module's request helpers (passed in: no import back)
+    svc = sys.modules[__name__]
+    add_compensation_routes(app, settings, keyed, svc)
     from service.circle import add_routes as add_circle_routes
-    add_circle_routes(app, settings, keyed)
+    add_circle_routes(app, settings, keyed, svc)
     from service.placement import add_routes as add_placement_routes   # placement searches (optimize-pose)
-    add_placement_routes(app, settings, keyed)
+    add_placement_routes(app, settings, keyed, svc)
     # the planner's browser page of finished jobs (HTML + its data routes); registered last
     from service.view import add_routes as add_view_routes
-    add_view_routes(app, settings, keyed)
+    add_view_routes(app, settings, keyed, svc)
     return app
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from types import ModuleType
 from typing import Annotated, Literal
 
 from fastapi import FastAPI, Path as PathParam, Request
@@ -116,10 +117,10 @@ def _check(robot: str, pose: dict, options: dict) -> None:
         raise InputError(exc.message, field="options." + (exc.field or "radius-mm").replace("-", "_")) from None
 
 
-def add_routes(app: FastAPI, settings, keyed: list) -> None:
-    """Register the circle routes on the service app (helpers of :mod:`service.app`)."""
-    from service import app as svc
-    from service.jobs import JobKind
+def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
+    """Register the circle routes on the service app; ``svc`` is :mod:`service.app`,
+    whose request helpers the routes share (passed in, so this module does not import it back)."""
+    from service.states import JobKind
     from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, inside
 
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")

@@ -21,6 +21,7 @@ import json
 import shutil
 import tempfile
 from pathlib import Path
+from types import ModuleType
 
 from fastapi import FastAPI, Path as PathParam, Request
 from fastapi.responses import FileResponse, JSONResponse
@@ -73,11 +74,11 @@ class CompensationRequest(Strict):
         return self
 
 
-def add_routes(app: FastAPI, settings, keyed: list) -> None:
-    """Register the compensation routes on the service app (helpers of :mod:`service.app`)."""
-    from service import app as svc
-    from service.jobs import JobKind
-    from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, inside
+def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
+    """Register the compensation routes on the service app; ``svc`` is :mod:`service.app`, whose request
+    helpers the routes share (passed in by it, so this module does not import it back)."""
+    from service.states import JobKind
+    from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, inside, named_file
 
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
     not_found = {404: {"model": ErrorBody}}

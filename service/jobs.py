@@ -40,41 +40,16 @@ import time
 import uuid
 from collections import deque
 from dataclasses import dataclass
-from enum import Enum
 from pathlib import Path
 from typing import Callable
 
 from identify.errors import InputError
+from service.states import JobKind, JobState
 
 #: Reason recorded for jobs cut off by a restart.
 RESTART_REASON = "the service stopped while this job was {state} (server restart); submit it again"
 #: Reason recorded for a job whose worker process ended without recording an end.
 WORKER_DIED_REASON = "the worker process ended unexpectedly ({how}); submit it again"
-
-
-class JobState(str, Enum):
-    """Life cycle of a job: queued -> running -> succeeded | failed | cancelled."""
-
-    queued = "queued"
-    running = "running"
-    succeeded = "succeeded"
-    failed = "failed"
-    cancelled = "cancelled"
-
-    @property
-    def finished(self) -> bool:
-        return self in (JobState.succeeded, JobState.failed, JobState.cancelled)
-
-
-class JobKind(str, Enum):
-    """What a job computes."""
-
-    simulation = "simulation"
-    diagnose = "diagnose"
-    explain = "explain"
-    compensation = "compensation"
-    placement_search = "placement_search"
-    circle = "circle"
 
 
 class QueueFull(RuntimeError):

@@ -33,7 +33,7 @@ import numpy as np
 
 from identify.errors import InputError
 from service import schemas
-from service.jobs import JobKind
+from service.states import JobKind
 from service.paths import DATA_DIR
 from simulate.defaults import DEXEL_SPACING, RANKING_DEXEL_SPACING
 

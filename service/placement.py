@@ -23,6 +23,7 @@ import json
 import shutil
 import tempfile
 from pathlib import Path
+from types import ModuleType
 
 from fastapi import FastAPI, Path as PathParam, Request
 from fastapi.responses import FileResponse
@@ -118,10 +119,10 @@ def _plan(folder: Path, text: str, source: str, stock_text: str, stock_source: s
                          line=exc.line, column=exc.column) from None
 
 
-def add_routes(app: FastAPI, settings, keyed: list) -> None:
-    """Register the placement-search routes on the service app (helpers of :mod:`service.app`)."""
-    from service import app as svc
-    from service.jobs import JobKind
+def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
+    """Register the placement-search routes on the service app; ``svc`` is :mod:`service.app`,
+    whose request helpers the routes share (passed in, so this module does not import it back)."""
+    from service.states import JobKind
     from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound
 
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")

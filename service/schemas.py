@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
-from service.jobs import JobKind, JobState
+from service.states import JobKind, JobState
 from service.paths import NAME_PATTERN
 from simulate.defaults import DEXEL_SPACING, RANKING_DEXEL_SPACING
 

@@ -45,6 +45,7 @@ import time
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import Callable
 
 import numpy as np
@@ -135,6 +136,7 @@ class Context:
     rec: object
     prefix: str
     token: str | None
+    svc: object = None   # service.app: its request helpers (passed in, no import back)
 
     @property
     def job_dir(self) -> Path:
@@ -147,9 +149,7 @@ class Context:
 
     def read(self, name: str, read):
         """``read(path)`` of a result file, its recorded digest checked (:func:`service.app._result`)."""
-        from service import app as svc
-
-        return svc._result(self.request, self.rec, name, read)
+        return self.svc._result(self.request, self.rec, name, read)
 
     def files(self) -> list[dict]:
         """Every file recorded when the job succeeded, with its size [bytes] and a download URL."""
@@ -424,7 +424,7 @@ def _um(mm):
 
 
 def _register_builtin() -> None:
-    from service.jobs import JobKind
+    from service.states import JobKind
 
     register(JobKind.simulation, "/simulations", "pose ranking", simulation_sections)
     register(JobKind.compensation, "/compensations", "compensation", compensation_sections)
@@ -442,13 +442,13 @@ def _page(status: int, title: str, message: str):
     return HTMLResponse(body, status_code=status)
 
 
-def add_routes(app, settings, keyed: list) -> None:
-    """Register the view routes of every kind in :data:`VIEWS` and the static files (call last)."""
+def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
+    """Register the view routes of every kind in :data:`VIEWS` and the static files (call last); ``svc``
+    is :mod:`service.app`, whose request helpers the routes share (passed in: no import back)."""
     from fastapi.staticfiles import StaticFiles
     from starlette.middleware.gzip import GZipMiddleware
 
-    from service import app as svc
-    from service.jobs import JobState
+    from service.states import JobState
     from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside
     from service.schemas import ErrorBody
 
@@ -482,7 +482,7 @@ def add_routes(app, settings, keyed: list) -> None:
             if not allowed(request, job_id, key, token):
                 raise HTTPException(status_code=401, detail=f"missing or invalid {HEADER} header or view link",
                                     headers={"WWW-Authenticate": HEADER})
-            return Context(request, svc._job(request, job_id, kind), prefix, token)
+            return Context(request, svc._job(request, job_id, kind), prefix, token, svc)
 
         @app.get(f"{prefix}/{{job_id}}/view", tags=[tag], responses=html_errors,
                  summary=f"Planner's page of a {view.title} job (HTML)")

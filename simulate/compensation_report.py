@@ -215,7 +215,7 @@ def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def compensation_job(program: Path, robot: str, pose: Path, name: Optional[str], *, spacing_mm: float,
+def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optional[str], *, spacing_mm: float,
                      probe_spacing_mm: float, size: Optional[int], friction: dict):
     """The loaded program, the :class:`simulate.pipeline.MachiningJob` (ranking settings: trimmed stock,
     Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates) and the placement."""

@@ -1,20 +1,18 @@
-"""``greybench compensate`` and ``greybench bench compensate``: pre-compensate a program from the
+"""``greybench compensate``: pre-compensate a program from the
 machining simulation (:mod:`simulate.compensation`, outputs :mod:`simulate.compensation_report`)."""
 from __future__ import annotations
 
-import time
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 from rich.table import Table
 
-from greybench.support import DATA_DIR, emit_json, out, progress, resolve_robot
+from greybench.support import emit_json, out, progress, resolve_robot
 from identify.errors import InputError
 from simulate import defaults as DEFAULTS
 
 
-def _friction(specs: list[str]) -> dict:
+def _friction(specs: list[str] | None) -> dict:
     """``AXIS=REF`` options -> {axis: model reference}."""
     fr = {}
     for s in specs or []:
@@ -30,7 +28,8 @@ def _friction(specs: list[str]) -> dict:
 def print_info(info: dict) -> None:
     ev = info.get("evaluation")
     if ev is not None:
-        t = Table(title=f"Table-2 deviations [µm] before / after compensation (robot stiffness x{ev['stiffness_scale']:g})")
+        t = Table(title="Table-2 deviations [µm] before / after compensation "
+                        f"(robot stiffness x{ev['stiffness_scale']:g})")
         for c in ("row", "tol", "before", "after"):
             t.add_column(c, justify="left" if c == "row" else "right")
         for r in ev["rows_mm"]:
@@ -54,8 +53,9 @@ def compensate_cmd(
     program: Path = typer.Option(..., "--program", help="G-code program; its stock <stem>.stock.json must sit "
                                                         "next to it."),
     robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
-    pose: Path = typer.Option(..., "--pose", help="Pose file (JSON): workpiece frame in the robot base frame [m, rad]."),
-    name: Optional[str] = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
+    pose: Path = typer.Option(..., "--pose",
+                              help="Pose file (JSON): workpiece frame in the robot base frame [m, rad]."),
+    name: str | None = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
     out_dir: Path = typer.Option(..., "--out", help="Output folder: compensated.nc, compensated.stock.json, "
                                                     "offsets.csv [mm, rad], feedforward.csv [Nm], report.md, "
                                                     "deviation.png."),
@@ -64,7 +64,7 @@ def compensate_cmd(
                                           help="Joint stiffness multiplier [-] of the robot the before/after "
                                                "evaluation simulates (both programs); the compensation itself "
                                                "iterates with the robot file's model (1)."),
-    check_scale: Optional[List[float]] = typer.Option(None, "--check-scale",
+    check_scale: list[float] | None = typer.Option(None, "--check-scale",
                                                       help="Also evaluate both programs with this stiffness "
                                                            "multiplier [-] (repeatable, e.g. 0.8 and 1.2)."),
     gain: float = typer.Option(1.0, "--gain", help="Damping of the update [-] (0 < gain <= 1.5)."),
@@ -72,9 +72,9 @@ def compensate_cmd(
                                   help="Dexel spacing [mm] (the ranking's default)."),
     probe_spacing: float = typer.Option(DEFAULTS.PROBE_SPACING * 1e3, "--probe-spacing",
                                         help="Virtual CMM point distance [mm]."),
-    size: Optional[int] = typer.Option(None, "--size", help="Test piece size [mm] (160 or 320; default: the "
+    size: int | None = typer.Option(None, "--size", help="Test piece size [mm] (160 or 320; default: the "
                                                             "stock's size_mm)."),
-    friction: Optional[List[str]] = typer.Option(None, "--friction",
+    friction: list[str] | None = typer.Option(None, "--friction",
                                                  help="AXIS=MODEL: friction model reference for a joint (saved "
                                                       "folder, runs:/, models:/), repeatable; others keep the "
                                                       "robot file's."),
@@ -101,50 +101,7 @@ def compensate_cmd(
     print_info(info)
 
 
-def bench_compensate(
-    spacing: float = typer.Option(1.0, "--spacing", help="Dexel spacing [mm]."),
-    iterations: int = typer.Option(2, "--iterations", help="Corrected programs simulated [-]."),
-    pose_name: str = typer.Option("near", "--pose", help="Pose of data/poses/iso160.json."),
-) -> None:
-    """Time per iteration and the reduction of the Table-2 sum on the 160 test piece, one pose."""
-    from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
-    from simulate.compensation_report import compensation_job
-
-    program = DATA_DIR / "programs" / "iso160.nc"
-    poses = DATA_DIR / "poses" / "iso160.json"
-    setup, job, placement, _ = compensation_job(program, resolve_robot("max100"), poses, pose_name, spacing_mm=spacing,
-                                                probe_spacing_mm=DEFAULTS.PROBE_SPACING * 1e3, size=160,
-                                                friction={})
-    rows = []
-    t0 = time.perf_counter()
-    with progress("compensating", total=iterations + 1) as adv:
-        def seen(it):
-            rows.append(it)
-            adv(1)
-
-        res = compensate(setup, pipeline_simulator(job), CompensationSettings(iterations=iterations),
-                         on_iteration=seen, require_spindle=True)
-    wall = time.perf_counter() - t0
-    t = Table(title=f"compensate iso160, pose {placement.name}, dexel spacing {spacing:g} mm")
-    for c in ("iteration", "simulation [s]", "sum of abs. deviation [µm]", "ratio to original", "path RMS [µm]", "time ratio",
-              "pieces"):
-        t.add_column(c, justify="right")
-    s0 = rows[0].table_sum
-    for it in rows:
-        t.add_row(str(it.index) + (" *" if it.index == res.best else ""), f"{it.wall_time:.1f}",
-                  f"{it.table_sum * 1e6:.1f}", f"{it.table_sum / s0:.3f}", f"{it.path_rms * 1e6:.1f}",
-                  f"{it.time_ratio:.3f}", str(it.pieces))
-    out.print(t)
-    n_it = max(1, len(rows) - 1)
-    per_sim = sum(it.wall_time for it in rows[1:]) / n_it
-    per_it = (wall - rows[0].wall_time) / n_it
-    out.print(f"total {wall:.1f} s; per iteration {per_it:.1f} s, of which {per_sim:.1f} s simulating the corrected "
-              f"program and {per_it - per_sim:.1f} s updating, writing and interpolating it; reduction reached: "
-              f"{rows[res.best].table_sum / s0:.3f} of the original sum (* chosen)")
-
-
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+def register(app: typer.Typer) -> None:
     from greybench.support import guarded
 
     app.command("compensate")(guarded(compensate_cmd))
-    bench_app.command("compensate")(guarded(bench_compensate))

@@ -1,10 +1,8 @@
-"""Evaluation commands: ``rank-poses``, ``trace``; ``bench ranking`` (paper 3.8, 4, Table 2)."""
+"""Evaluation commands: ``rank-poses``, ``trace`` (paper 3.8, 4, Table 2)."""
 from __future__ import annotations
 
 import os
-import time
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.table import Table
@@ -67,7 +65,7 @@ def rank_poses_cmd(
     robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
     poses: Path = typer.Option(..., "--poses", help="Pose file (JSON): workpiece frame in the robot base frame "
                                                     "[m, rad]."),
-    out_dir: Optional[Path] = typer.Option(None, "--out", help="Output folder: report.md, images/, per pose "
+    out_dir: Path | None = typer.Option(None, "--out", help="Output folder: report.md, images/, per pose "
                                                                "scan.csv [m] and workpiece.npz."),
     spacing: float = typer.Option(DEFAULTS.RANKING_DEXEL_SPACING * 1e3, "--spacing",
                                   help="Dexel spacing [mm] (coarser grids make the cutting force, hence the "
@@ -81,7 +79,7 @@ def rank_poses_cmd(
     size: int = typer.Option(320, "--size", help="Test piece size [mm]: 160 or 320."),
     workers: int = typer.Option(2, "--workers", help="Parallel processes [-] (at most 2); Ray tasks instead when "
                                                      "RAY_ADDRESS is set."),
-    friction: Optional[list[str]] = typer.Option(None, "--friction",
+    friction: list[str] | None = typer.Option(None, "--friction",
                                                  help="AXIS=MODEL: friction model reference for a joint (saved "
                                                       "folder, runs:/, models:/<name>@<alias>), repeatable; others "
                                                       "keep the robot file's."),
@@ -94,7 +92,7 @@ def rank_poses_cmd(
 
     if not program.exists():
         raise InputError("program not found", source=str(program))
-    from greybench.commands.compensate import _friction as friction_refs   # the one AXIS=MODEL parser
+    from greybench.commands.compensate import _friction as friction_refs  # the one AXIS=MODEL parser
     from simulate.robot.friction import joint_rows
 
     robot_path = resolve_robot(robot)
@@ -137,7 +135,7 @@ def trace_cmd(
                                                             "or the .npz itself."),
     point: str = typer.Option(..., "--point", help="Point x,y,z [mm], workpiece frame."),
     radius: float = typer.Option(1.5, "--radius", help="Search radius around the point [mm]."),
-    program: Optional[Path] = typer.Option(None, "--program", help="G-code program to show line texts (default: "
+    program: Path | None = typer.Option(None, "--program", help="G-code program to show line texts (default: "
                                                                    "the one recorded in meta.json)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object with the lines and times."),
 ) -> None:
@@ -178,42 +176,6 @@ def trace_cmd(
         err.print("no machined surface near that point (stock surface or empty space)")
 
 
-def bench_ranking(
-    program: Path = typer.Option(Path(__file__).resolve().parents[2] / "data" / "programs" / "iso320.nc",
-                                 "--program", help="G-code program."),
-    poses: Path = typer.Option(Path(__file__).resolve().parents[2] / "data" / "poses" / "iso320.json", "--poses",
-                               help="Pose file (JSON) [m, rad]."),
-    spacing: float = typer.Option(DEFAULTS.RANKING_DEXEL_SPACING * 1e3, "--spacing",
-                                  help="Dexel spacing [mm] (coarser grids make the cutting force, hence the "
-                                       "deflection, jumpy)."),
-) -> None:
-    """Rank the poses with 2 and 1 worker processes, and with 2 plus the component re-runs (``--shares``, what
-    ``make demo`` runs): wall times [s] and ratios, one run each."""
-    from simulate.toolpath.placement import load_poses
-
-    placements = load_poses(poses)
-    robot_path = resolve_robot("max100")
-    settings = RankSettings(spacing=spacing * MM)
-    t = Table(title=f"bench ranking: {len(placements)} poses of {program.name}, dexel {spacing:g} mm "
-                    "(target <= 120 s on 2 cores)")
-    for c in ("workers", "component re-runs", "simulations", "wall \\[s]", "per simulation \\[s]", "ratio to 1 worker",
-              "best pose"):
-        t.add_column(c, justify="right")
-    rows = []
-    for w, sh in ((2, False), (1, False), (2, True)):
-        c0 = time.perf_counter()
-        r = rank_poses(program, robot_path, placements, settings=settings, workers=w, shares=sh)
-        n_sim = len(placements) * (1 + (len(COMPONENTS) if sh else 0))
-        rows.append((w, sh, n_sim, time.perf_counter() - c0, r.best))
-    base = next(x[3] / x[2] for x in rows if x[0] == 1)
-    for w, sh, n_sim, s, best in rows:
-        t.add_row(str(w), "yes" if sh else "no", str(n_sim), f"{s:.1f}", f"{s / n_sim:.1f}",
-                  f"{base / (s / n_sim):.2f}", best)
-    out.print(t)
-    out.print("ratio to 1 worker: simulations per second relative to the 1-worker run.")
-
-
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+def register(app: typer.Typer) -> None:
     app.command("rank-poses")(guarded(rank_poses_cmd))
     app.command("trace")(guarded(trace_cmd))
-    bench_app.command("ranking")(guarded(bench_ranking))

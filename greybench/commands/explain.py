@@ -1,15 +1,13 @@
-"""``greybench explain`` and ``greybench bench explain``: name what the simulation gets wrong
+"""``greybench explain``: name what the simulation gets wrong
 about a measured part, calibrate it, and measure the gain."""
 from __future__ import annotations
 
-import time
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.table import Table
 
-from greybench.support import DATA_DIR, check_cost, emit_json, guarded, out, progress, resolve_robot
+from greybench.support import check_cost, emit_json, guarded, out, progress, resolve_robot
 from identify.errors import InputError
 from simulate import defaults as DEFAULTS
 
@@ -21,14 +19,14 @@ def explain(
                                                         "<stem>.stock.json [m] must sit next to it."),
     robot: str = typer.Option("max100", "--robot", help="Nominal robot: name in data/robots or a TOML path [SI]."),
     pose: Path = typer.Option(..., "--pose", help="Pose file (JSON) [m, rad]."),
-    name: Optional[str] = typer.Option(None, "--name", help="Pose name in the pose file (default: the first)."),
-    out_dir: Optional[Path] = typer.Option(None, "--out", help="Output folder: report.md with PNGs, the calibrated "
+    name: str | None = typer.Option(None, "--name", help="Pose name in the pose file (default: the first)."),
+    out_dir: Path | None = typer.Option(None, "--out", help="Output folder: report.md with PNGs, the calibrated "
                                                                "robot file robot_calibrated.toml, explain.json."),
     spacing: float = typer.Option(DEFAULTS.DEXEL_SPACING * 1e3, "--spacing",
                                   help="Dexel spacing of the simulation [mm]; use the spacing the scan was simulated "
                                        "at (greybench machine: the same default): a coarser grid alone differs by "
                                        "some micrometres, which explain would try to attribute to a cause."),
-    size: Optional[int] = typer.Option(None, "--size", help="Test piece size [mm] (160 or 320; default: size_mm of "
+    size: int | None = typer.Option(None, "--size", help="Test piece size [mm] (160 or 320; default: size_mm of "
                                                             "the stock file)."),
     max_sims: int = typer.Option(3, "--max-sims", help="Re-simulations for the calibration [-] (>= 1)."),
     as_json: bool = typer.Option(False, "--json", help='Print {"cause", "ranking", "calibrated", "rms_before", '
@@ -61,16 +59,14 @@ def explain(
         ex = explain_part(meas, rob, setup, max_sims=max_sims)
     if out_dir is not None:
         import json
-        import os
 
+        from identify.files import write_text_atomic
         from simulate.explain.report import write_report
 
         out_dir.mkdir(parents=True, exist_ok=True)
         save_robot(ex.calibrated_robot, out_dir / "robot_calibrated.toml")
         write_report(ex, out_dir, str(measured))
-        tmp = out_dir / ".explain.json.tmp"
-        tmp.write_text(json.dumps(ex.as_json(), indent=1))
-        os.replace(tmp, out_dir / "explain.json")
+        write_text_atomic(out_dir / "explain.json", json.dumps(ex.as_json(), indent=1))
     if as_json:
         emit_json(ex.as_json())
         return
@@ -83,71 +79,16 @@ def explain(
     ft = Table(title="RMS measured - simulated \\[um]")
     for c in ("feature", "before", "after"):
         ft.add_column(c, justify="left" if c == "feature" else "right")
-    for f, (b, a) in ex.rms_by_feature().items():
-        ft.add_row(f, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}")
+    for feature, (b, a) in ex.rms_by_feature().items():
+        ft.add_row(feature, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}")
     ft.add_row("all", f"{ex.rms_before * 1e6:.2f}", f"{ex.rms_after * 1e6:.2f}")
     out.print(ft)
     if ex.calibration is not None:
-        c = ex.calibration
-        out.print(f"calibrated {c.before.param}: {c.before.value:.6g} -> {c.after.value:.6g} {c.before.unit}")
+        cal = ex.calibration
+        out.print(f"calibrated {cal.before.param}: {cal.before.value:.6g} -> {cal.after.value:.6g} {cal.before.unit}")
     out.print(f"gain (1 - rms_after/rms_before): {ex.gain * 100:.1f} %" +
               (f"; report {out_dir / 'report.md'}" if out_dir is not None else ""))
 
 
-def bench_explain(
-    spacing: float = typer.Option(1.0, "--spacing", help="Dexel spacing [mm]."),
-) -> None:
-    """Times of the explain stages on the small test program (tests/explain/data), one hidden stiffness change."""
-    import numpy as np
-
-    from simulate.evaluation.cmm import probe
-    from simulate.explain.comparison import compare_points
-    from simulate.explain.measured import MeasuredScan
-    from simulate.explain.pipeline import explain_part
-    from simulate.explain.simulation import load_setup, simulate_part
-    from simulate.robot.model import load_robot
-
-    d = Path(__file__).resolve().parents[2] / "tests" / "explain" / "data"
-    rob = load_robot(DATA_DIR / "robots" / "max100.toml")
-    setup = load_setup(d / "small160.nc", d / "small160.poses.json", "near", spacing=spacing * 1e-3)
-    c0 = time.perf_counter()
-    n_steps = len(setup.trajectory(rob).t)
-    t_setup = time.perf_counter() - c0
-    hidden = rob.with_changes(stiffness=rob.stiffness * np.array([1, 0.5, 1, 1, 1, 1]))
-    simulate_part(rob, setup)  # compile / warm caches
-    c0 = time.perf_counter()
-    ms = simulate_part(hidden, setup)
-    t_sim = time.perf_counter() - c0
-    scan = probe(ms.workpiece, setup.piece)
-    keep = {k: v for k, v in scan.points.items() if k.startswith(("circle_wall", "square_wall", "circle_floor",
-                                                                   "square_floor"))}
-    meas = MeasuredScan(points=keep, lines={k: np.zeros(len(v), np.int64) for k, v in keep.items()}, source="<bench>")
-    c0 = time.perf_counter()
-    nominal = simulate_part(rob, setup)
-    cmp = compare_points(meas, nominal.workpiece, nominal.steps, setup.piece)
-    t_cmp = time.perf_counter() - c0
-    c0 = time.perf_counter()
-    ex = explain_part(meas, rob, setup, nominal=nominal, max_sims=2)
-    t_all = time.perf_counter() - c0
-    t = Table(title=f"explain bench: small 160 program, pose near, spacing {spacing} mm, hidden stiffness:2 x0.5")
-    t.add_column("figure")
-    t.add_column("value", justify="right")
-    t.add_row("steps", f"{n_steps}")
-    t.add_row("setup (IK, switching) \\[s]", f"{t_setup:.2f}")
-    t.add_row("one simulation \\[s]", f"{t_sim:.2f}")
-    t.add_row("steps/s of one simulation", f"{n_steps / t_sim:,.0f}")
-    t.add_row("probe points compared", f"{len(cmp.residual)}")
-    t.add_row("nominal simulation + comparison \\[s]", f"{t_cmp:.2f}")
-    for k, v in ex.timings.items():
-        t.add_row(f"  explain: {k} \\[s]", f"{v:.2f}")
-    t.add_row("explain total (nominal given) \\[s]", f"{t_all:.2f}")
-    t.add_row("calibration re-simulations", f"{len(ex.calibration.history) if ex.calibration else 0}")
-    t.add_row("explain / one simulation \\[-]", f"{t_all / t_sim:.1f}")
-    t.add_row("cause named", ex.cause)
-    t.add_row("rms before / after \\[um]", f"{ex.rms_before * 1e6:.2f} / {ex.rms_after * 1e6:.2f}")
-    out.print(t)
-
-
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+def register(app: typer.Typer) -> None:
     app.command("explain")(guarded(explain))
-    bench_app.command("explain")(guarded(bench_explain))

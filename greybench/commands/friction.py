@@ -1,15 +1,13 @@
 """Friction identification commands: trajectory, synth, fit, predict, compare, train-robot,
-promote, ui; ``bench friction``. Fits are tracked in MLflow (:mod:`identify.tracking`)."""
+promote, ui. Fits are tracked in MLflow (:mod:`identify.tracking`)."""
 from __future__ import annotations
 
 import sys
 import time
 from enum import Enum
 from pathlib import Path
-from typing import Optional
+from typing import Any
 
-import numpy as np
-import pandas as pd
 import typer
 from rich.table import Table
 
@@ -17,9 +15,17 @@ from greybench.support import emit_json, err, guarded, out, progress, resolve_ro
 from identify.axis_limits import load_axis_limits
 from identify.errors import InputError
 from identify.metrics import Metrics
-from identify.models import MODELS, FrictionModel, load_model, make_model
+from identify.models import MODELS, FrictionModel, make_seeded, parse_model_names
 from identify.plant import Effect, PlantConfig, synthesize
-from identify.records import load_record, read_table, validate_frame, write_table
+from identify.records import (
+    AxisRecord,
+    derivative_note,
+    load_axis_record,
+    read_table,
+    record_params,
+    validate_frame,
+    write_table,
+)
 from identify.trajectories import TRAJECTORIES
 
 
@@ -50,22 +56,6 @@ def _params_table(model: FrictionModel) -> Table:
     return table
 
 
-def derivative_note(record) -> str:
-    """One line: how the record's velocity and acceleration were obtained (the cut-off [Hz])."""
-    if record.cutoff_hz is None:
-        return f"derivatives: qd, qdd read from {record.source} (no cut-off applied)"
-    return (f"derivatives: {', '.join(record.derived)} derived with cut-off {record.cutoff_hz:.3g} Hz "
-            f"(zero-phase low-pass at {1.0 / record.sample_time:.4g} Hz sampling)")
-
-
-def record_params(record) -> dict:
-    """MLflow params describing a training record: derivative cut-off [Hz] and axis units."""
-    units = record.units
-    return {"deriv_cutoff_hz": "record" if record.cutoff_hz is None else f"{record.cutoff_hz:.6g}",
-            "axis_kind": "linear" if record.linear else "rotary",
-            "unit_position": units["q"], "unit_torque": units["tau"]}
-
-
 def trajectory(
     kind: TrajectoryKind = typer.Argument(..., help="universal | test (Universal Trajectory and its test variant), "
                                                      "stribeck (constant-velocity steps) | presliding (slow motion)."),
@@ -73,7 +63,8 @@ def trajectory(
     robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
     duration: float = typer.Option(60.0, "--duration", help="Duration [s] (universal, test, presliding)."),
     rate: float = typer.Option(1000.0, "--rate", help="Sampling rate [Hz]."),
-    out_file: Path = typer.Option(..., "--out", help="Output table, .csv or .parquet: t [s], q [rad], qd [rad/s], qdd [rad/s^2]."),
+    out_file: Path = typer.Option(..., "--out", help="Output table, .csv or .parquet: t [s], q [rad], qd [rad/s], qdd "
+                                                     "[rad/s^2]."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object with the peaks."),
 ) -> None:
     """Generate an excitation trajectory within the axis's position, velocity [rad/s],
@@ -102,21 +93,24 @@ def trajectory(
 
 
 def synth(
-    trajectory_file: Path = typer.Option(..., "--trajectory", help="Trajectory table (t [s], q [rad], optional qd, qdd)."),
+    trajectory_file: Path = typer.Option(..., "--trajectory", help="Trajectory table (t [s], q [rad], optional qd, "
+                                                                   "qdd)."),
     out_file: Path = typer.Option(..., "--out", help="Output axis record, .csv or .parquet."),
     effect: Effect = typer.Option(Effect.NONE, "--effect", help="Hidden effect the plain LuGre model does not know."),
     magnitude: float = typer.Option(1.0, "--magnitude", help="Scale of the effect's strength (1 = default)."),
     seed: int = typer.Option(0, "--seed", help="Seed of noise, start temperature and load phase."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Plant parameters TOML (keys of PlantConfig, SI)."),
-    static_curve: Optional[str] = typer.Option(None, "--static-curve", help="stribeck | lorentzian | hump (overrides config)."),
-    noise: Optional[float] = typer.Option(None, "--noise", help="Torque noise standard deviation [Nm] (overrides config)."),
+    config: Path | None = typer.Option(None, "--config", help="Plant parameters TOML (keys of PlantConfig, SI)."),
+    static_curve: str | None = typer.Option(None, "--static-curve", help="stribeck | lorentzian | hump (overrides "
+                                                                         "config)."),
+    noise: float | None = typer.Option(None, "--noise", help="Torque noise standard deviation [Nm] (overrides "
+                                                             "config)."),
     positions_only: bool = typer.Option(False, "--positions-only", help="Write no qd/qdd (they must then be derived)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object describing the record."),
 ) -> None:
     """Simulate one joint (inertia, LuGre friction, sensor noise, optional hidden effect) following
     a trajectory; writes t [s], q [rad], qd [rad/s], qdd [rad/s^2], tau [Nm], temp [degC], tau_load [Nm]."""
     cfg = PlantConfig.from_toml(config) if config else PlantConfig()
-    overrides = {}
+    overrides: dict[str, Any] = {}
     if static_curve is not None:
         overrides["static_curve"] = static_curve
     if noise is not None:
@@ -145,151 +139,64 @@ def synth(
 COMPARE_MODELS = ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox")
 
 
-def _check_axis(axis: Optional[int]) -> None:
+def _check_axis(axis: int | None) -> None:
     if axis is not None and axis < 1:
         raise InputError(f"axis must be >= 1, got {axis}", field="--axis")
 
 
-def _log_axes(columns) -> list[int]:
-    """Joint numbers N of the ``qN`` columns of a robot log (headers may carry units)."""
-    import re
-
-    axes = set()
-    for c in columns:
-        m = re.match(r"^\s*q(\d+)\s*(\[.*\])?\s*$", str(c))
-        if m:
-            axes.add(int(m.group(1)))
-    return sorted(axes)
+def _make(model: str, seed: int, epochs: int | None) -> FrictionModel:
+    return make_seeded(model, seed, epochs, model_field="--model", epochs_field="--epochs")
 
 
-def load_axis_record(path: Path, axis: Optional[int], *, linear: Optional[bool] = None,
-                     cutoff_hz: Optional[float] = None):
-    """An axis record from a file: a plain axis record, or joint ``axis`` of a robot log with any
-    number of joints (``t, q1..qN, tau1..tauN``, optional ``qdN, qddN, tempN, tau_rbN, tau_loadN``;
-    headers may declare units, ``q7 [m]``). ``linear`` declares a linear axis (m, N); ``cutoff_hz``
-    [Hz] fixes the derivative cut-off (else chosen from the record)."""
-    from identify.records import split_unit_headers
-
-    df = read_table(path)
-    plain, units = split_unit_headers(df, str(path))
-    axes = _log_axes(plain.columns)
-    is_log = "q" not in plain.columns and bool(axes)
-    if not is_log:
-        return validate_frame(df, source=str(path), linear=linear, cutoff_hz=cutoff_hz)
-    if axis is None:
-        raise InputError(f"this is a robot log with joints {axes[0]}..{axes[-1]} (q{axes[0]}..q{axes[-1]}): choose "
-                         f"the joint with --axis", source=str(path), field="--axis")
-    cols = {"t": "t", f"q{axis}": "q", f"tau{axis}": "tau", f"qd{axis}": "qd", f"qdd{axis}": "qdd",
-            f"temp{axis}": "temp", f"tau_rb{axis}": "tau_rb", f"tau_load{axis}": "tau_load"}
-    for need in ("t", f"q{axis}", f"tau{axis}"):
-        if need not in plain.columns:
-            have = f" (the log has joints {', '.join(map(str, axes))})" if need != "t" else ""
-            raise InputError(f"robot log has no column '{need}' for axis {axis}{have}", source=str(path), field=need)
-    keep = [c for c in cols if c in plain.columns]
-    sub = plain[keep].rename(columns={c: (f"{cols[c]} [{units[c]}]" if c in units else cols[c]) for c in keep})
-    rec = validate_frame(sub, source=f"{path} (axis {axis})", linear=linear, cutoff_hz=cutoff_hz)
-    own = float(np.ptp(rec.q)) or 1.0
-    moving = []
-    for j in axes:
-        if j != axis and f"q{j}" in plain.columns:
-            qj = pd.to_numeric(plain[f"q{j}"], errors="coerce").to_numpy(dtype=float)
-            if np.isfinite(qj).all() and float(np.ptp(qj)) > 0.01 * own:
-                moving.append(j)
-    rec.other_joints_moving = tuple(moving)
-    return rec
-
-
-def _make(model: str, seed: int, epochs: Optional[int]) -> FrictionModel:
-    if model not in MODELS:
-        raise InputError(f"unknown model '{model}' (known: {', '.join(MODELS)})", field="--model")
-    hp = MODELS[model]().get_hyperparameters()
-    kwargs = {}
-    if "seed" in hp:
-        kwargs["seed"] = seed
-    if epochs is not None:
-        if epochs < 1:
-            raise InputError("must be >= 1", field="--epochs")
-        if "epochs" in hp:
-            kwargs["epochs"] = epochs
-    return make_model(model, **kwargs)
+def _load(path: Path, axis: int | None, **kw: Any) -> AxisRecord:
+    return load_axis_record(path, axis, axis_field="--axis", **kw)
 
 
 def _robot_name(robot: str) -> str:
     return Path(resolve_robot(robot)).stem
 
 
-#: An axis whose gravity torque over the arm's workspace exceeds this share of the largest
-#: joint's is taken to be loaded by the arm (so a fit without tau_rb takes gravity for friction) [-].
-GRAVITY_SHARE = 0.02
-
-
-def coupling_warnings(record, robot: str, axis: Optional[int]) -> list[str]:
-    """Why a record without ``tau_rb`` would mix the arm's torques into the friction (empty when
-    it has ``tau_rb``): the robot model says gravity loads the axis (its torque varies over the
-    joint limits), or the robot log moves other joints (their coupling loads this one)."""
-    if record.tau_rb is not None:
-        return []
-    msgs = []
-    a = axis or 1
-    fix = "give a tau_rb column or split the log with `greybench prepare`"
-    try:
-        from simulate.robot.dynamics import gravity_torque
-        from simulate.robot.model import load_robot
-
-        rob = load_robot(resolve_robot(robot))
-        n_joints = len(rob.lower)
-    except (InputError, OSError, ValueError):
-        rob, n_joints = None, 0
-    if rob is not None and a <= n_joints:
-        rng = np.random.default_rng(0)  # seeded poses within the joint limits
-        poses = rng.uniform(rob.lower, rob.upper, size=(256, n_joints))
-        g = gravity_torque(rob, poses)
-        peak = np.abs(g).max(axis=0)
-        if peak[a - 1] > GRAVITY_SHARE * peak.max():
-            msgs.append(f"{record.source}: axis {a} of {Path(resolve_robot(robot)).stem} carries gravity torque up to "
-                        f"{peak[a - 1]:.3g} Nm and the record has no tau_rb: the fit takes it for friction; {fix}")
-    moving = getattr(record, "other_joints_moving", ())
-    if moving:
-        msgs.append(f"{record.source}: joints {', '.join(map(str, moving))} move in the log and their coupling loads "
-                    f"axis {a}, but the record has no tau_rb; {fix}")
-    return msgs
-
-
 def fit(
     model: str = typer.Option(..., "--model", help=f"Model name: {', '.join(MODELS)}."),
     train: Path = typer.Option(..., "--train", help="Training axis record, or robot log (t, q1..qN, tau1..tauN) with "
                                                     "--axis (.csv/.parquet; SI: t [s], q [rad], tau [Nm], ...)."),
-    test: Optional[Path] = typer.Option(None, "--test", help="Test record (same format) for held-out metrics [Nm]."),
-    out_dir: Optional[Path] = typer.Option(None, "--out", help="Folder for the fitted model (params.json with units, "
+    test: Path | None = typer.Option(None, "--test", help="Test record (same format) for held-out metrics [Nm]."),
+    out_dir: Path | None = typer.Option(None, "--out", help="Folder for the fitted model (params.json with units, "
                                                                "+ model files); the MLflow run holds it too."),
-    axis: Optional[int] = typer.Option(None, "--axis", help="Joint N >= 1 (picks q<N>, tau<N> [rad, Nm; m, N when "
+    axis: int | None = typer.Option(None, "--axis", help="Joint N >= 1 (picks q<N>, tau<N> [rad, Nm; m, N when "
                                                             "linear] from a robot log with any number of joints; "
                                                             "names the registered model). Default 1."),
     robot: str = typer.Option("max100", "--robot", help="Robot name or file; names the registered model."),
-    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
+    cutoff: float | None = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without "
                                                                    "qd/qdd (default: chosen from each record's "
                                                                    "sampling rate and position spectrum)."),
     linear: bool = typer.Option(False, "--linear", help="A linear axis: q [m], qd [m/s], tau [N] (also declared by "
                                                         "record headers such as 'q [m]', 'tau [N]')."),
     seed: int = typer.Option(0, "--seed", help="Random seed of the identification (GA, torch)."),
-    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models (default per model)."),
+    epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models (default per "
+                                                             "model)."),
     experiment: str = typer.Option("friction", "--experiment", help="MLflow experiment name."),
     track: bool = typer.Option(True, "--track/--no-track", help="Record the fit as an MLflow run (default on)."),
-    register: bool = typer.Option(True, "--register/--no-register", help="Register the model as <robot>-axis<N>-friction "
-                                                                         "with alias challenger (greybench promote makes "
+    register: bool = typer.Option(True, "--register/--no-register", help="Register the model as "
+                                                                         "<robot>-axis<N>-friction "
+                                                                         "with alias challenger (greybench promote "
+                                                                         "makes "
                                                                          "the champion)."),
-    as_json: bool = typer.Option(False, "--json", help='Print {"model", "params", "train", "test", "run"} as one JSON object.'),
+    as_json: bool = typer.Option(False, "--json", help='Print {"model", "params", "train", "test", "run"} as one JSON '
+                                                       'object.'),
 ) -> None:
     """Fit a friction model (co-identifying inertia J [kg m^2] and offset c [Nm] unless the
     record has tau_rb [Nm]); track it in MLflow, save it, print RMSE [Nm], R^2, NRMSE, max error [Nm]."""
     _check_axis(axis)
     est = _make(model, seed, epochs)
-    train_rec = load_axis_record(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
+    train_rec = _load(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
     # the test record is differentiated like the training record (the model learned on that filter)
-    test_rec = (load_axis_record(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
+    test_rec = (_load(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
                 if test else None)
     robot_name = _robot_name(robot)
-    warnings = coupling_warnings(train_rec, robot, axis)
+    from simulate.coupling import coupling_warnings
+
+    warnings = coupling_warnings(train_rec, resolve_robot(robot), axis)
     for w in warnings:
         err.print(f"[bold yellow]warning:[/] {w}", highlight=False, markup=True, soft_wrap=True)
     if not as_json:
@@ -328,21 +235,18 @@ def fit(
             out.print(f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}")
 
 
-def _load_any_model(ref: str) -> FrictionModel:
-    from identify.tracking import is_tracked_ref, load_tracked_model
-
-    return load_tracked_model(ref) if is_tracked_ref(ref) else load_model(ref)
-
-
 def predict(
-    model_ref: str = typer.Option(..., "--model", help="Saved model folder, runs:/<run_id>/model or models:/<name>@<alias>."),
-    data: Path = typer.Option(..., "--data", help="Axis record to predict (.csv/.parquet), or a robot log with --axis."),
+    model_ref: str = typer.Option(..., "--model", help="Saved model folder, runs:/<run_id>/model or "
+                                                       "models:/<name>@<alias>."),
+    data: Path = typer.Option(..., "--data", help="Axis record to predict (.csv/.parquet), or a robot log with "
+                                                  "--axis."),
     out_file: Path = typer.Option(..., "--out", help="Output table: the input columns plus tau_friction_pred [Nm] "
                                                      "(the friction) and tau_pred [Nm] (the total joint torque: "
                                                      "tau_friction_pred + tau_rb when the model was fitted with "
                                                      "tau_rb, else tau_friction_pred + J*qdd + c)."),
-    axis: Optional[int] = typer.Option(None, "--axis", help="Joint N >= 1 when --data is a robot log (t, q1..qN, tau1..tauN)."),
-    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
+    axis: int | None = typer.Option(None, "--axis", help="Joint N >= 1 when --data is a robot log (t, q1..qN, "
+                                                         "tau1..tauN)."),
+    cutoff: float | None = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
                                                                    "(default: the one the model was fitted with, "
                                                                    "else chosen from the record)."),
     as_json: bool = typer.Option(False, "--json", help="Print metrics as one JSON object."),
@@ -355,13 +259,16 @@ def predict(
     without tau_rb co-identified an inertia J [kg m^2] and an offset c [Nm]:
     tau_pred = tau_friction_pred + J*qdd + c. The metrics compare tau_pred with tau."""
     _check_axis(axis)
-    est = _load_any_model(model_ref)
-    rec = load_axis_record(data, axis, linear=getattr(est, "linear_", None) or None,
+    from identify.tracking import load_any_model
+
+    est = load_any_model(model_ref)
+    rec = _load(data, axis, linear=getattr(est, "linear_", None) or None,
                            cutoff_hz=cutoff or getattr(est, "cutoff_hz_", None))
     if getattr(est, "linear_", False) != rec.linear:
         raise InputError(f"mixed units: the model was fitted on a {'linear' if est.linear_ else 'rotary'} axis and "
                          f"the record is {'linear' if rec.linear else 'rotary'}", source=str(data), field="q")
     friction, tau_pred = est.predict_parts(rec)
+    assert rec.frame is not None  # records read from a file keep their frame
     frame = rec.frame.copy()
     frame["tau_friction_pred"] = friction
     frame["tau_pred"] = tau_pred
@@ -375,31 +282,20 @@ def predict(
         out.print(_metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"]))
 
 
-def _parse_models(models: Optional[str]) -> list[str]:
-    if not models:
-        return list(COMPARE_MODELS)
-    names = [m.strip() for m in models.split(",") if m.strip()]
-    if not names:
-        raise InputError("no model named", field="--models")
-    for m in names:
-        if m not in MODELS:
-            raise InputError(f"unknown model '{m}' (known: {', '.join(MODELS)})", field="--models")
-    if len(set(names)) != len(names):
-        raise InputError("a model is named twice", field="--models")
-    return names
-
-
 def compare(
     train: Path = typer.Option(..., "--train", help="Training axis record (or robot log with --axis), SI units."),
-    test: Path = typer.Option(..., "--test", help="Test axis record (same format); the table is sorted by its RMSE [Nm]."),
-    models: Optional[str] = typer.Option(None, "--models", help=f"Comma-separated models (default: {','.join(COMPARE_MODELS)})."),
-    axis: Optional[int] = typer.Option(None, "--axis", help="Joint N >= 1 (robot logs; recorded in the runs)."),
-    cutoff: Optional[float] = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
+    test: Path = typer.Option(..., "--test", help="Test axis record (same format); the table is sorted by its RMSE "
+                                                  "[Nm]."),
+    models: str | None = typer.Option(None, "--models", help="Comma-separated models (default: "
+                                                             f"{','.join(COMPARE_MODELS)})."),
+    axis: int | None = typer.Option(None, "--axis", help="Joint N >= 1 (robot logs; recorded in the runs)."),
+    cutoff: float | None = typer.Option(None, "--cutoff", help="Derivative cut-off [Hz] for records without qd/qdd "
                                                                    "(default: chosen from the training record)."),
     linear: bool = typer.Option(False, "--linear", help="A linear axis: q [m], tau [N]."),
     robot: str = typer.Option("max100", "--robot", help="Robot name or file (recorded in the runs)."),
     seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
-    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for the learned models (default per model)."),
+    epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] for the learned models (default per "
+                                                             "model)."),
     experiment: str = typer.Option("compare", "--experiment", help="MLflow experiment holding the runs."),
     track: bool = typer.Option(True, "--track/--no-track", help="Record every fit as an MLflow run (default on)."),
     as_json: bool = typer.Option(False, "--json", help='Print {"rows": [...]} sorted by test RMSE as one JSON object.'),
@@ -407,49 +303,17 @@ def compare(
     """Fit several friction models on one record and rank them by test RMSE [Nm], with R^2,
     fit time [s] and parameter count; every fit is a run of one MLflow experiment."""
     _check_axis(axis)
-    names = _parse_models(models)
-    train_rec = load_axis_record(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
-    test_rec = load_axis_record(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
+    names = parse_model_names(models, COMPARE_MODELS, "--models")
+    train_rec = _load(train, axis, linear=True if linear else None, cutoff_hz=cutoff)
+    test_rec = _load(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
     robot_name = _robot_name(robot)
-    parent = None
-    if track:
-        from identify.tracking import end_run, log_comparison, log_fit, start_parent_run
+    from identify.tracking import compare_models
 
-        parent = start_parent_run(experiment, "compare", {"train_file": str(train), "test_file": str(test),
-                                                           "models": ",".join(names), "axis": axis or 1,
-                                                           "robot": robot_name})
-    rows = []
-    fitted = {}
-    try:
-        with progress("compare", total=len(names) + (1 if track else 0)) as advance:
-            for i, name in enumerate(names, 1):
-                advance.describe(f"fitting {name}, model {i} of {len(names)}")
-                est = _make(name, seed, epochs)
-                t0 = time.perf_counter()
-                est.fit(train_rec)
-                fit_time = time.perf_counter() - t0
-                te = est.score(test_rec)
-                row = {"model": name, "test_rmse": te.rmse, "test_r2": te.r2, "train_rmse": est.train_metrics_.rmse,
-                       "train_r2": est.train_metrics_.r2, "fit_time_s": fit_time, "n_parameters": est.n_parameters()}
-                if track:
-                    advance.describe(f"logging {name} to MLflow")
-                    run = log_fit(est, train_rec, test_rec, fit_time=fit_time, experiment=experiment, axis=axis or 1,
-                                  robot=robot_name, parent_run_id=parent, extra_params=record_params(train_rec))
-                    row["run_id"] = run.run_id
-                    fitted[name] = est
-                rows.append(row)
-                advance(1)
-            if track:
-                advance.describe("logging the comparison (overlay, residual analysis) to MLflow")
-                log_comparison(parent, fitted, test_rec, rows)
-                advance(1)
-    except BaseException:
-        if parent:
-            end_run(parent, status="FAILED")
-        raise
-    rows.sort(key=lambda r: r["test_rmse"])
-    if parent:
-        end_run(parent)
+    models_ = [_make(name, seed, epochs) for name in names]  # unknown names and bad --epochs fail first
+    with progress("compare", total=len(names) + (1 if track else 0)) as advance:
+        rows, parent = compare_models(models_, train_rec, test_rec, track=track, experiment=experiment,
+                                      axis=axis or 1, robot=robot_name, advance=advance,
+                                      params={"train_file": str(train), "test_file": str(test)})
     if as_json:
         emit_json({"experiment": experiment if track else None, "parent_run_id": parent, "axis": axis or 1,
                    "rows": rows})
@@ -472,19 +336,20 @@ def train_robot(
     log: Path = typer.Option(..., "--log", help="Six-axis log: t [s], q1..q6 [rad], tau1..tau6 [Nm] (.csv/.parquet)."),
     robot: str = typer.Option("max100", "--robot", help="Robot name (data/robots) or robot file (.toml)."),
     model: str = typer.Option("greybox", "--model", help=f"Model name: {', '.join(MODELS)}."),
-    test: Optional[Path] = typer.Option(None, "--test", help="Six-axis test log (same format) for test metrics [Nm]."),
+    test: Path | None = typer.Option(None, "--test", help="Six-axis test log (same format) for test metrics [Nm]."),
     axes: str = typer.Option("1,2,3,4,5,6", "--axes", help="Comma-separated joints 1..6 to fit."),
     seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
-    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models."),
+    epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] for learned models."),
     experiment: str = typer.Option("train-robot", "--experiment", help="MLflow experiment name."),
-    register: bool = typer.Option(True, "--register/--no-register", help="Register each axis as <robot>-axis<N>-friction."),
+    register: bool = typer.Option(True, "--register/--no-register", help="Register each axis as "
+                                                                         "<robot>-axis<N>-friction."),
     as_json: bool = typer.Option(False, "--json", help='Print {"parent_run_id", "axes": [...]} as one JSON object.'),
 ) -> None:
     """Fit one friction model per robot axis from a six-axis log (split by ``greybench prepare``:
     tau_rb [Nm] from the rigid-body model), one MLflow run per axis under a parent run."""
     import tempfile
 
-    from identify.tracking import end_run, log_fit, registered_name, start_parent_run
+    from identify.tracking import fit_axes
     from simulate.robot.model import load_robot
     from simulate.robot.prepare import prepare_log
 
@@ -502,39 +367,16 @@ def train_robot(
         if a > 6:
             raise InputError(f"--axis {a}: the robot model and `prepare` handle joints 1..6", field="--axes")
     robot_name = _robot_name(robot)
-    ext = Path(log).suffix.lower()
     with tempfile.TemporaryDirectory(prefix="greybench-train-robot-") as tmp:
         with progress("train-robot: splitting the logs (rigid-body model)"):
             train_paths = prepare_log(rob, log, Path(tmp) / "train").paths
             test_paths = prepare_log(rob, test, Path(tmp) / "test").paths if test else None
-        parent = start_parent_run(experiment, f"train-robot {robot_name} {model}",
-                                  {"log": str(log), "test_log": str(test) if test else "", "robot": robot_name,
-                                   "model": model, "axes": ",".join(map(str, axis_list)), "format": ext})
-        rows = []
-        try:
-            with progress(f"train-robot {model}", total=len(axis_list)) as advance:
-                for a in axis_list:
-                    advance.describe(f"axis {a}: fitting and logging")
-                    rec = load_record(train_paths[a - 1])
-                    rec_t = load_record(test_paths[a - 1]) if test_paths else None
-                    est = _make(model, seed, epochs)
-                    t0 = time.perf_counter()
-                    est.fit(rec)
-                    fit_time = time.perf_counter() - t0
-                    run = log_fit(est, rec, rec_t, fit_time=fit_time, experiment=experiment, axis=a, robot=robot_name,
-                                  run_name=f"{model} axis {a}", parent_run_id=parent,
-                                  register=registered_name(robot_name, a) if register else None)
-                    row = {"axis": a, "train_rmse": est.train_metrics_.rmse, "train_r2": est.train_metrics_.r2,
-                           "fit_time_s": fit_time, **run.to_dict()}
-                    if rec_t is not None:
-                        m = est.score(rec_t)
-                        row.update(test_rmse=m.rmse, test_r2=m.r2)
-                    rows.append(row)
-                    advance(1)
-        except BaseException:
-            end_run(parent, status="FAILED")
-            raise
-        end_run(parent)
+        with progress(f"train-robot {model}", total=len(axis_list)) as advance:
+            rows, parent = fit_axes(lambda: _make(model, seed, epochs), {a: train_paths[a - 1] for a in axis_list},
+                                    {a: test_paths[a - 1] for a in axis_list} if test_paths else None,
+                                    experiment=experiment, robot=robot_name, register=register, advance=advance,
+                                    params={"log": str(log), "test_log": str(test) if test else "",
+                                            "format": Path(log).suffix.lower()})
     if as_json:
         emit_json({"parent_run_id": parent, "experiment": experiment, "model": model, "robot": robot_name,
                    "axes": rows})
@@ -603,241 +445,7 @@ def ui(
         raise typer.Exit(code=proc.wait()) from None
 
 
-def _bench_greybox(pass_samples: int, recurrent_samples: int, fit_samples: int, repeats: int) -> list[tuple]:
-    """Rows of the grey-box benchmark: forward+backward by the scan vs step by step; full fit time."""
-    import torch
-
-    from identify.axis_limits import AxisLimits
-    from identify.models.greybox import GreyBoxLuGre, GreyBoxLuGreNet, forward_recurrent
-    from identify.records import validate_frame
-    from identify.trajectories import test_trajectory, universal_trajectory
-
-    limits = AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0)
-    tr = universal_trajectory(limits, duration=pass_samples / 1000.0)
-    as_t = lambda x: torch.tensor(np.asarray(x, dtype=float), dtype=torch.float64)
-    qd, qdd, dt = as_t(tr.qd), as_t(tr.qdd), torch.full((tr.t.size,), 1e-3, dtype=torch.float64)
-    y = as_t(np.sign(tr.qd) * 2.0 + 0.5 * tr.qd)
-    net = GreyBoxLuGreNet(float(np.abs(tr.qd).max()), 1.0, 1.0, s0=1.7e4, s1=10.0, nu=0.5, J=0.5, c=0.05)
-
-    def step(n=None):
-        net.zero_grad()
-        sl = slice(None) if n is None else slice(0, n)
-        if n is None:
-            pred = net(qd, qdd, dt).total
-        else:
-            pred = forward_recurrent(net, qd[sl], qdd[sl], dt[sl])
-        loss = torch.mean((pred - y[sl]) ** 2)
-        loss.backward()
-
-    step()  # warm-up
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        step()
-        times.append(time.perf_counter() - t0)
-    t_scan = float(np.median(times))
-    n_rec = min(recurrent_samples, tr.t.size)
-    with progress(f"step-by-step recurrent pass ({n_rec} samples)", enabled=True):
-        t0 = time.perf_counter()
-        step(n_rec)
-        t_loop = (time.perf_counter() - t0) * tr.t.size / n_rec  # linear in n: scaled to the full record
-    rows = [(f"grey-box forward+backward, {tr.t.size} samples (scan, median of {repeats})", f"{t_scan * 1e3:.1f} ms",
-             "<= 50 ms (2 cores)", f"{t_loop / t_scan:.0f}x the step-by-step recurrent pass (target >= 300x)"),
-            (f"grey-box forward+backward, step by step in Python", f"{t_loop:.1f} s",
-             "", f"measured on {n_rec} samples, scaled linearly to {tr.t.size}")]
-    if fit_samples > 0:
-        cfg = PlantConfig(static_curve="hump")
-        ut = universal_trajectory(limits, duration=fit_samples / 1000.0)
-        te = test_trajectory(limits, duration=fit_samples / 1000.0)
-        rec = validate_frame(synthesize(ut.t, ut.q, ut.qd, ut.qdd, config=cfg, seed=1).frame, "bench-ut")
-        rec_t = validate_frame(synthesize(te.t, te.q, te.qd, te.qdd, config=cfg, seed=2).frame, "bench-test")
-        est = GreyBoxLuGre()
-        with progress(f"fitting greybox on {rec.n} samples", enabled=True):
-            t0 = time.perf_counter()
-            est.fit(rec)
-            t_fit = time.perf_counter() - t0
-        rows.append((f"fit greybox ({est.epochs} epochs), {rec.n}-sample UT, hump curve", f"{t_fit:.1f} s",
-                     "<= 90 s (2 cores)", f"test RMSE {est.score(rec_t).rmse:.4f} Nm (noise {cfg.noise} Nm); "
-                                          f"training {est.history_.seconds:.1f} s"))
-    return rows
-
-
-def _bench_busy_neighbour(samples: int, epochs: int) -> list[tuple]:
-    """Rows: a grey-box fit alone and beside a busy neighbour (every core busy), with the thread
-    pools sized to the usable cores (:mod:`identify.resources`) and with library defaults."""
-    from greybench.neighbour_bench import measure
-
-    with progress(f"grey-box fits ({samples} samples, {epochs} epochs) alone and beside a busy neighbour",
-                  total=4, enabled=True) as advance:
-        res = measure(samples, epochs, advance)
-    sized, unsized = res["sized"], res["unsized"]
-    return [("grey-box fit beside a busy neighbour, pools sized to the usable cores", f"{sized['beside_s']:.1f} s",
-             "<= 2.5x alone (fair share of the cores)",
-             f"{sized['slowdown']:.1f}x its {sized['alone_s']:.1f} s alone ({res['cores']} usable cores)"),
-            ("grey-box fit beside a busy neighbour, library default pools", f"{unsized['beside_s']:.1f} s", "",
-             f"{unsized['slowdown']:.1f}x its {unsized['alone_s']:.1f} s alone; "
-             f"{unsized['beside_s'] / sized['alone_s']:.1f}x the sized fit alone")]
-
-
-def bench_friction(
-    samples: int = typer.Option(60_000, "--samples", help="Record length [samples] at 1 kHz."),
-    repeats: int = typer.Option(20, "--repeats", help="Repetitions of the simulation timing."),
-    pass_samples: int = typer.Option(100_000, "--pass-samples", help="Record length [samples] of the grey-box "
-                                                                     "forward+backward timing."),
-    recurrent_samples: int = typer.Option(3_000, "--recurrent-samples", help="Samples [count] the step-by-step "
-                                                                             "recurrent pass is timed on (scaled linearly)."),
-    greybox_fit_samples: int = typer.Option(60_000, "--greybox-fit-samples", help="UT record length [samples] of the "
-                                                                                  "full grey-box fit timing (0 skips)."),
-    greybox_only: bool = typer.Option(False, "--greybox-only", help="Only the grey-box rows."),
-    neighbour_samples: int = typer.Option(10_000, "--neighbour-samples", help="UT record length [samples] of the "
-                                                                              "fits beside a busy neighbour (0 skips)."),
-) -> None:
-    """LuGre simulation speed (samples/s) vs scipy solve_ivp (LSODA); GA + polish fit time;
-    grey-box forward+backward time [ms] vs a step-by-step recurrent pass, and grey-box fit time [s]."""
-    for name, val in (("--samples", samples), ("--repeats", repeats), ("--pass-samples", pass_samples),
-                      ("--recurrent-samples", recurrent_samples)):
-        if val < 1:
-            raise InputError("must be >= 1", field=name)
-    if greybox_fit_samples < 0:
-        raise InputError("must be >= 0", field="--greybox-fit-samples")
-    greybox_rows = _bench_greybox(pass_samples, recurrent_samples, greybox_fit_samples, min(repeats, 10))
-    if neighbour_samples > 0:
-        greybox_rows += _bench_busy_neighbour(neighbour_samples, epochs=60)
-    if greybox_only:
-        table = Table(title="bench friction (grey-box), one run")
-        for col in ("item", "measured", "target", "ratio / note"):
-            table.add_column(col)
-        for row in greybox_rows:
-            table.add_row(*row)
-        out.print(table)
-        return
-    from scipy.integrate import solve_ivp
-
-    from identify.axis_limits import AxisLimits
-    from identify.models.lugre_kernel import lugre_stribeck
-    from identify.records import validate_frame
-    from identify.trajectories import test_trajectory, universal_trajectory
-
-    limits = AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0)
-    duration = samples / 1000.0
-    tr = universal_trajectory(limits, duration=duration)
-    cfg = PlantConfig()
-    qd, dt = np.ascontiguousarray(tr.qd), np.full(tr.t.size, 1e-3)
-    z = np.empty_like(qd)
-    args = (cfg.s0, cfg.s1, cfg.nu, cfg.fc, cfg.fs, cfg.vs, cfg.delta)
-    lugre_stribeck(qd, dt, *args, z)  # compile
-    t0 = time.perf_counter()
-    for _ in range(repeats):
-        lugre_stribeck(qd, dt, *args, z)
-    t_numba = (time.perf_counter() - t0) / repeats
-
-    def rhs(t, zz):
-        v = np.interp(t, tr.t, tr.qd)
-        g = cfg.fc + (cfg.fs - cfg.fc) * np.exp(-abs(v / cfg.vs) ** cfg.delta)
-        return [v - cfg.s0 * abs(v) * zz[0] / g]
-
-    with progress("solve_ivp LSODA", enabled=True):
-        t0 = time.perf_counter()
-        # max_step = one sample: the velocity input changes every sample, and a free step size lets LSODA
-        # stride over the small low-velocity reversals at the end of the trajectory.
-        sol = solve_ivp(rhs, (tr.t[0], tr.t[-1]), [z[0]], method="LSODA", t_eval=tr.t, rtol=1e-6, atol=1e-10,
-                        max_step=float(tr.t[1] - tr.t[0]))
-        t_lsoda = time.perf_counter() - t0
-    agree = float(np.sqrt(np.mean((cfg.s0 * sol.y[0] - cfg.s0 * z) ** 2)))
-
-    te = test_trajectory(limits, duration=duration)
-    rec = validate_frame(synthesize(tr.t, tr.q, tr.qd, tr.qdd, config=cfg, seed=1).frame, "bench-train")
-    rec_test = validate_frame(synthesize(te.t, te.q, te.qd, te.qdd, config=cfg, seed=2).frame, "bench-test")
-    timings = {}
-    scores = {}
-    for name in MODELS:
-        if name not in ("coulomb-viscous", "stribeck", "lugre"):
-            continue
-        est = make_model(name)
-        with progress(f"fitting {name}", enabled=True):
-            t0 = time.perf_counter()
-            est.fit(rec)
-            timings[name] = time.perf_counter() - t0
-        scores[name] = est.score(rec_test).rmse
-
-    table = Table(title=f"bench friction: {tr.t.size} samples at 1 kHz (universal trajectory), one run")
-    for col in ("item", "measured", "target", "ratio / note"):
-        table.add_column(col)
-    rate_numba = tr.t.size / t_numba
-    rate_lsoda = tr.t.size / t_lsoda
-    table.add_row("LuGre simulation, numba exact update (1 core)", f"{rate_numba / 1e6:.1f} M samples/s",
-                  ">= 20 M samples/s", f"{rate_numba / rate_lsoda:.0f}x solve_ivp LSODA")
-    table.add_row("LuGre simulation, scipy solve_ivp LSODA", f"{rate_lsoda / 1e3:.1f} k samples/s", "",
-                  f"RMS difference of s0*z: {agree:.2e} Nm")
-    for name, t_fit in timings.items():
-        target = "<= 30 s (2 cores)" if name == "lugre" else ""
-        table.add_row(f"fit {name} (GA + polish)" if name == "lugre" else f"fit {name}", f"{t_fit:.2f} s", target,
-                      f"test RMSE {scores[name]:.4f} Nm (noise {cfg.noise} Nm)")
-    for row in greybox_rows:
-        table.add_row(*row)
-    out.print(table)
-
-
-def bench_realdata(
-    data: Path = typer.Option(..., "--data", help="Folder with joint<J>_train.csv, joint<J>_test.csv (t [s], q [rad], "
-                                                  "qd [rad/s], qdd [rad/s^2], tau [Nm], tau_rb [Nm]) and "
-                                                  "published_friction_joint<J>_test.csv (t [s], tau_f [Nm])."),
-    models: Optional[str] = typer.Option(None, "--models", help=f"Comma-separated models (default: {','.join(COMPARE_MODELS)})."),
-    joints: Optional[str] = typer.Option(None, "--joints", help="Comma-separated joints (default: every joint in --data)."),
-    epochs: Optional[int] = typer.Option(None, "--epochs", help="Adam epochs [passes] of the learned models "
-                                                                "(default: the benchmark's modest settings)."),
-    seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
-    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "summary": {...}} (RMSE in Nm) as one JSON object.'),
-) -> None:
-    """Fit every model type on every joint of a real log and print, per joint, the test RMSE [Nm] of
-    tau - tau_rb - tau_friction_pred beside the published friction model's (same samples)."""
-    from greybench.benchmarks import realdata as rd
-
-    names = _parse_models(models)
-    found = rd.joints_in(data)
-    if joints:
-        try:
-            wanted = [int(j) for j in joints.split(",") if j.strip()]
-        except ValueError:
-            raise InputError(f"not a list of joint numbers: {joints!r}", field="--joints") from None
-        for j in wanted:
-            if j not in found:
-                raise InputError(f"joint {j} has no records in {data} (have {', '.join(map(str, found))})",
-                                 field="--joints")
-        found = wanted
-    if epochs is not None and epochs < 1:
-        raise InputError("must be >= 1", field="--epochs")
-    results = []
-    t0 = time.perf_counter()
-    with progress(f"bench realdata: {len(names)} models x {len(found)} joints", total=len(names) * len(found)) as advance:
-        for j in found:
-            results.append(rd.run_joint(data, j, names, seed=seed, epochs=epochs, advance=advance))
-    wall = time.perf_counter() - t0
-    summ = rd.summary(results)
-    if as_json:
-        emit_json({"data": str(data), "models": names, "settings": rd.BENCH_SETTINGS, "wall_time_s": wall,
-                   "joints": [r.to_dict() for r in results], "summary": summ})
-        return
-    # models as rows, joints as columns: seven joints fit an 80-column terminal
-    table = Table(title=f"bench realdata: test RMSE \\[mNm] of tau - tau_rb - friction ({wall:.0f} s)",
-                  pad_edge=False)
-    table.add_column("model", no_wrap=True)
-    for r in results:
-        table.add_column(f"J{r.joint}", justify="right")
-    table.add_row("published", *[f"{r.published * 1e3:.1f} " for r in results])
-    table.add_row("no friction", *[f"{r.no_friction * 1e3:.1f} " for r in results])
-    for n in names:
-        table.add_row(n, *[f"{r.rmse[n] * 1e3:.1f}" + ("*" if r.rmse[n] <= r.published else " ") for r in results])
-    out.print(table)
-    out.print("* at or below the published model", highlight=False)
-    if "greybox_at_or_below_published" in summ:
-        line = f"grey-box at or below the published model on {summ['greybox_at_or_below_published']}/{summ['joints']} joints"
-        if "residual_over_greybox_max" in summ:
-            line += f"; residual / grey-box at most {summ['residual_over_greybox_max']:.3f} (goal <= 1.1)"
-        out.print(line, highlight=False)
-
-
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+def register(app: typer.Typer) -> None:
     app.command("trajectory")(guarded(trajectory))
     app.command("synth")(guarded(synth))
     app.command("fit")(guarded(fit))
@@ -846,5 +454,3 @@ def register(app: typer.Typer, bench_app: typer.Typer) -> None:
     app.command("train-robot")(guarded(train_robot))
     app.command("promote")(guarded(promote))
     app.command("ui")(guarded(ui))
-    bench_app.command("friction")(guarded(bench_friction))
-    bench_app.command("realdata")(guarded(bench_realdata))

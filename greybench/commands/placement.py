@@ -4,7 +4,6 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -30,12 +29,12 @@ def optimize_pose_cmd(
     seed: int = typer.Option(0, "--seed", help="Seed of the sampler [-]."),
     spacing: float = typer.Option(DEFAULTS.RANKING_DEXEL_SPACING / MM, "--spacing", help="Dexel spacing [mm] (the "
                                                                                           "ranking's)."),
-    size: Optional[int] = typer.Option(None, "--size", help="Test piece size [mm]: 160 or 320 (default: the stock's "
+    size: int | None = typer.Option(None, "--size", help="Test piece size [mm]: 160 or 320 (default: the stock's "
                                                             "size_mm)."),
     xy_margin: float = typer.Option(400.0, "--xy-margin-mm", help="Search box half-width around the given poses, "
                                                                   "x and y [mm]."),
     z_margin: float = typer.Option(100.0, "--z-margin-mm", help="Search box half-height around the given poses [mm]."),
-    max_simulations: Optional[int] = typer.Option(None, "--max-simulations", help="Stop after this many simulated "
+    max_simulations: int | None = typer.Option(None, "--max-simulations", help="Stop after this many simulated "
                                                                                   "candidates [-]."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object: best pose [m, rad], its score, every "
                                                        "given pose's score, the improvement [-]."),
@@ -102,5 +101,5 @@ def optimize_pose_cmd(
               f"--poses {out_dir / 'best.json'} --size {size} --spacing {spacing:g}")
 
 
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+def register(app: typer.Typer) -> None:
     app.command("optimize-pose")(guarded(optimize_pose_cmd))

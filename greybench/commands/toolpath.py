@@ -1,22 +1,20 @@
-"""Toolpath commands: ``testpiece``, ``interpolate``; ``bench toolpath`` (paper 3.1, 3.2, 3.7)."""
+"""Toolpath commands: ``testpiece``, ``interpolate`` (paper 3.1, 3.2, 3.7)."""
 from __future__ import annotations
 
-import time
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import pandas as pd
 import typer
 from rich.table import Table
 
-from greybench.support import DATA_DIR, emit_json, guarded, out, print_summary, progress, resolve_robot
+from greybench.support import emit_json, guarded, out, print_summary, progress, resolve_robot
 from identify.errors import InputError
 from identify.records import write_table
 from simulate.toolpath.gcode import read_program
 from simulate.toolpath.interpolation import PathLimits, interpolate
 from simulate.toolpath.placement import JointTrajectory, joint_trajectory, load_poses, select_pose
-from simulate.toolpath.testpiece import Technology, finishing_program, iso_test_piece, write_test_piece
+from simulate.toolpath.testpiece import Technology, iso_test_piece, write_test_piece
 
 
 def trajectory_frame(jt: JointTrajectory) -> pd.DataFrame:
@@ -62,8 +60,9 @@ def testpiece(
 def interpolate_cmd(
     program: Path = typer.Option(..., "--program", help="G-code program (lengths in mm or inch as programmed)."),
     robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
-    pose: Path = typer.Option(..., "--pose", help="Pose file (JSON): workpiece frame in the robot base frame [m, rad]."),
-    name: Optional[str] = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
+    pose: Path = typer.Option(..., "--pose", help="Pose file (JSON): workpiece frame in the robot base frame [m, "
+                                                  "rad]."),
+    name: str | None = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
     out_file: Path = typer.Option(..., "--out", help="Output .csv or .parquet: t [s], line, x y z [m], q1..q6 [rad], "
                                                      "qd1..qd6 [rad/s], switch."),
     acceleration: float = typer.Option(2.0, "--acceleration", help="Path acceleration limit A [m/s^2]."),
@@ -106,50 +105,6 @@ def interpolate_cmd(
     print_summary(f"{program.name} on {rob.name}, pose {placement.name}", summary)
 
 
-def bench_toolpath(
-    size: int = typer.Option(320, "--size", help="Test piece size [mm] whose finishing program is timed."),
-    repeat: int = typer.Option(3, "--repeat", help="Timed runs; the best is reported."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
-) -> None:
-    """Interpolation and inverse kinematics throughput [points/s] on the test-piece program (target >= 1e6)."""
-    from simulate.robot.model import load_robot
-    from simulate.toolpath.gcode import parse_program
-
-    if repeat < 1:
-        raise InputError("must be >= 1", field="repeat")
-    prog = parse_program(finishing_program(iso_test_piece(size)), source=f"testpiece{size}.nc")
-    rob = load_robot(resolve_robot("max100"))
-    placement = load_poses(DATA_DIR / "poses" / f"iso{size}.json")[0]
-    ip = interpolate(prog)
-    joint_trajectory(rob, ip, placement)  # warm-up: numba compile / cache load
-    t_int, t_ik = np.inf, np.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        ip = interpolate(prog)
-        t1 = time.perf_counter()
-        joint_trajectory(rob, ip, placement)
-        t2 = time.perf_counter()
-        t_int, t_ik = min(t_int, t1 - t0), min(t_ik, t2 - t1)
-    n = len(ip)
-    rows = {"interpolation": t_int, "inverse kinematics + qd + switching": t_ik, "together": t_int + t_ik}
-    res = {name: {"seconds": s, "points_per_s": n / s, "us_per_point": s / n * 1e6} for name, s in rows.items()}
-    res["points"] = n
-    res["segments"] = len(prog.segments)
-    res["target_points_per_s"] = 1e6
-    res["ratio_together_to_target"] = n / (t_int + t_ik) / 1e6
-    if as_json:
-        emit_json(res)
-        return
-    table = Table(title=f"toolpath bench: test piece {size}, {n} points at 2 ms, {len(prog.segments)} segments "
-                        f"(best of {repeat})")
-    for col in ("part", "time \\[s]", "points/s", "us/point", "x target 1e6/s"):
-        table.add_column(col, justify="left" if col == "part" else "right")
-    for name, s in rows.items():
-        table.add_row(name, f"{s:.4f}", f"{n / s:,.0f}", f"{s / n * 1e6:.3f}", f"{n / s / 1e6:.2f}")
-    out.print(table)
-
-
-def register(app: typer.Typer, bench_app: typer.Typer) -> None:
+def register(app: typer.Typer) -> None:
     app.command("testpiece")(guarded(testpiece))
     app.command("interpolate")(guarded(interpolate_cmd))
-    bench_app.command("toolpath")(guarded(bench_toolpath))

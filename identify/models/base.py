@@ -28,15 +28,13 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import tempfile
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
 from identify.errors import InputError, NotFittedError
-from identify.files import as_created
+from identify.files import atomic_folder
 from identify.metrics import Metrics, evaluate
 from identify.records import AxisRecord
 
@@ -55,6 +53,12 @@ class FrictionModel:
     name: ClassVar[str] = "base"
     #: Units of the fitted parameters, for the human-readable params file.
     units: ClassVar[dict[str, str]] = {}
+    # fitted state, set by fit() or a load (declared for the type checker; absent until then)
+    params_: dict[str, float]
+    rigid_: bool
+    linear_: bool
+    cutoff_hz_: float | None
+    train_metrics_: Metrics
 
     # ---- hyperparameters -------------------------------------------------------------
     def get_hyperparameters(self) -> dict[str, Any]:
@@ -62,7 +66,7 @@ class FrictionModel:
         return {k: v for k, v in vars(self).items() if not k.endswith("_") and not k.startswith("_")}
 
     # ---- fitting ---------------------------------------------------------------------
-    def fit(self, record: AxisRecord) -> "FrictionModel":
+    def fit(self, record: AxisRecord) -> Self:
         """Identify the model on a training record; returns self."""
         self.rigid_ = record.tau_rb is None
         self.linear_ = bool(record.linear)
@@ -148,10 +152,7 @@ class FrictionModel:
         """
         self._check_fitted()
         target = Path(directory)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-        as_created(tmp, directory=True)
-        try:
+        with atomic_folder(target) as tmp:
             doc = {
                 "model": self.name,
                 "format": FORMAT_VERSION,
@@ -165,12 +166,6 @@ class FrictionModel:
             }
             (tmp / PARAMS_FILE).write_text(json.dumps(doc, indent=2) + "\n")
             self._save_extra(tmp)
-            if target.exists():
-                shutil.rmtree(target)
-            os.replace(tmp, target)
-        finally:
-            if tmp.exists():
-                shutil.rmtree(tmp)
         return target
 
     def _save_extra(self, directory: Path) -> None:
@@ -180,7 +175,7 @@ class FrictionModel:
         pass
 
     @classmethod
-    def from_document(cls, doc: dict, directory: Path) -> "FrictionModel":
+    def from_document(cls, doc: dict, directory: Path) -> Self:
         model = cls(**doc.get("hyperparameters", {}))
         model.rigid_ = bool(doc["rigid"])
         model.linear_ = bool(doc.get("linear", False))
@@ -193,7 +188,7 @@ class FrictionModel:
         return model
 
     @classmethod
-    def load(cls, directory: str | os.PathLike) -> "FrictionModel":
+    def load(cls, directory: str | os.PathLike) -> Self:
         doc = read_params(directory)
         if doc["model"] != cls.name:
             raise InputError(f"holds a '{doc['model']}' model, not '{cls.name}'", source=str(directory), field="model")

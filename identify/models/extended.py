@@ -59,6 +59,7 @@ from identify.models.base import FrictionModel
 from identify.models.lugre import LuGre
 from identify.models.lugre_kernel import _advance, _initial_state, stribeck_level_scalar
 from identify.records import AxisRecord
+from identify.ripple import ripple_periodogram
 
 #: Extensions in their fixed order, with their coefficients and units.
 EXTENSIONS: dict[str, dict[str, str]] = {
@@ -140,7 +141,7 @@ class LuGreExtended(FrictionModel):
         baseline = LuGre(population=self.population, generations=self.generations, seed=self.seed).fit(record)
         self._extend(baseline, record)
 
-    def fit_from(self, baseline: LuGre, record: AxisRecord) -> "LuGreExtended":
+    def fit_from(self, baseline: LuGre, record: AxisRecord) -> LuGreExtended:
         """Extend an already fitted LuGre ``baseline`` (same training ``record``); returns self."""
         self.rigid_ = bool(baseline.rigid_)
         self.linear_ = bool(record.linear)
@@ -167,8 +168,6 @@ class LuGreExtended(FrictionModel):
         if "position" in self.causes:
             order = self.ripple_order
             if order is None:
-                from identify.diagnosis import ripple_periodogram
-
                 order = ripple_periodogram(record.q, record.tau - baseline.predict(record)).best
             p["ripple_order"] = float(order)
         self.params_ = p
@@ -186,34 +185,36 @@ class LuGreExtended(FrictionModel):
     def _refit(self, record: AxisRecord) -> None:
         names = self._free()
         p = self.params_
-        x0, lo, hi = [], [], []
+        rows = []  # (start, lower, upper) per free parameter
         for k in names:
             v = p[k]
             if k in ("s0", "vs"):
-                x0.append(np.log10(v)); lo.append(np.log10(v) - 2); hi.append(np.log10(v) + 2)
+                rows.append((np.log10(v), np.log10(v) - 2, np.log10(v) + 2))
             elif k == "fs":
-                x0.append(v - p["fc"]); lo.append(0.0); hi.append(np.inf)
+                rows.append((v - p["fc"], 0.0, np.inf))
             elif k in ("fc", "s1", "nu", "J"):
-                x0.append(v); lo.append(0.0); hi.append(np.inf)
+                rows.append((v, 0.0, np.inf))
             elif k == "delta":
-                x0.append(v); lo.append(0.3); hi.append(5.0)
+                rows.append((v, 0.3, 5.0))
             elif k == "asym":
-                x0.append(v); lo.append(-0.9); hi.append(9.0)
+                rows.append((v, -0.9, 9.0))
             elif k == "ripple_order":
                 # within a quarter of the periodogram's resolution either side
                 span = float(np.ptp(record.q)) or 1.0
                 w = 0.5 * np.pi / span
-                x0.append(v); lo.append(v - w); hi.append(v + w)
+                rows.append((v, v - w, v + w))
             else:
-                x0.append(v); lo.append(-np.inf); hi.append(np.inf)
-        x0, lo, hi = np.array(x0, float), np.array(lo, float), np.array(hi, float)
-        pad = lambda b: 1e-9 * (np.abs(np.where(np.isfinite(b), b, 0.0)) + 1.0)
+                rows.append((v, -np.inf, np.inf))
+        x0, lo, hi = np.array(rows, float).reshape(-1, 3).T
+
+        def pad(b):
+            return 1e-9 * (np.abs(np.where(np.isfinite(b), b, 0.0)) + 1.0)
         x0 = np.clip(x0, lo + pad(lo), hi - pad(hi))  # strictly inside the box (trf needs it)
         fixed = dict(p)
 
         def unpack(x):
             q = dict(fixed)
-            for k, v in zip(names, x):
+            for k, v in zip(names, x, strict=True):
                 q[k] = v
             q["s0"], q["vs"] = 10.0 ** q["s0"], 10.0 ** q["vs"]
             q["fs"] = q["fc"] + q["fs"]
@@ -242,9 +243,9 @@ class LuGreExtended(FrictionModel):
         mult = np.ones(record.n)
         nu = np.full(record.n, q["nu"])
         if "load" in self.causes:
-            mult *= np.maximum(1.0 + q["k_load"] * (np.abs(record.tau_load) - q["load_ref"]), LEVEL_FLOOR)
+            mult *= np.maximum(1.0 + q["k_load"] * (np.abs(record.require("tau_load")) - q["load_ref"]), LEVEL_FLOOR)
         if "temperature" in self.causes:
-            dT = record.temp - q["temp_ref"]
+            dT = record.require("temp") - q["temp_ref"]
             mult *= np.maximum(1.0 + q["k_dry_temp"] * dT, LEVEL_FLOOR)
             nu = nu * np.exp(np.clip(q["k_nu_temp"] * dT, -30.0, 30.0))
         if "asymmetry" in self.causes:
@@ -268,7 +269,7 @@ class LuGreExtended(FrictionModel):
         """Non-friction torque: J*qdd + c (when ``base``) plus the inertia and drift extensions."""
         out = q["J"] * record.qdd + q["c"] if base else np.zeros(record.n)
         if "inertia" in self.causes:
-            out = out + q["k_J"] * (np.abs(record.tau_load) - q["load_ref"]) * record.qdd
+            out = out + q["k_J"] * (np.abs(record.require("tau_load")) - q["load_ref"]) * record.qdd
         if "drift" in self.causes:
             out = out + q["drift"] * (record.t - record.t[0])
         if "gravity" in self.causes:

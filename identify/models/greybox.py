@@ -106,6 +106,11 @@ class StaticLevelNet(nn.Module):
         Hidden nodes (paper: 10).
     """
 
+    # buffers (register_buffer), declared for the type checker
+    v_max: torch.Tensor
+    v_ref: torch.Tensor
+    tau_scale: torch.Tensor
+
     def __init__(self, v_max: float, tau_scale: float, hidden: int = 10):
         super().__init__()
         self.register_buffer("v_max", torch.tensor(float(v_max), dtype=DTYPE))
@@ -168,6 +173,12 @@ class GreyBoxLuGreNet(nn.Module):
     hidden : int
         Hidden nodes of g.
     """
+
+    # buffers (register_buffer), declared for the type checker
+    s1_scale: torch.Tensor
+    nu_scale: torch.Tensor
+    J_scale: torch.Tensor
+    c_scale: torch.Tensor
 
     def __init__(self, v_max: float, tau_scale: float, acc_scale: float, s0: float = 1e4, s1: float = 1.0,
                  nu: float = 0.1, J: float = 0.0, c: float = 0.0, rigid: bool = True, hidden: int = 10):
@@ -254,7 +265,8 @@ def forward_recurrent(net: GreyBoxLuGreNet, qd: torch.Tensor, qdd: torch.Tensor,
 
 def record_tensors(record: AxisRecord) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """(qd, qdd, dt, friction target) of a record as float64 tensors."""
-    as_t = lambda x: torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)
+    def as_t(x):
+        return torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)
     return as_t(record.qd), as_t(record.qdd), as_t(record.dt), as_t(record.friction_target)
 
 
@@ -336,6 +348,7 @@ def _initial_lugre(record: AxisRecord, level: StaticLevelNet, rigid: bool) -> di
         sse = float(np.sum((X @ res.x - (y - w)) ** 2))
         if best is None or sse < best[0]:
             best = (sse, s0, res.x)
+    assert best is not None  # the s0 grid has 17 points
     _, s0, x = best
     p = {"s0": float(s0), "s1": float(x[0]), "nu": float(x[1]), "c": float(x[-1])}
     if rigid:

@@ -34,7 +34,7 @@ from torch import nn
 
 from identify.errors import InputError
 from identify.models.base import FrictionModel
-from identify.models.sequence_features import DEFAULT_PLAY_WIDTHS, FeatureScales, TANH_VELOCITY, sequence_features
+from identify.models.sequence_features import DEFAULT_PLAY_WIDTHS, TANH_VELOCITY, FeatureScales, sequence_features
 from identify.records import AxisRecord
 from identify.training import TrainingHistory, count_parameters, deterministic, torch_threads, train
 
@@ -71,6 +71,12 @@ class LSTMFrictionNet(nn.Module):
     J, c : float
         Initial inertia [kg m^2] and offset [Nm].
     """
+
+    # buffers (register_buffer), declared for the type checker
+    v_scale: torch.Tensor
+    a_scale: torch.Tensor
+    tau_scale: torch.Tensor
+    play_widths: torch.Tensor
 
     def __init__(self, v_scale: float, a_scale: float, tau_scale: float,
                  play_widths: tuple[float, ...] = DEFAULT_PLAY_WIDTHS, hidden: int = 16, head: int = 32,
@@ -138,7 +144,7 @@ class WindowLayout:
     scored: np.ndarray
 
     @classmethod
-    def of(cls, n: int, window: int, warmup: int) -> "WindowLayout":
+    def of(cls, n: int, window: int, warmup: int) -> WindowLayout:
         count = max(1, -(-n // window))
         pos = np.arange(count)[:, None] * window + np.arange(warmup + window)[None, :] - warmup
         scored = (pos >= 0) & (pos < n)

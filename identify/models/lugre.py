@@ -184,7 +184,8 @@ class LuGre(FrictionModel):
         lo = [s["low"] for s in space] + [0.0, 0.0] + ([0.0, -np.inf] if rigid else [])
         hi = [s["high"] for s in space] + [np.inf, np.inf] + ([np.inf, np.inf] if rigid else [])
         lo, hi = np.array(lo), np.array(hi)
-        pad = lambda b: 1e-9 * (np.abs(np.where(np.isfinite(b), b, 0.0)) + 1.0)
+        def pad(b):
+            return 1e-9 * (np.abs(np.where(np.isfinite(b), b, 0.0)) + 1.0)
         x0 = np.clip(x0, lo + pad(lo), hi - pad(hi))
         z = np.empty_like(qd)
 

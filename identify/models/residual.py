@@ -48,6 +48,11 @@ class ResidualNet(nn.Module):
         Nodes per hidden layer (paper: 10).
     """
 
+    # buffers (register_buffer), declared for the type checker
+    v_max: torch.Tensor
+    tau_scale: torch.Tensor
+    res_scale: torch.Tensor
+
     def __init__(self, v_max: float, tau_scale: float, res_scale: float, hidden: int = 10):
         super().__init__()
         self.register_buffer("v_max", torch.tensor(float(v_max), dtype=DTYPE))
@@ -56,9 +61,11 @@ class ResidualNet(nn.Module):
         self.mlp = nn.Sequential(nn.Linear(3, hidden, dtype=DTYPE), nn.LeakyReLU(0.01),
                                  nn.Linear(hidden, hidden, dtype=DTYPE), nn.LeakyReLU(0.01),
                                  nn.Linear(hidden, 1, dtype=DTYPE))
+        last = self.mlp[-1]
+        assert isinstance(last, nn.Linear)
         with torch.no_grad():  # start at zero correction: the model begins as plain LuGre
-            self.mlp[-1].weight.mul_(0.1)
-            self.mlp[-1].bias.zero_()
+            last.weight.mul_(0.1)
+            last.bias.zero_()
 
     def forward(self, qd: torch.Tensor, state: torch.Tensor, tau_lugre: torch.Tensor) -> torch.Tensor:
         """Residual torque [Nm]; ``state`` = s0*z/g [-], ``tau_lugre`` [Nm]."""
@@ -105,7 +112,8 @@ class ResidualLuGre(FrictionModel):
         f = lugre_stribeck(qd, np.ascontiguousarray(record.dt, dtype=float), p["s0"], p["s1"], p["nu"], p["fc"],
                            p["fs"], p["vs"], p["delta"], z) + self.base_.offset()
         g = self.base_.static_curve(qd)
-        as_t = lambda x: torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)
+        def as_t(x):
+            return torch.tensor(np.asarray(x, dtype=float), dtype=DTYPE)
         return as_t(qd), as_t(p["s0"] * z / g), as_t(f)
 
     def _fit(self, record: AxisRecord) -> None:

@@ -89,7 +89,7 @@ class FeatureScales:
         return 4 + len(self.play_widths)
 
     @classmethod
-    def from_record(cls, qd: np.ndarray, qdd: np.ndarray, play_widths=DEFAULT_PLAY_WIDTHS) -> "FeatureScales":
+    def from_record(cls, qd: np.ndarray, qdd: np.ndarray, play_widths=DEFAULT_PLAY_WIDTHS) -> FeatureScales:
         v = float(np.max(np.abs(qd))) if qd.size else 0.0
         a = float(np.std(qdd)) if qdd.size else 0.0
         return cls(v_scale=v if v > 0 else 1.0, a_scale=a if a > 0 else 1.0,

@@ -72,19 +72,22 @@ class Stribeck(FrictionModel):
     def _solve_linear(self, record, log_vs, delta):
         shape = np.sign(record.qd) * np.exp(-np.abs(record.qd / 10.0**log_vs) ** delta)
         cols = [np.sign(record.qd), shape, record.qd] + _rigid_columns(record, self.rigid_)
-        return _bounded_lsq(cols, record.friction_target, [True, True, True] + ([True, False] if self.rigid_ else [False]))
+        nonneg = [True, True, True] + ([True, False] if self.rigid_ else [False])
+        return _bounded_lsq(cols, record.friction_target, nonneg)
 
     def _fit(self, record: AxisRecord) -> None:
         lo = np.log10(self.vs_bounds)
+        d_lo, d_hi = self.delta_bounds
         # coarse grid then a bounded local search on (log10 vs, delta)
-        grid = [(a, d) for a in np.linspace(lo[0], lo[1], 13) for d in np.linspace(*self.delta_bounds, 6)]
+        grid = [(a, d) for a in np.linspace(lo[0], lo[1], 13) for d in np.linspace(d_lo, d_hi, 6)]
         best = min(grid, key=lambda p: self._solve_linear(record, *p)[1])
         res = minimize(lambda p: self._solve_linear(record, p[0], p[1])[1], np.array(best), method="Nelder-Mead",
                        options={"xatol": 1e-4, "fatol": 1e-10, "maxiter": 400})
         log_vs = float(np.clip(res.x[0], *lo))
-        delta = float(np.clip(res.x[1], *self.delta_bounds))
+        delta = float(np.clip(res.x[1], d_lo, d_hi))
         x, _ = self._solve_linear(record, log_vs, delta)
-        self.params_ = {"fc": float(x[0]), "fs": float(x[0] + x[1]), "vs": 10.0**log_vs, "delta": delta, "nu": float(x[2])}
+        self.params_ = {"fc": float(x[0]), "fs": float(x[0] + x[1]), "vs": 10.0**log_vs, "delta": delta,
+                        "nu": float(x[2])}
         if self.rigid_:
             self.params_.update(J=float(x[3]), c=float(x[4]))
         else:

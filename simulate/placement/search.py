@@ -40,7 +40,7 @@ import time
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -48,6 +48,9 @@ from identify.errors import InputError
 from simulate.evaluation.ranking import RankSettings
 from simulate.placement.screen import LIMIT_MARGIN, WRIST_MARGIN, ScreenResult, dominated_by, screen
 from simulate.toolpath.placement import Placement
+
+if TYPE_CHECKING:
+    from simulate.pipeline import ProgramSetup
 
 #: Lower bound of the wall time of one simulation per 2 ms sample of the program [s]: about a third
 #: of what one iso160 simulation at 0.5 mm took on an idle core (50 s for 30 287 samples), so a
@@ -274,7 +277,7 @@ class SearchResult:
 
 @dataclass(frozen=True)
 class _Eval:
-    program: object   # ProgramSetup, shared interpolation
+    program: ProgramSetup   # shared interpolation
     robot: str
     placement: Placement
     settings: RankSettings
@@ -364,7 +367,7 @@ class SearchPlan:
         Lower-bound wall time of one simulation [s].
     """
 
-    program: object
+    program: ProgramSetup
     robot: object
     robot_file: str
     placements: list

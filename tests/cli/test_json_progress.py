@@ -27,7 +27,8 @@ M30
 def test_machine_json_keeps_progress_on_stderr(tmp_path):
     prog = tmp_path / "slot.nc"
     prog.write_text(SLOT)
-    (tmp_path / "slot.stock.json").write_text(json.dumps({"units": "mm", "box": {"min": [0, 0, -6], "max": [20, 20, 0]}}))
+    stock = {"units": "mm", "box": {"min": [0, 0, -6], "max": [20, 20, 0]}}
+    (tmp_path / "slot.stock.json").write_text(json.dumps(stock))
     pose = tmp_path / "poses.json"
     pose.write_text(json.dumps({"poses": [{"name": "near", "xyz": [1.45, 0.0, -0.1], "rpy": [0.0, 0.0, 0.0]}]}))
     env = dict(os.environ, PYTHONPATH=str(ROOT), TERM="xterm-256color", FORCE_COLOR="1")

@@ -24,7 +24,8 @@ def free_port() -> int:
 def test_wait_until_answers_waits_for_a_late_server(tmp_path):
     port = free_port()
     # a server that starts listening only after 1.5 s
-    code = f"import time, http.server; time.sleep(1.5); http.server.test(http.server.SimpleHTTPRequestHandler, port={port}, bind='127.0.0.1')"
+    code = (f"import time, http.server; time.sleep(1.5); "
+            f"http.server.test(http.server.SimpleHTTPRequestHandler, port={port}, bind='127.0.0.1')")
     proc = subprocess.Popen([sys.executable, "-c", code], cwd=tmp_path, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     try:

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from greybench.commands.diagnose import confusion_table, generated_cases, run_case
+from greybench_bench.diagnose import confusion_table
+from identify.diagnosis_cases import generated_cases, run_case
 
 
 @pytest.mark.slow

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from greybench.commands.diagnose import effect_rms, magnitude_for
+from identify.diagnosis_cases import effect_rms, magnitude_for
 from identify.diagnosis import Cause, diagnose, ripple_periodogram
 from identify.errors import InputError
 from identify.models import load_model

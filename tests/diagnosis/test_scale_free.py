@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from greybench.commands.diagnose import magnitude_for
+from identify.diagnosis_cases import magnitude_for
 from identify.diagnosis import Cause, diagnose
 from identify.plant import PlantConfig
 from identify.records import validate_frame
@@ -106,7 +106,7 @@ def test_gravity_residue_is_named_and_modelled(make_pair):
 def test_strong_temperature_effect_modelled_to_the_noise(trajectories):
     """A temperature effect 10x the noise RMS (identifiable part): named alone, and the extension
     leaves at most 2x the noise RMS on the held-out record (measured: 1.03x)."""
-    from greybench.commands.diagnose import run_case
+    from identify.diagnosis_cases import run_case
 
     res, _ = run_case("temperature", 10.0, 1001, 5001, *trajectories)
     assert res.analysis.causes == [Cause.TEMPERATURE]

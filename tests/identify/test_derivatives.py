@@ -6,7 +6,7 @@ import pytest
 
 from identify.axis_limits import AxisLimits
 from identify.errors import InputError
-from identify.records import (SAVGOL_ORDER, SAVGOL_WINDOW_S, choose_cutoff, derive_derivatives, validate_frame)
+from identify.records import SAVGOL_ORDER, SAVGOL_WINDOW_S, choose_cutoff, derive_derivatives, validate_frame
 from identify.trajectories import universal_trajectory
 
 LIMITS = AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0)

@@ -34,7 +34,7 @@ def test_exact_update_matches_a_tight_ode_solution_with_velocity_held():
     for k in range(qd.size - 1):
         v = qd[k]
         g = stribeck(v, P["fc"], P["fs"], P["vs"], P["delta"])
-        sol = solve_ivp(lambda t, y: [v - P["s0"] * abs(v) * y[0] / g], (0, dt[k]), [zz], method="LSODA",
+        sol = solve_ivp(lambda t, y, v=v, g=g: [v - P["s0"] * abs(v) * y[0] / g], (0, dt[k]), [zz], method="LSODA",
                         rtol=1e-12, atol=1e-16)
         zz = sol.y[0, -1]
         assert z[k + 1] == pytest.approx(zz, rel=1e-6, abs=1e-14)

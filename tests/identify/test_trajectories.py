@@ -4,8 +4,7 @@ import pytest
 
 from identify.axis_limits import load_axis_limits
 from identify.errors import InputError
-from identify.trajectories import (TRAJECTORIES, presliding_motion, stribeck_steps, test_trajectory,
-                                   universal_trajectory)
+from identify.trajectories import TRAJECTORIES, presliding_motion, stribeck_steps, test_trajectory, universal_trajectory
 
 from .conftest import ROBOT
 

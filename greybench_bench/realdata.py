@@ -13,14 +13,18 @@ from __future__ import annotations
 
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
+import typer
+from rich.table import Table
 
+from greybench.commands.friction import COMPARE_MODELS
+from greybench.support import emit_json, out, progress
 from identify.errors import InputError
-from identify.models import make_model
+from identify.models import make_model, parse_model_names
 from identify.records import load_record, read_table
 
 #: Model types in the order of the table.
@@ -104,7 +108,7 @@ def _rmse(x: np.ndarray) -> float:
 
 
 def run_joint(data: Path, joint: int, models=MODELS, *, seed: int = 0, epochs: int | None = None,
-              advance: Callable[[float], None] = lambda n=1: None) -> JointResult:
+              advance: Callable[[float], None] | None = None) -> JointResult:
     """Fit ``models`` on one joint's training record and score them on its test record."""
     data = Path(data)
     train = load_record(data / f"joint{joint}_train.csv")
@@ -131,7 +135,8 @@ def run_joint(data: Path, joint: int, models=MODELS, *, seed: int = 0, epochs: i
         res.fit_time[name] = time.perf_counter() - t0
         friction, _ = est.predict_parts(test)
         res.rmse[name] = _rmse(y - friction)
-        advance(1)
+        if advance is not None:
+            advance(1)
     return res
 
 
@@ -149,10 +154,72 @@ def _one_torch_thread() -> None:
 def summary(results: list[JointResult], grey: str = "greybox", residual: str = "residual") -> dict:
     """The benchmark's goals: grey-box at or below the published model on every joint, the
     residual model within 1.1x of the grey-box."""
-    out = {}
+    out: dict[str, float] = {}
     if results and grey in results[0].rmse:
         out["greybox_at_or_below_published"] = sum(r.rmse[grey] <= r.published for r in results)
         out["joints"] = len(results)
         if residual in results[0].rmse:
             out["residual_over_greybox_max"] = max(r.rmse[residual] / r.rmse[grey] for r in results)
     return out
+
+
+def bench_realdata(
+    data: Path = typer.Option(..., "--data", help="Folder with joint<J>_train.csv, joint<J>_test.csv (t [s], q [rad], "
+                                                  "qd [rad/s], qdd [rad/s^2], tau [Nm], tau_rb [Nm]) and "
+                                                  "published_friction_joint<J>_test.csv (t [s], tau_f [Nm])."),
+    models: str | None = typer.Option(None, "--models", help="Comma-separated models (default: "
+                                                             f"{','.join(COMPARE_MODELS)})."),
+    joints: str | None = typer.Option(None, "--joints", help="Comma-separated joints (default: every joint in "
+                                                             "--data)."),
+    epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] of the learned models "
+                                                                "(default: the benchmark's modest settings)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
+    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "summary": {...}} (RMSE in Nm) as one '
+                                                       'JSON object.'),
+) -> None:
+    """Fit every model type on every joint of a real log and print, per joint, the test RMSE [Nm] of
+    tau - tau_rb - tau_friction_pred beside the published friction model's (same samples)."""
+    names = parse_model_names(models, COMPARE_MODELS, "--models")
+    found = joints_in(data)
+    if joints:
+        try:
+            wanted = [int(j) for j in joints.split(",") if j.strip()]
+        except ValueError:
+            raise InputError(f"not a list of joint numbers: {joints!r}", field="--joints") from None
+        for j in wanted:
+            if j not in found:
+                raise InputError(f"joint {j} has no records in {data} (have {', '.join(map(str, found))})",
+                                 field="--joints")
+        found = wanted
+    if epochs is not None and epochs < 1:
+        raise InputError("must be >= 1", field="--epochs")
+    results = []
+    t0 = time.perf_counter()
+    with progress(f"bench realdata: {len(names)} models x {len(found)} joints",
+                  total=len(names) * len(found)) as advance:
+        for j in found:
+            results.append(run_joint(data, j, names, seed=seed, epochs=epochs, advance=advance))
+    wall = time.perf_counter() - t0
+    summ = summary(results)
+    if as_json:
+        emit_json({"data": str(data), "models": names, "settings": BENCH_SETTINGS, "wall_time_s": wall,
+                   "joints": [r.to_dict() for r in results], "summary": summ})
+        return
+    # models as rows, joints as columns: seven joints fit an 80-column terminal
+    table = Table(title=f"bench realdata: test RMSE \\[mNm] of tau - tau_rb - friction ({wall:.0f} s)",
+                  pad_edge=False)
+    table.add_column("model", no_wrap=True)
+    for r in results:
+        table.add_column(f"J{r.joint}", justify="right")
+    table.add_row("published", *[f"{r.published * 1e3:.1f} " for r in results])
+    table.add_row("no friction", *[f"{r.no_friction * 1e3:.1f} " for r in results])
+    for n in names:
+        table.add_row(n, *[f"{r.rmse[n] * 1e3:.1f}" + ("*" if r.rmse[n] <= r.published else " ") for r in results])
+    out.print(table)
+    out.print("* at or below the published model", highlight=False)
+    if "greybox_at_or_below_published" in summ:
+        n_ok = summ["greybox_at_or_below_published"]
+        line = f"grey-box at or below the published model on {n_ok}/{summ['joints']} joints"
+        if "residual_over_greybox_max" in summ:
+            line += f"; residual / grey-box at most {summ['residual_over_greybox_max']:.3f} (goal <= 1.1)"
+        out.print(line, highlight=False)

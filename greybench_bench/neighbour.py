@@ -16,6 +16,7 @@ import os
 import subprocess
 import sys
 import time
+from typing import Any
 
 #: Thread and wait settings removed from the children's environment for the *unsized* runs.
 _THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS",
@@ -86,7 +87,7 @@ def measure(samples: int, epochs: int, advance=lambda n=1: None) -> dict:
     """Fit seconds alone and beside the neighbour, sized and unsized; slowdowns [-]."""
     from identify.resources import usable_cores
 
-    res = {"cores": usable_cores(), "samples": samples, "epochs": epochs}
+    res: dict[str, Any] = {"cores": usable_cores(), "samples": samples, "epochs": epochs}
     for mode in ("sized", "unsized"):
         alone = fit_seconds(samples, epochs, mode, neighbour=False)
         advance(1)

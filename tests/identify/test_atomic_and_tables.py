@@ -1,0 +1,48 @@
+"""The one atomic writer (identify.files) and the one markdown table writer (identify.records)."""
+import os
+import stat
+
+import pytest
+
+from identify.files import atomic_file, atomic_folder, write_text_atomic
+from identify.records import markdown_table
+
+
+def _leftovers(folder):
+    return [p.name for p in folder.iterdir() if p.name.startswith(".")]
+
+
+def test_atomic_file_replaces_only_when_the_block_ends_well(tmp_path):
+    target = tmp_path / "out.txt"
+    target.write_text("old")
+    with pytest.raises(RuntimeError), atomic_file(target) as tmp:
+        tmp.write_text("half")
+        raise RuntimeError("failed while writing")
+    assert target.read_text() == "old" and _leftovers(tmp_path) == []
+    old = os.umask(0o022)
+    try:
+        write_text_atomic(target, "new")
+    finally:
+        os.umask(old)
+    assert target.read_text() == "new" and _leftovers(tmp_path) == []
+    assert stat.S_IMODE(target.stat().st_mode) == 0o644  # not the 0600 of the temporary
+
+
+def test_atomic_folder_replaces_a_folder_or_leaves_it(tmp_path):
+    target = tmp_path / "model"
+    target.mkdir()
+    (target / "a.txt").write_text("old")
+    with pytest.raises(ValueError), atomic_folder(target) as stage:
+        (stage / "b.txt").write_text("half")
+        raise ValueError("failed while writing")
+    assert sorted(p.name for p in target.iterdir()) == ["a.txt"] and _leftovers(tmp_path) == []
+    with atomic_folder(target) as stage:
+        (stage / "b.txt").write_text("new")
+    assert sorted(p.name for p in target.iterdir()) == ["b.txt"] and _leftovers(tmp_path) == []
+
+
+def test_markdown_table_lines():
+    lines = markdown_table(("model", "RMSE [Nm]"), [("lugre", "0.0213"), ("a|b", 2)])
+    assert lines == ["| model | RMSE [Nm] |", "|---|---|", "| lugre | 0.0213 |", "| a\\|b | 2 |"]
+    with pytest.raises(ValueError, match="2 columns"):
+        markdown_table(("a", "b"), [("only one",)])
