@@ -74,6 +74,7 @@ def test_spindle_from_rpm():
     s2 = Spindle.from_rpm(60.0, phase=0.5)
     assert s2.omega == pytest.approx(2 * math.pi) and s2.phase == 0.5
     assert Spindle(1.0).phase == 0.0
+    assert Spindle.from_rpm(0.5).omega == pytest.approx(math.pi / 60.0)   # slow, but turning
     for bad in (0.0, -10.0, math.inf, math.nan):
         with pytest.raises(InputError) as e:
             Spindle.from_rpm(bad)

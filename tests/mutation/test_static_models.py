@@ -112,3 +112,20 @@ def test_stribeck_default_search_ranges():
     assert m.delta_bounds == (0.3, 4.0)
     assert m.vs_bounds == (1e-4, 1.0)
     assert Stribeck(delta_bounds=[1, 2], vs_bounds=[0.1, 0.2]).vs_bounds == (0.1, 0.2)
+
+
+@pytest.mark.parametrize("rigid", [False, True])
+def test_stribeck_levels_and_slopes_stay_nonnegative(make_record, rigid):
+    qd = _velocity(1500)
+    qdd = np.gradient(qd, 1e-3)
+    # a negative slope and a negative inertia are not physical: every level and slope stays at 0
+    rec = (make_record(qd, -0.5 * qd - 0.01 * qdd + 0.2, qdd=qdd) if rigid
+           else make_record(qd, -0.5 * qd, tau_rb=np.zeros(qd.size)))
+    p = Stribeck().fit(rec).params_
+    assert p["fc"] == 0.0 and p["fs"] == 0.0 and p["nu"] == 0.0
+    if rigid:
+        assert p["J"] == 0.0
+        assert p["c"] == pytest.approx(0.2, abs=1e-3)
+    # a negative Coulomb level is clamped too
+    p = Stribeck().fit(make_record(qd, -0.5 * np.sign(qd) + 1.0 * qd, tau_rb=np.zeros(qd.size))).params_
+    assert p["fc"] == 0.0 and p["nu"] > 0.5
