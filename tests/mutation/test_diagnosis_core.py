@@ -25,7 +25,7 @@ def _baseline(rigid=False):
     return m
 
 
-def _record(f1, f2, n=8000, seed=0, temp=True, load=True, rigid=False):
+def _record(f1, f2, n=4000, seed=0, temp=True, load=True, rigid=False):
     t = np.arange(n) * DT
     qd = 1.2 * np.sin(2 * np.pi * f1 * t) + 0.5 * np.sin(2 * np.pi * f2 * t + 0.3)
     q = 0.2 + np.cumsum(qd) * DT
