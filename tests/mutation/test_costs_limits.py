@@ -169,3 +169,52 @@ def test_stock_errors_name_the_stock_source():
         check_machining_cost("G21\nG1 X1 F100\n", "{}", 1e-3, stock_source="s.json",
                              fields=CostFields(stock="options.stock"))
     assert e.value.source == "s.json" and e.value.field == "options.stock"
+
+
+def test_dexel_bytes_closed_form_off_origin():
+    cells, size = dexel_bytes([0.1, -0.2, 0.3], [0.110, -0.180, 0.330], 1e-3)
+    assert cells == (10, 20, 30)
+    assert size == 20 * 30 * (8 * 24 + 4) + 10 * 30 * (8 * 24 + 4) + 10 * 20 * (4 * 24 + 4)
+
+
+def test_human_year_boundary():
+    assert _human(365.25 * 86400) == "1 years"
+    assert _human(86400 * 1.5) == "1.5 days"
+
+
+def test_cost_defaults_and_names_in_messages():
+    text = "G21 G90\nG0 X100\nG1 X200 F600000\n"      # rapid at 0.25 m/s, feed capped at 1 m/s
+    est = check_machining_cost(text, BOX, 1e-3)
+    assert est.simulations == 1 and est.cut_seconds == pytest.approx(0.4 + 0.1)
+    with pytest.raises(InputError) as e:
+        check_machining_cost("G21\nG1 X1 F100\n" * 3, BOX, 1e-3, CostLimits(max_lines=5), source="a.nc",
+                             fields=CostFields(program="gcode"))
+    assert e.value.source == "a.nc" and e.value.field == "gcode"
+    with pytest.raises(InputError) as e:
+        check_machining_cost("G21\nQ7\n", BOX, 1e-3, source="b.nc")
+    assert e.value.source == "b.nc" and e.value.line == 2
+    with pytest.raises(InputError) as e:
+        check_machining_cost("G21\nQ7\n", BOX, 1e-3)
+    assert e.value.source == "<program>"
+    with pytest.raises(InputError) as e:
+        check_machining_cost("G21\nG1 X1 F100\n", "{}", 1e-3)
+    assert e.value.source == "stock" and e.value.field == "stock"
+
+
+def test_memory_message_numbers():
+    text = "G21 G90\nG1 X60 F600\n"
+    est = check_machining_cost(text, BOX, 2e-5)
+    limit = 0.5 * 1024 ** 3
+    with pytest.raises(InputError) as e:
+        check_machining_cost(text, BOX, 2e-5, CostLimits(max_memory_bytes=limit))
+    assert f"about {est.memory_bytes / 1024 ** 3:.3g} GiB estimated" in e.value.message
+    assert "more than the limit of 0.5 GiB" in e.value.message
+
+
+def test_stock_error_text_names_the_problem():
+    with pytest.raises(InputError) as e:
+        stock_bounds('{"box": {"min": [0, 0, 0], "max": [1, 0, 1]}}')
+    assert e.value.message == "not a readable stock description (empty or degenerate)"
+    with pytest.raises(InputError) as e:
+        stock_bounds('{"box": {"min": [0, 0, 0]}}')
+    assert e.value.message == "not a readable stock description ('max')"

@@ -184,3 +184,61 @@ def test_feature_row_and_table_helpers():
     assert t.n_in_tolerance == 2
     assert t.worst.name == "z"
     assert t.source == ""
+
+
+def test_every_row_carries_its_nominal_unit_and_instances(pts, piece):
+    t = _table(pts, piece)
+    expect = {"circle height zMZ": (piece.circle_z[1] - piece.circle_z[0], "m", ["height"]),
+              "circle diameter": (piece.circle_diameter, "m", ["diameter"]),
+              "circle roundness": (None, "", ["roundness"]),
+              "square height zMZ": (piece.square_z[1] - piece.square_z[0], "m", ["height"]),
+              "square side length (2x)": (piece.square_side, "m", ["x", "y"]),
+              "square straightness (4x)": (None, "", ["square_wall_xp", "square_wall_xn", "square_wall_yp",
+                                                      "square_wall_yn"]),
+              "angles 30/60 deg": (None, "", [f"angle_edge_{k}" for k in range(1, 5)]),
+              "slope height zMZ": (piece.slope_z0, "m", ["height"]),
+              "slope straightness": (None, "", ["slope_line_1", "slope_line_2", "slope_line_3"]),
+              "slope angle": (piece.slope_angle, "rad", ["angle"])}
+    for name, (nominal, unit, keys) in expect.items():
+        r = t[name]
+        assert r.nominal == (pytest.approx(nominal) if nominal is not None else None), name
+        assert r.nominal_unit == unit and sorted(r.instances) == sorted(keys), name
+        assert r.worst_instance in keys and r.instances[r.worst_instance] == r.deviation, name
+    # the square's floor sits at z = 0 here: a nominal height of top + floor would equal top - floor
+    assert t["square height zMZ"].nominal == pytest.approx(0.006)
+
+
+def test_off_centre_piece(piece):
+    import dataclasses
+
+    moved = dataclasses.replace(piece, square_center=(0.012, -0.007), circle_center=(0.012, -0.007),
+                                square_z=(0.001, 0.007))
+    pts = {g.name: g.points.copy() for g in probe_plan(moved)}
+    t = _table(pts, moved)
+    assert all(abs(r.deviation) < 1e-10 for r in t.rows)
+    assert t["square height zMZ"].nominal == pytest.approx(0.006)
+    eps = 3e-4
+    pts["angle_edge_3"] = _rotate_about_centroid(pts["angle_edge_3"], eps)
+    top = pts["circle_top"]
+    top[:, 2] += 1e-4 * top[:, 0] + 5e-5 * top[:, 1]          # tilted: read at the circle's centre
+    t = _table(pts, moved)
+    assert t["angles 30/60 deg"].instances["angle_edge_3"] == pytest.approx(eps * moved.angle_side, rel=1e-6)
+    assert t["circle height zMZ"].deviation == pytest.approx(1e-4 * 0.012 - 5e-5 * 0.007, abs=1e-10)
+
+
+def test_slope_face_uses_all_three_lines(pts, piece):
+    pts["slope_line_1"][:, 2] += 4 * UM
+    t = _table(pts, piece)
+    # the face's zone spans lines 1 to 3: raising line 1 alone moves the face's plane
+    assert 0.5 * UM < t["slope height zMZ"].deviation <= 4 * UM
+
+
+def test_fewest_points_per_feature(pts, piece):
+    small = {}
+    for name, p in pts.items():
+        k = 4 if name == "circle_wall" else 2 if ("wall" in name or "edge" in name or "line" in name) else 3
+        idx = np.linspace(0, len(p) - 1, k).round().astype(int)
+        small[name] = p[idx]
+    small["circle_top"] = pts["circle_top"][[0, len(pts["circle_top"]) // 3, 2 * len(pts["circle_top"]) // 3]]
+    t = _table(small, piece)
+    assert abs(t["circle height zMZ"].deviation) < 1e-10 and abs(t["square side length (2x)"].deviation) < 1e-10
