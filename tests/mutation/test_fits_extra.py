@@ -140,3 +140,59 @@ def test_point_checks(fn, dim, minimum):
     bad[0, 0] = np.nan
     with pytest.raises(ValueError, match="finite"):
         fn(bad)
+
+
+def _rot(ax, ay):
+    cx, sx, cy, sy = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay)
+    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    return Ry @ Rx
+
+
+@pytest.mark.parametrize("ax, ay", [(0.0, 0.0), (0.3, -0.2), (-0.25, 0.4)])
+def test_plane_mz_differs_from_ls_and_is_exact(ax, ay):
+    # a plane with a raised corner plateau: LS tilts towards the plateau, the minimum zone does not
+    g = np.linspace(-1.0, 1.0, 21)
+    xy = np.array([(x, y) for x in g for y in g])
+    h = 1e-3
+    z = np.where((xy[:, 0] > 0.55) & (xy[:, 1] > 0.55), h, 0.0)
+    p = np.column_stack([xy, z]) @ _rot(ax, ay).T + [0.3, -0.1, 2.0]
+    n_true = _rot(ax, ay) @ np.array([0.0, 0.0, 1.0])
+    ls, mz = fit_plane_ls(p), fit_plane_mz(p)
+    assert ls.flatness > 1.03 * h
+    assert mz.flatness == pytest.approx(h, rel=1e-9)
+    np.testing.assert_allclose(mz.normal, n_true, atol=1e-9)
+    d = mz.distance(p)
+    assert d.max() == pytest.approx(h / 2, rel=1e-6) and d.min() == pytest.approx(-h / 2, rel=1e-6)
+    np.testing.assert_allclose(ls.point, p.mean(axis=0), atol=1e-15)
+    assert ls.distance(p).max() - ls.distance(p).min() == pytest.approx(ls.flatness)
+
+
+def test_plane_normals_point_up_for_any_svd_sign():
+    rng = np.random.default_rng(11)
+    for _ in range(12):
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        a = np.cross(n, [0.3, 0.5, 0.8])
+        a /= np.linalg.norm(a)
+        b = np.cross(n, a)
+        uv = rng.uniform(-1, 1, (30, 2))
+        p = uv[:, :1] * a + uv[:, 1:] * b + rng.uniform(0, 1e-3, (30, 1)) * n
+        ls, mz = fit_plane_ls(p), fit_plane_mz(p)
+        assert ls.normal[2] >= 0 and mz.normal[2] >= 0
+        assert abs(ls.normal @ n) == pytest.approx(1.0, abs=1e-3)
+        assert np.linalg.norm(mz.normal) == pytest.approx(1.0)
+
+
+def test_frame_of_a_general_normal_is_orthonormal():
+    for n in (np.array([0.3, 0.4, math.sqrt(1 - 0.25)]), np.array([0.95, 0.1, math.sqrt(1 - 0.9025 - 0.01)])):
+        F = _frame(n)
+        np.testing.assert_allclose(F @ F.T, np.eye(3), atol=1e-14)
+        np.testing.assert_allclose(F[2], n)
+
+
+def test_distances_take_integer_points():
+    f = fit_line_ls([[0, 0], [2, 0]])
+    assert f.distance([[1, 3]])[0] == pytest.approx(3.0)
+    pl = fit_plane_ls([[0, 0, 1], [1, 0, 1], [0, 1, 1]])
+    assert pl.distance([[5, 5, 4]])[0] == pytest.approx(3.0)
