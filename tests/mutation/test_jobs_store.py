@@ -368,3 +368,73 @@ def test_worker_sees_a_cancel_and_skips_a_job_not_queued(store, tmp_path, monkey
     assert run_in_worker(str(store.path), "b", rec.id, "simulation", {}, str(tmp_path), None) == "skipped"
     with pytest.raises(JobCancelled):
         raise JobCancelled("x")
+
+
+def _in_fork(fn):
+    """Run fn() in a forked child (it sees this process's modules); returns (exit code, its JSON)."""
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - child
+        os.close(r)
+        code = 0
+        try:
+            out = fn()
+        except SystemExit as e:
+            out, code = None, int(e.code or 0)
+        except BaseException as e:
+            out, code = repr(e), 1
+        os.write(w, json.dumps(out).encode())
+        os._exit(code)
+    os.close(w)
+    data = b""
+    while chunk := os.read(r, 65536):
+        data += chunk
+    os.close(r)
+    _, status = os.waitpid(pid, 0)
+    return os.waitstatus_to_exitcode(status), (json.loads(data) if data else None)
+
+
+def _pdeathsig():
+    import ctypes
+    import ctypes.util
+
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+    v = ctypes.c_int(-1)
+    libc.prctl(2, ctypes.byref(v), 0, 0, 0)     # PR_GET_PDEATHSIG
+    return v.value
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux only")
+def test_parent_death_signal_is_sigkill():
+    code, out = _in_fork(lambda: [jobs._set_parent_death_signal(), _pdeathsig()])
+    assert code == 0 and out == [True, int(signal.SIGKILL)]
+    # armed with the right parent: returns, and forked grandchildren inherit the arming
+    code, out = _in_fork(lambda: [jobs.die_with_parent(os.getppid()), _pdeathsig(),
+                                  _in_fork(_pdeathsig)])
+    assert code == 0 and out == [None, int(signal.SIGKILL), [0, int(signal.SIGKILL)]]
+    # the parent is already gone (another pid): exit code 3 at once
+    code, _ = _in_fork(lambda: jobs.die_with_parent(os.getppid() + 100000))
+    assert code == 3
+
+
+def test_worker_main_leads_its_group_and_runs_the_job(monkeypatch):
+    seen = {}
+
+    def fake(*args):
+        seen["args"] = args
+        return "succeeded"
+
+    monkeypatch.setattr(jobs, "run_in_worker", fake)
+    monkeypatch.setattr("identify.resources.configure_threads", lambda n: seen.setdefault("threads", n))
+
+    def child():
+        jobs._worker_main(os.getppid(), 3, "db", "boot", "jid", "simulation", {"r": 1}, "dir", "ray")
+        return [seen["args"], seen["threads"], os.getpgid(0) == os.getpid(), _pdeathsig()]
+
+    code, out = _in_fork(child)
+    assert code == 0
+    args, threads, leader, sig = out
+    assert args == ["db", "boot", "jid", "simulation", {"r": 1}, "dir", "ray"]
+    assert threads == 3 and leader is True
+    if sys.platform.startswith("linux"):
+        assert sig == int(signal.SIGKILL)
