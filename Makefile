@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-all lint bench clean
+.PHONY: demo test test-all lint bench mutation clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -30,6 +30,16 @@ test-all: $(STAMP)
 
 bench: $(STAMP)
 	for b in friction diagnose robot toolpath machining ranking explain service circle; do $(BIN)/greybench bench $$b || exit 1; done
+
+# Mutation testing of the core numeric and safety modules (docs/mutation-testing.md): mutmut over
+# [tool.mutmut] in pyproject.toml, niced, one worker by default (MUTATION_JOBS=2 on an idle machine);
+# MUTANTS narrows it, e.g. make mutation MUTANTS='simulate.costs.*'. Results are kept in mutants/:
+# a rerun only tests what changed.
+MUTATION_JOBS ?= 1
+MUTANTS ?=
+mutation: $(STAMP)
+	nice -n 10 $(BIN)/mutmut run --max-children $(MUTATION_JOBS) $(MUTANTS)
+	$(BIN)/python scripts/mutation_report.py
 
 clean:
 	rm -rf $(VENV) demo-output mlruns.db mlflow.db mlartifacts greybench-service
