@@ -279,11 +279,11 @@ def run_ray(tasks: list[PoseTask], progress: Progress, address: str, lo: float =
 
 # ---- jobs -------------------------------------------------------------------------------
 def _write_atomic(path: Path, data: bytes | str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    with os.fdopen(fd, "wb") as f:
-        f.write(data.encode() if isinstance(data, str) else data)
-    os.replace(tmp, path)
+    """A result file, written whole or not at all, with the mode the umask gives a new file."""
+    from identify.files import atomic_file
+
+    with atomic_file(path) as tmp:
+        tmp.write_bytes(data.encode() if isinstance(data, str) else data)
 
 
 def _model_files(folder: Path) -> dict[str, bytes]:

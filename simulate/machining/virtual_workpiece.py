@@ -273,8 +273,8 @@ def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", m
     single-coloured regions merged (:func:`coloured_surface`). The GLB (written by trimesh) holds two
     nodes: ``part`` (linear vertex colours, as glTF defines them) and ``legend``, a rectangle beside
     the part textured with the legend image. Each file is written atomically. ``max_points`` is kept
-    for compatibility (the mesh size is set by ``stride``, see
-    :func:`simulate.machining.surface_mesh.choose_stride`). Returns the paths."""
+    for compatibility (the mesh size is set by ``stride``, by default the smallest whose lattice has at
+    most :data:`simulate.machining.surface_mesh.EXPORT_MAX_NODES` nodes). Returns the paths."""
     import io
 
     import trimesh
@@ -282,6 +282,10 @@ def export_meshes(vw: VirtualWorkpiece, out_dir, variable: str = "deflection", m
 
     from identify.files import atomic_file
 
+    from .surface_mesh import EXPORT_MAX_NODES, choose_stride
+
+    if stride is None:
+        stride = choose_stride(vw.workpiece.shape, EXPORT_MAX_NODES)
     sm, cols, _, (lo, hi) = coloured_surface(vw, variable, stride)
     png = legend_png(variable, lo, hi)
     v = sm.vertices

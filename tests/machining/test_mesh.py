@@ -157,3 +157,27 @@ def test_greedy_rectangles_cover_exactly_once():
         cover[i0:i1, j0:j1] += 1
     np.testing.assert_array_equal(cover, occ.astype(int))
     assert len(rects) < occ.sum() / 2
+
+
+def test_export_coarsens_a_large_part_to_its_node_budget(tmp_path, monkeypatch):
+    """A part whose lattice exceeds EXPORT_MAX_NODES is exported at the smallest stride within it:
+    the mesh shrinks by the square of the stride (a flat-topped box: its faces), the files get the
+    mode the umask gives a new file."""
+    import os
+
+    from simulate.machining import surface_mesh as smod
+
+    vw = _pocketed()
+    n = int(np.prod(vw.workpiece.shape))
+    full = export_meshes(vw, tmp_path / "full", "deflection", stride=1)
+    monkeypatch.setattr(smod, "EXPORT_MAX_NODES", n // 7)   # (nx/2+3)(ny/2+3)(nz/2+3) > n/8 for this part
+    old = os.umask(0o022)
+    try:
+        coarse = export_meshes(vw, tmp_path / "coarse", "deflection")
+    finally:
+        os.umask(old)
+    assert smod.choose_stride(vw.workpiece.shape, n // 7) == 3
+    f_full = len(trimesh.load(full[1], force="mesh").faces)
+    f_coarse = len(trimesh.load(coarse[1], force="mesh").faces)
+    assert f_coarse < f_full / 4
+    assert all(p.stat().st_mode & 0o777 == 0o644 for p in coarse)
