@@ -487,8 +487,8 @@ def circle_sections(ctx: Context) -> list[dict]:
         df = _read_csv(ctx, "out/circle.csv")
         step = max(1, -(-len(df) // POLAR_MAX_POINTS))
         keep = df.iloc[::step]
-        out.append({"type": "polar", "title": "Radial deviation over the angle [µm] (every sample drawn: "
-                                              f"1 in {step})",
+        thinned = "" if step == 1 else f" (1 in {step} samples of circle.csv drawn)"
+        out.append({"type": "polar", "title": f"Radial deviation over the angle [µm]{thinned}",
                     "series": [{"label": "radial deviation", "angle_deg": keep["angle_deg"].round(4).tolist(),
                                 "deviation_um": keep["radial_deviation_um"].round(4).tolist()}],
                     "marks": [{"angle_deg": _num(r.get("angle_deg")), "label": f"{r.get('joint')} "

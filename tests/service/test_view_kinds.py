@@ -8,6 +8,8 @@ files are written in the format of :mod:`simulate.placement.report`.
 from __future__ import annotations
 
 import json
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -229,7 +231,9 @@ def _open(browser, srv, prefix, job_id, shot=None):
     page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
     page.wait_for_function("[...document.images].every(i => i.complete && i.naturalWidth > 0)", timeout=30_000)
     if shot:
-        page.screenshot(path=str(shot), full_page=True)
+        # GREYBENCH_VIEW_SHOTS=<folder> keeps the screenshots to look at
+        folder = os.environ.get("GREYBENCH_VIEW_SHOTS")
+        page.screenshot(path=str(Path(folder) / shot.name if folder else shot), full_page=True)
     return page, problems
 
 
@@ -244,7 +248,7 @@ def test_circle_page_in_chromium(server, browser, tmp_path):
     spikes = [r.split("\t") for r in page.locator("table[data-id='spikes'] tbody tr").all_inner_texts()]
     assert spikes == [[f"{a:.1f}", f"A{j}", f"{h:.2f}"] for a, j, h in SPIKES]
     assert page.locator("section.polar svg polyline").count() == 1
-    assert page.locator("section.polar svg text.mark").all_inner_texts() == ["A1 +7.5 µm", "A2 -4.0 µm"]
+    assert page.locator("section.polar svg text.mark").all_text_contents() == ["A1 +7.5 µm", "A2 -4.0 µm"]
     assert page.evaluate("document.querySelector('section.image img').naturalWidth") > 300   # the job's plot
     assert page.locator("ul.files a").count() == 3
     assert not problems, problems

@@ -155,7 +155,8 @@ const RENDER = {
       return `<td class="text">${esc(v)}</td>`;
     };
     const body = section.rows.map((r, i) => `<tr${hl.has(i) ? ' class="highlight"' : ''}>${r.map(cell).join('')}</tr>`).join('');
-    const head = section.columns.map((c) => `<th>${esc(c)}</th>`).join('');
+    const textCol = section.columns.map((c, j) => section.rows.length > 0 && typeof section.rows[0][j] === 'string');
+    const head = section.columns.map((c, j) => `<th${textCol[j] ? ' class="text"' : ''}>${esc(c)}</th>`).join('');
     el.insertAdjacentHTML('beforeend', section.rows.length
       ? `<div class="scroll"><table data-id="${esc(section.id || '')}"><thead><tr>${head}</tr></thead><tbody>${body}</tbody></table></div>`
       : `<p class="empty">${esc(section.empty || 'none')}</p>`);
@@ -169,6 +170,7 @@ const RENDER = {
     if (!xs.length || !ys.length) { el.insertAdjacentHTML('beforeend', '<p class="empty">nothing to plot</p>'); return; }
     let [x0, x1] = [Math.min(...xs), Math.max(...xs)], [y0, y1] = [Math.min(...ys), Math.max(...ys)];
     if (x1 === x0) { x0 -= 1; x1 += 1; }
+    const xpad = (x1 - x0) * 0.03; x0 -= xpad; x1 += xpad;   // points at the ends stay inside the frame
     if (y1 === y0) { y0 -= Math.abs(y0) * 0.1 || 1; y1 += Math.abs(y1) * 0.1 || 1; }
     const pad = (y1 - y0) * 0.06; y0 -= pad; y1 += pad;
     const px = (x) => L + ((x - x0) / (x1 - x0)) * (W - L - R), py = (y) => T + (1 - (y - y0) / (y1 - y0)) * (H - T - B);
