@@ -491,9 +491,23 @@ def circle_sections(ctx: Context) -> list[dict]:
         out.append({"type": "polar", "title": f"Radial deviation over the angle [µm]{thinned}",
                     "series": [{"label": "radial deviation", "angle_deg": keep["angle_deg"].round(4).tolist(),
                                 "deviation_um": keep["radial_deviation_um"].round(4).tolist()}],
-                    "marks": [{"angle_deg": _num(r.get("angle_deg")), "label": f"{r.get('joint')} "
-                               f"{float(r.get('height_um') or 0):+.1f} µm"} for r in spikes]})
+                    "marks": _spike_marks(spikes)})
     out.append({"type": "files", "title": "Result files", "files": ctx.files()})
+    return out
+
+
+def _spike_marks(spikes: list[dict]) -> list[dict]:
+    """One polar mark per reversal angle: joints reversing at the same sample share it (as in the job's
+    polar plot), labelled with the joints and the largest |height| [µm] there."""
+    groups: dict = {}
+    for r in spikes:
+        a = _num(r.get("angle_deg"))
+        if a is not None:
+            groups.setdefault(round(a, 6), []).append(r)
+    out = []
+    for a, rs in groups.items():
+        h = max((_num(r.get("height_um")) or 0.0 for r in rs), key=abs)
+        out.append({"angle_deg": a, "label": f"{'+'.join(str(r.get('joint')) for r in rs)} {h:+.1f} µm"})
     return out
 
 

@@ -18,7 +18,7 @@ from tests.service.test_view import CHROMIUM, FLAGS, HEADERS, _browser
 
 #: The synthetic circle: 1 µm-per-degree free of spikes, two reversals with known heights.
 ROUNDNESS_UM, RADIUS_ERROR_UM = 12.5, -3.25
-SPIKES = [(90.0, 1, 7.5), (270.0, 2, -4.0)]
+SPIKES = [(90.0, 1, 7.5), (90.0, 6, 7.5), (270.0, 2, -4.0)]
 
 #: The synthetic placement search: best found placement against two given poses.
 GIVEN = [{"name": "near", "xyz": [1.5, 0.0, -0.1], "rpy": [0.0, 0.0, 0.0]},
@@ -109,7 +109,9 @@ def test_circle_page_shows_the_circle_numbers(client):
     assert max(s["deviation_um"]) - min(s["deviation_um"]) == pytest.approx(ROUNDNESS_UM, rel=1e-3)
     i = s["angle_deg"].index(45.0)
     assert s["deviation_um"][i] == pytest.approx(0.0, abs=1e-3)       # cos(90 deg)
-    assert [m["angle_deg"] for m in by_type["polar"]["marks"]] == [90.0, 270.0]
+    # joints reversing together share one mark
+    assert by_type["polar"]["marks"] == [{"angle_deg": 90.0, "label": "A1+A6 +7.5 µm"},
+                                         {"angle_deg": 270.0, "label": "A2 -4.0 µm"}]
     png = client.get(by_type["image"]["url"], headers=HEADERS)
     assert png.status_code == 200 and png.content[:4] == b"\x89PNG"
     assert {f["name"] for f in by_type["files"]["files"]} == {"out/circle.csv", "out/circle.png", "out/summary.json"}
@@ -248,7 +250,7 @@ def test_circle_page_in_chromium(server, browser, tmp_path):
     spikes = [r.split("\t") for r in page.locator("table[data-id='spikes'] tbody tr").all_inner_texts()]
     assert spikes == [[f"{a:.1f}", f"A{j}", f"{h:.2f}"] for a, j, h in SPIKES]
     assert page.locator("section.polar svg polyline").count() == 1
-    assert page.locator("section.polar svg text.mark").all_text_contents() == ["A1 +7.5 µm", "A2 -4.0 µm"]
+    assert page.locator("section.polar svg text.mark").all_text_contents() == ["A1+A6 +7.5 µm", "A2 -4.0 µm"]
     assert page.evaluate("document.querySelector('section.image img').naturalWidth") > 300   # the job's plot
     assert page.locator("ul.files a").count() == 3
     assert not problems, problems
