@@ -229,6 +229,8 @@ def _open(browser, srv, prefix, job_id, shot=None):
     page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
     page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
     page.on("requestfailed", lambda r: problems.append(f"request failed: {r.url}"))
+    # three.js is for a page with a 3D part only: these pages must not download it
+    page.on("request", lambda r: problems.append(f"fetched {r.url}") if "/vendor/three/" in r.url else None)
     page.goto(srv.url + link["url"])
     page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
     page.wait_for_function("[...document.images].every(i => i.complete && i.naturalWidth > 0)", timeout=30_000)

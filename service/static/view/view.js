@@ -2,8 +2,16 @@
 // Reads the job's sections from <prefix>/<id>/view/data and renders each by its type; a job kind plugs in
 // by returning sections of the types below. Access: a signed link (?token=...) or an API key that the
 // planner enters once (sessionStorage: this tab's session) and that is exchanged for a signed link.
-import * as THREE from 'three';
-import { OrbitControls } from '/view-static/vendor/three/OrbitControls.js';
+// three.js loads only for a page with a 3D part (loadThree): a circle or search page does without its 0.4 MB
+let THREE = null;
+let OrbitControls = null;
+
+async function loadThree() {
+  if (!THREE) {
+    THREE = await import('three');
+    ({ OrbitControls } = await import('/view-static/vendor/three/OrbitControls.js'));
+  }
+}
 
 const KEY_STORE = 'greybench-api-key';
 const params = new URLSearchParams(location.search);
@@ -111,10 +119,12 @@ const RENDER = {
 
   workpiece(section, el) {
     if (!section.poses.length) { el.insertAdjacentHTML('beforeend', `<p>${esc(section.note)}</p>`); return; }
-    const viewer = new WorkpieceView(section, el);
-    window.greybenchView.views.push(viewer);
-    window.greybenchView.workpiece = viewer;
-    viewer.start();
+    loadThree().then(() => {
+      const viewer = new WorkpieceView(section, el);
+      window.greybenchView.views.push(viewer);
+      window.greybenchView.workpiece = viewer;
+      viewer.start();
+    }).catch((e) => { el.insertAdjacentHTML('beforeend', `<p class="error">${esc(e.message)}</p>`); });
   },
 
   files(section, el) {
@@ -224,7 +234,7 @@ const RENDER = {
     }).join('');
     const rings = [-1, 0, 1].map((f) => `<circle cx="${c}" cy="${c}" r="${r0 + f * span * k}" fill="none" stroke="#bbb" stroke-dasharray="${f ? '3,3' : ''}"/>`).join('');
     const legend = section.series.map((s, i) => `<span style="color:${colours[i % colours.length]}">&#9632; ${esc(s.label)}</span>`).join(' ');
-    el.insertAdjacentHTML('beforeend', `<svg width="${size}" height="${size}" viewBox="0 0 ${size} ${size}" style="overflow:visible;margin:0 4em">${rings}${paths}${marks}</svg>
+    el.insertAdjacentHTML('beforeend', `<svg width="${size}" height="${size}" viewBox="0 0 ${size} ${size}" style="overflow:visible;margin:0 9em">${rings}${paths}${marks}</svg>
       <p class="legend-note">${legend}; rings: nominal and &plusmn;${fmt(span, 1)} µm radial deviation.</p>`);
   },
 };
