@@ -274,3 +274,65 @@ def test_placement_page_in_chromium(server, browser, tmp_path):
     assert page.locator("ul.files a").count() == 5
     assert not problems, problems
     page.close()
+
+
+def test_key_entered_once_opens_the_circle_page(server, browser):
+    from service.jobs import JobStore
+    from tests.service.conftest import KEY
+
+    job_id = _circle_job(JobStore(server.data_dir / "jobs.sqlite"), server.data_dir / "jobs")
+    page = browser.new_page()
+    page.goto(f"{server.url}/circles/{job_id}/view")
+    page.wait_for_selector("#login:not([hidden])")
+    assert page.locator("section.summary").count() == 0             # no data before a key
+    page.fill("#login-key", KEY)
+    page.click("#login-form button")
+    page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
+    assert "token=" in page.url and f"/circles/{job_id}/view" in page.url
+    assert page.locator("table[data-id='spikes'] tbody tr").count() == len(SPIKES)
+    page.close()
+
+
+# ---- real jobs (slow: a circle simulation and a short placement search) --------------------------------------
+@pytest.mark.slow
+def test_pages_of_real_jobs(server, browser):
+    """The pages read what real jobs write: the numbers shown are the jobs' results."""
+    import time
+
+    with server.client() as c:
+        circle = c.post("/circles", json={"pose_set": "iso160", "pose": "near", "options": {"radius_mm": 50},
+                                          "friction": [{"axis": a, "model": "robot"} for a in range(1, 7)]})
+        search = c.post("/placement-searches", json={"program": "iso160", "pose_set": "iso160", "options": {
+            "budget_s": 600, "spacing_mm": 1.0, "max_simulations": 4}})
+        assert circle.status_code == 202 and search.status_code == 202, (circle.text, search.text)
+        done = {}
+        deadline = time.time() + 1500
+        for prefix, r in (("/circles", circle), ("/placement-searches", search)):
+            job = r.json()["id"]
+            while (st := c.get(f"{prefix}/{job}").json())["state"] not in ("succeeded", "failed", "cancelled"):
+                assert time.time() < deadline, st
+                time.sleep(1)
+            assert st["state"] == "succeeded", st
+            done[prefix] = st
+    res = done["/circles"]["result"]
+    page, problems = _open(browser, server, "/circles", done["/circles"]["id"])
+    summary = dict(r.split("\t") for r in page.locator("section.summary tr").all_inner_texts())
+    assert float(summary["roundness (circular deviation G, ISO 230-4) [µm]"]) == pytest.approx(res["roundness_um"],
+                                                                                                abs=5e-4)
+    rows = [r.split("\t") for r in page.locator("table[data-id='spikes'] tbody tr").all_inner_texts()]
+    assert [(float(a), j, float(h)) for a, j, h in rows] == [
+        (pytest.approx(s["angle_deg"], abs=0.05), s["joint"], pytest.approx(s["height_um"], abs=0.005))
+        for s in res["reversal_spikes"]]
+    assert not problems, problems
+    page.close()
+    res = done["/placement-searches"]["result"]
+    page, problems = _open(browser, server, "/placement-searches", done["/placement-searches"]["id"])
+    rows = [r.split("\t") for r in page.locator("table[data-id='poses'] tbody tr").all_inner_texts()]
+    assert rows[0][0] == res["best"]["name"] and float(rows[0][8]) == pytest.approx(res["best"]["score"], abs=5e-5)
+    assert {r[0]: float(r[8]) for r in rows[1:]} == {g["name"]: pytest.approx(g["score"], abs=5e-5)
+                                                      for g in res["given"]}
+    best_given = next(r for r in rows[1:] if r[0] == res["best_given"])
+    assert float(best_given[10]) == pytest.approx(100 * res["improvement"], abs=5e-3)
+    assert page.locator("svg.plot circle.pt").count() == res["candidates"]["simulated"]
+    assert not problems, problems
+    page.close()
