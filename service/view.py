@@ -564,10 +564,10 @@ def placement_sections(ctx: Context) -> list[dict]:
                     "url": ctx.url("files/out/heatmap.png"), "note": s.get("heatmap", "")})
     if "out/history.csv" in digests:
         h = _read_csv(ctx, "out/history.csv")
-        sim = h[(h["status"] == "simulated") & np.isfinite(pd_num(h["score"]))] if len(h) else h
+        sim = h[(h["status"] == "simulated") & np.isfinite(_pd_num(h["score"]))] if len(h) else h
         if len(sim):
             idx = sim["index"].astype(float).to_numpy()
-            score = pd_num(sim["score"])
+            score = _pd_num(sim["score"])
             given = (sim["origin"] == "given").to_numpy()
             out.append({"type": "plot", "title": "Search history: score per simulated candidate",
                         "x_label": "candidate [-] (order drawn)", "y_label": "score [-]", "series": [
@@ -593,7 +593,8 @@ def placement_sections(ctx: Context) -> list[dict]:
     return out
 
 
-def pd_num(col) -> np.ndarray:
+def _pd_num(col) -> np.ndarray:
+    """A column as floats, NaN where it is not a number."""
     import pandas as pd
 
     return pd.to_numeric(col, errors="coerce").to_numpy(float)
