@@ -6,7 +6,10 @@ coloured virtual workpiece of a chosen pose in 3D (three.js, shipped in ``servic
 CDN, works offline) with the variable chosen from those the workpiece carries and a legend in units,
 the program lines, time stamps, reversing axes and error components at a clicked point, the program
 lines that cut a box-selected region, and download links for every result file. A compensation job's
-page (``GET /compensations/{id}/view``) shows the Table-2 deviations before and after.
+page (``GET /compensations/{id}/view``) shows the Table-2 deviations before and after; a circle job's
+(``GET /circles/{id}/view``) the roundness, radius error, reversal spikes and the polar plot; a placement
+search's (``GET /placement-searches/{id}/view``) the best pose against the given poses, the heat map and the
+search history.
 
 Access is the API's: the page and every data route need a valid ``X-API-Key``, or a short-lived
 signed link from ``POST /<jobs>/{id}/view-link`` (``?token=``: HMAC-SHA256 over the job id and the
@@ -24,9 +27,14 @@ page's *sections*, each a dict with ``type`` and ``title`` rendered by ``view.js
   ``stock_rgb``, ``click_radius_mm``, ``urls`` by pose (mesh, values, click, box);
 - ``before-after``: ``rows`` (name, tolerance_um, before_um, after_um);
 - ``polar``: ``series`` (label, angle_deg, deviation_um: radial deviation from the nominal circle),
-  e.g. a circle (ballbar) test;
-- ``image``: ``url``; ``summary``: ``items`` ([label with unit, value]); ``files``: ``files``
-  (name, bytes, url; :meth:`Context.files`).
+  optional ``marks`` (angle_deg, label), e.g. a circle (ballbar) test;
+- ``table``: ``columns`` (labels with units), ``rows`` (lists of cells), optional ``digits`` per column,
+  ``highlight`` (row indices), ``note``, ``empty`` (text when there are no rows), ``id`` (the table's
+  ``data-id``);
+- ``plot``: ``x_label``, ``y_label`` (with units), ``series`` (label, x, y, ``style`` points / line /
+  step, colour);
+- ``image``: ``url``, optional ``note``; ``summary``: ``items`` ([label with unit, value]); ``files``:
+  ``files`` (name, bytes, url; :meth:`Context.files`).
 
 The data routes are thin: the geometry and values come from :mod:`simulate.machining.surface_mesh`
 and :mod:`simulate.machining.virtual_workpiece`, a click from :func:`simulate.evaluation.trace.trace_point`.
@@ -423,11 +431,192 @@ def _um(mm):
     return None if mm is None else float(mm) * 1e3
 
 
+#: Most samples of a circle trace the page draws (the CSV has every one): every k-th sample kept, which at
+#: this count still resolves a reversal spike (a few degrees wide) to under 0.2 deg.
+POLAR_MAX_POINTS = 2000
+
+
+def _read_json(ctx: Context, name: str) -> dict:
+    return ctx.read(name, lambda p: json.loads(p.read_text()))
+
+
+def _read_csv(ctx: Context, name: str):
+    import pandas as pd
+
+    return ctx.read(name, lambda p: pd.read_csv(p))
+
+
+def _num(v):
+    """A finite float or None (JSON has no NaN)."""
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if np.isfinite(f) else None
+
+
+def circle_sections(ctx: Context) -> list[dict]:
+    """A circle (ballbar) job: roundness and radius error [µm], the reversal spikes, the polar plot (the
+    job's ``circle.png`` and the trace of ``circle.csv`` drawn by the page), downloads."""
+    s = _read_json(ctx, "out/summary.json")
+    c = s.get("center_offset_um") or [None, None]
+    spikes = s.get("reversal_spikes") or []
+    out = [{"type": "summary", "title": "Circle test", "items": [
+        ["roundness (circular deviation G, ISO 230-4) [µm]", _num(s.get("roundness_um"))],
+        ["radius error (least-squares radius - nominal) [µm]", _num(s.get("radius_error_um"))],
+        ["centre offset, in-plane axes [µm]", ", ".join("-" if _num(v) is None else f"{float(v):.2f}" for v in c)],
+        ["largest reversal spike [µm]", _num(s.get("largest_spike_um"))],
+        ["radius [mm]", _num(s.get("radius_mm"))], ["feed [mm/min]", _num(s.get("feed_mm_min"))],
+        ["plane, direction", f"{s.get('plane', '-')}, {'clockwise (G2)' if s.get('cw') else 'counter-clockwise (G3)'}"],
+        ["robot, pose", f"{s.get('robot', '-')}, {s.get('pose', '-')}"],
+        ["friction, backlash, friction feed-forward", ", ".join(
+            "-" if s.get(k) is None else ("on" if s.get(k) else "off") for k in ("friction", "backlash", "ff_friction"))],
+        ["friction scale [-]", _num(s.get("friction_scale"))]]},
+        {"type": "table", "title": "Reversal spikes", "id": "spikes",
+         "columns": ["angle [deg]", "joint", "height [µm]"],
+         "rows": [[_num(r.get("angle_deg")), r.get("joint"), _num(r.get("height_um"))] for r in spikes],
+         "digits": [1, None, 2],
+         "note": "where a joint's commanded velocity changes sign along the circle: the extreme of the radial "
+                 "deviation just after it, relative to its value at the reversal (outward positive)",
+         "empty": "no joint reverses on this circle"}]
+    digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
+    if "out/circle.png" in digests:
+        out.append({"type": "image", "title": "Polar plot (radial deviation, magnified)",
+                    "url": ctx.url("files/out/circle.png")})
+    if "out/circle.csv" in digests:
+        df = _read_csv(ctx, "out/circle.csv")
+        step = max(1, -(-len(df) // POLAR_MAX_POINTS))
+        keep = df.iloc[::step]
+        thinned = "" if step == 1 else f" (1 in {step} samples of circle.csv drawn)"
+        out.append({"type": "polar", "title": f"Radial deviation over the angle [µm]{thinned}",
+                    "series": [{"label": "radial deviation", "angle_deg": keep["angle_deg"].round(4).tolist(),
+                                "deviation_um": keep["radial_deviation_um"].round(4).tolist()}],
+                    "marks": _spike_marks(spikes)})
+    out.append({"type": "files", "title": "Result files", "files": ctx.files()})
+    return out
+
+
+def _spike_marks(spikes: list[dict]) -> list[dict]:
+    """One polar mark per reversal angle: joints reversing at the same sample share it (as in the job's
+    polar plot), labelled with the joints and the largest |height| [µm] there."""
+    groups: dict = {}
+    for r in spikes:
+        a = _num(r.get("angle_deg"))
+        if a is not None:
+            groups.setdefault(round(a, 6), []).append(r)
+    out = []
+    for a, rs in groups.items():
+        h = max((_num(r.get("height_um")) or 0.0 for r in rs), key=abs)
+        out.append({"angle_deg": a, "label": f"{'+'.join(str(r.get('joint')) for r in rs)} {h:+.1f} µm"})
+    return out
+
+
+#: Rows of the history table the page shows (``history.csv`` has every candidate).
+HISTORY_ROWS = 300
+
+
+def placement_sections(ctx: Context) -> list[dict]:
+    """A placement search: the best pose against the given poses (pose, scores, rows in tolerance, the
+    improvement), the heat map, the search history (score per simulated candidate, table), downloads."""
+    s = _read_json(ctx, "out/summary.json")
+    best_doc = _read_json(ctx, "out/best.json")
+    where = {p.get("name"): p for p in best_doc.get("poses", [])}
+    b = s.get("best") or {}
+    best_score = _num(b.get("score"))
+
+    def pose_row(name, origin, xyz_m, rpy_rad, score, in_tol):
+        xyz = [None if _num(v) is None else float(v) / MM for v in (xyz_m or [None] * 3)]
+        rpy = [None if _num(v) is None else float(np.degrees(float(v))) for v in (rpy_rad or [None] * 3)]
+        score = _num(score)
+        # how much lower the best score is than this pose's [%]: the search's improvement for the best given
+        gain = None if score in (None, 0) or best_score is None else 100.0 * (score - best_score) / score
+        return [name, origin, *xyz, *rpy, score, in_tol, gain]
+
+    rows = [pose_row(b.get("name"), f"best ({b.get('origin', '-')})", b.get("xyz_m"), b.get("rpy_rad"),
+                     b.get("score"), b.get("in_tolerance"))]
+    for g in s.get("given") or []:
+        p = where.get(g.get("name"), {})
+        rows.append(pose_row(g.get("name"), "given", p.get("xyz"), p.get("rpy"), g.get("score"),
+                             g.get("in_tolerance")))
+    counts = s.get("candidates") or {}
+    imp = _num(s.get("improvement"))
+    out = [{"type": "summary", "title": "Placement search", "items": [
+        ["best placement", f"{b.get('name', '-')} ({b.get('origin', '-')})"],
+        ["best score (sum of |deviation| / tolerance) [-]", best_score],
+        ["best given pose, its score [-]", f"{s.get('best_given', '-')}, "
+         + next((f"{float(g['score']):.4f}" for g in s.get("given") or [] if g.get("name") == s.get("best_given")
+                 and _num(g.get("score")) is not None), "-")],
+        ["improvement over the best given pose [%]", None if imp is None else 100.0 * imp],
+        ["score reduction [-]", _num(s.get("score_reduction"))],
+        ["candidates", ", ".join(f"{v} {k}" for k, v in counts.items() if v) or "-"],
+        ["stopped", s.get("stop_reason", "-")],
+        ["wall time / budget [s]", f"{_num(s.get('wall_time_s')) or 0:.0f} / {_num(s.get('budget_s')) or 0:.0f}"],
+        ["seed, backend", f"{s.get('seed', '-')}, {s.get('backend', '-')}"]]},
+        {"type": "table", "title": "Best pose against the given poses", "id": "poses",
+         "columns": ["pose", "origin", "x [mm]", "y [mm]", "z [mm]", "roll [deg]", "pitch [deg]", "yaw [deg]",
+                     "score [-]", "rows in tolerance", "best is lower by [%]"],
+         "rows": rows, "digits": [None, None, 1, 1, 1, 1, 1, 1, 4, None, 2], "highlight": [0],
+         "note": "workpiece origin in the robot base frame; score: sum of |deviation| / tolerance over the "
+                 "Table-2 rows, lower is better; last column: (pose's score - best score) / pose's score"}]
+    digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
+    if "out/heatmap.png" in digests:
+        out.append({"type": "image", "title": "Heat map: score over the workpiece position x-y",
+                    "url": ctx.url("files/out/heatmap.png"), "note": s.get("heatmap", "")})
+    if "out/history.csv" in digests:
+        h = _read_csv(ctx, "out/history.csv")
+        sim = h[(h["status"] == "simulated") & np.isfinite(_pd_num(h["score"]))] if len(h) else h
+        if len(sim):
+            idx = sim["index"].astype(float).to_numpy()
+            score = _pd_num(sim["score"])
+            given = (sim["origin"] == "given").to_numpy()
+            out.append({"type": "plot", "title": "Search history: score per simulated candidate",
+                        "x_label": "candidate [-] (order drawn)", "y_label": "score [-]", "series": [
+                            {"label": "given poses", "x": idx[given].tolist(), "y": score[given].tolist(),
+                             "style": "points", "colour": "#d62728"},
+                            {"label": "candidates", "x": idx[~given].tolist(), "y": score[~given].tolist(),
+                             "style": "points", "colour": "#1f77b4"},
+                            {"label": "best so far", "x": idx.tolist(),
+                             "y": np.minimum.accumulate(score).tolist(), "style": "step", "colour": "#2ca02c"}]})
+        shown = h[h["status"] != "skipped"] if len(h) else h
+        cols = [("index", "#", 0), ("name", "name", None), ("origin", "origin", None), ("status", "status", None),
+                ("x_mm", "x [mm]", 1), ("y_mm", "y [mm]", 1), ("z_mm", "z [mm]", 1), ("yaw_deg", "yaw [deg]", 1),
+                ("score", "score [-]", 4), ("in_tolerance", "rows in tolerance", 0),
+                ("switching_points", "switching points [-]", 0), ("compliance_um_per_n", "compliance [µm/N]", 3),
+                ("message", "note", None)]
+        cols = [c for c in cols if c[0] in h.columns]
+        out.append({"type": "table", "title": f"Search history ({len(shown)} of {len(h)} candidates; skipped ones "
+                                              "in history.csv)", "id": "history",
+                    "columns": [c[1] for c in cols], "digits": [c[2] for c in cols],
+                    "rows": [[_cell(v) for v in row] for row in
+                             shown[[c[0] for c in cols]].head(HISTORY_ROWS).itertuples(index=False)]})
+    out.append({"type": "files", "title": "Result files", "files": ctx.files()})
+    return out
+
+
+def _pd_num(col) -> np.ndarray:
+    """A column as floats, NaN where it is not a number."""
+    import pandas as pd
+
+    return pd.to_numeric(col, errors="coerce").to_numpy(float)
+
+
+def _cell(v):
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return _num(v)
+    return None if v is None else str(v)
+
+
 def _register_builtin() -> None:
     from service.states import JobKind
 
     register(JobKind.simulation, "/simulations", "pose ranking", simulation_sections)
     register(JobKind.compensation, "/compensations", "compensation", compensation_sections)
+    register(JobKind.circle, "/circles", "circle test", circle_sections)
+    register(JobKind.placement_search, "/placement-searches", "placement search", placement_sections)
 
 
 _register_builtin()

@@ -2,8 +2,16 @@
 // Reads the job's sections from <prefix>/<id>/view/data and renders each by its type; a job kind plugs in
 // by returning sections of the types below. Access: a signed link (?token=...) or an API key that the
 // planner enters once (sessionStorage: this tab's session) and that is exchanged for a signed link.
-import * as THREE from 'three';
-import { OrbitControls } from '/view-static/vendor/three/OrbitControls.js';
+// three.js loads only for a page with a 3D part (loadThree): a circle or search page does without its 0.4 MB
+let THREE = null;
+let OrbitControls = null;
+
+async function loadThree() {
+  if (!THREE) {
+    THREE = await import('three');
+    ({ OrbitControls } = await import('/view-static/vendor/three/OrbitControls.js'));
+  }
+}
 
 const KEY_STORE = 'greybench-api-key';
 const params = new URLSearchParams(location.search);
@@ -111,10 +119,12 @@ const RENDER = {
 
   workpiece(section, el) {
     if (!section.poses.length) { el.insertAdjacentHTML('beforeend', `<p>${esc(section.note)}</p>`); return; }
-    const viewer = new WorkpieceView(section, el);
-    window.greybenchView.views.push(viewer);
-    window.greybenchView.workpiece = viewer;
-    viewer.start();
+    loadThree().then(() => {
+      const viewer = new WorkpieceView(section, el);
+      window.greybenchView.views.push(viewer);
+      window.greybenchView.workpiece = viewer;
+      viewer.start();
+    }).catch((e) => { el.insertAdjacentHTML('beforeend', `<p class="error">${esc(e.message)}</p>`); });
   },
 
   files(section, el) {
@@ -140,7 +150,64 @@ const RENDER = {
   },
 
   image(section, el) {
-    el.insertAdjacentHTML('beforeend', `<img src="${esc(section.url)}" alt="${esc(section.title)}" style="max-width:100%">`);
+    el.insertAdjacentHTML('beforeend', `<img src="${esc(section.url)}" alt="${esc(section.title)}" style="max-width:100%">`
+      + (section.note ? `<p class="legend-note">${esc(section.note)}</p>` : ''));
+  },
+
+  // a table of numbers: columns with units, digits per column, highlighted rows
+  table(section, el) {
+    const digits = section.digits || [];
+    const hl = new Set(section.highlight || []);
+    const cell = (v, j) => {
+      if (v === null || v === undefined) return '<td>-</td>';
+      if (typeof v === 'number') return `<td>${digits[j] === null || digits[j] === undefined ? v : fmt(v, digits[j])}</td>`;
+      if (typeof v === 'boolean') return `<td>${v ? 'yes' : 'no'}</td>`;
+      return `<td class="text">${esc(v)}</td>`;
+    };
+    const body = section.rows.map((r, i) => `<tr${hl.has(i) ? ' class="highlight"' : ''}>${r.map(cell).join('')}</tr>`).join('');
+    const textCol = section.columns.map((c, j) => section.rows.length > 0 && typeof section.rows[0][j] === 'string');
+    const head = section.columns.map((c, j) => `<th${textCol[j] ? ' class="text"' : ''}>${esc(c)}</th>`).join('');
+    el.insertAdjacentHTML('beforeend', section.rows.length
+      ? `<div class="scroll"><table data-id="${esc(section.id || '')}"><thead><tr>${head}</tr></thead><tbody>${body}</tbody></table></div>`
+      : `<p class="empty">${esc(section.empty || 'none')}</p>`);
+    if (section.note) el.insertAdjacentHTML('beforeend', `<p class="legend-note">${esc(section.note)}</p>`);
+  },
+
+  // an x-y chart (SVG): points, lines or steps, axes with ticks and labels in units
+  plot(section, el) {
+    const W = 640, H = 320, L = 64, R = 16, T = 12, B = 44;
+    const xs = section.series.flatMap((s) => s.x), ys = section.series.flatMap((s) => s.y).filter((v) => v !== null);
+    if (!xs.length || !ys.length) { el.insertAdjacentHTML('beforeend', '<p class="empty">nothing to plot</p>'); return; }
+    let [x0, x1] = [Math.min(...xs), Math.max(...xs)], [y0, y1] = [Math.min(...ys), Math.max(...ys)];
+    if (x1 === x0) { x0 -= 1; x1 += 1; }
+    const xpad = (x1 - x0) * 0.03; x0 -= xpad; x1 += xpad;   // points at the ends stay inside the frame
+    if (y1 === y0) { y0 -= Math.abs(y0) * 0.1 || 1; y1 += Math.abs(y1) * 0.1 || 1; }
+    const pad = (y1 - y0) * 0.06; y0 -= pad; y1 += pad;
+    const px = (x) => L + ((x - x0) / (x1 - x0)) * (W - L - R), py = (y) => T + (1 - (y - y0) / (y1 - y0)) * (H - T - B);
+    const ticks = (a, b) => {
+      const step = Math.pow(10, Math.floor(Math.log10((b - a) / 4)));
+      const k = [1, 2, 5, 10].find((m) => (b - a) / (m * step) <= 6) * step;
+      const out = [];
+      for (let v = Math.ceil(a / k) * k; v <= b + 1e-12; v += k) out.push(v);
+      return out;
+    };
+    const dec = (a, b) => Math.max(0, -Math.floor(Math.log10((b - a) / 5)));
+    const grid = ticks(y0, y1).map((v) => `<line x1="${L}" x2="${W - R}" y1="${py(v)}" y2="${py(v)}" stroke="#eee"/>
+      <text x="${L - 4}" y="${py(v) + 4}" text-anchor="end">${v.toFixed(dec(y0, y1))}</text>`).join('')
+      + ticks(x0, x1).map((v) => `<text x="${px(v)}" y="${H - B + 16}" text-anchor="middle">${v.toFixed(dec(x0, x1))}</text>`).join('');
+    const marks = section.series.map((s) => {
+      const pts = s.x.map((x, i) => [x, s.y[i]]).filter((p) => p[1] !== null);
+      const c = s.colour || '#1f77b4';
+      if (s.style === 'points') return pts.map(([x, y]) => `<circle class="pt" cx="${px(x).toFixed(1)}" cy="${py(y).toFixed(1)}" r="3" fill="${c}"><title>${esc(s.label)}: ${x}, ${fmt(y, 4)}</title></circle>`).join('');
+      const path = pts.map(([x, y], i) => (s.style === 'step' && i ? `${px(x).toFixed(1)},${py(pts[i - 1][1]).toFixed(1)} ` : '') + `${px(x).toFixed(1)},${py(y).toFixed(1)}`).join(' ');
+      return `<polyline fill="none" stroke="${c}" stroke-width="1.5" points="${path}"><title>${esc(s.label)}</title></polyline>`;
+    }).join('');
+    const legend = section.series.map((s) => `<span style="color:${s.colour || '#1f77b4'}">&#9632; ${esc(s.label)}</span>`).join(' ');
+    el.insertAdjacentHTML('beforeend', `<svg class="plot" width="${W}" height="${H}" viewBox="0 0 ${W} ${H}" font-size="11">
+      <rect x="${L}" y="${T}" width="${W - L - R}" height="${H - T - B}" fill="none" stroke="#999"/>${grid}${marks}
+      <text x="${(L + W - R) / 2}" y="${H - 6}" text-anchor="middle">${esc(section.x_label)}</text>
+      <text transform="translate(14 ${(T + H - B) / 2}) rotate(-90)" text-anchor="middle">${esc(section.y_label)}</text></svg>
+      <p class="legend-note">${legend}</p>`);
   },
 
   // a circle (ballbar) test: radial deviation over the angle; deviation scaled about the nominal circle
@@ -158,9 +225,16 @@ const RENDER = {
       });
       return `<polyline fill="none" stroke="${colours[i % colours.length]}" stroke-width="1.2" points="${pts.join(' ')}"><title>${esc(s.label)}</title></polyline>`;
     }).join('');
+    // marks (e.g. joint reversals): a tick across the rings and a label outside
+    const marks = (section.marks || []).filter((m) => m.angle_deg !== null).map((m) => {
+      const t = (m.angle_deg * Math.PI) / 180, a = r0 - span * k - 6, b = r0 + span * k + 6, lr = b + 8;
+      const X = (r) => (c + r * Math.cos(t)).toFixed(1), Y = (r) => (c - r * Math.sin(t)).toFixed(1);
+      return `<line x1="${X(a)}" y1="${Y(a)}" x2="${X(b)}" y2="${Y(b)}" stroke="#555"/>` +
+        `<text class="mark" x="${(c + lr * Math.cos(t)).toFixed(1)}" y="${(c - lr * Math.sin(t) + 4).toFixed(1)}" font-size="10" text-anchor="${Math.cos(t) > 0.3 ? 'start' : Math.cos(t) < -0.3 ? 'end' : 'middle'}">${esc(m.label)}</text>`;
+    }).join('');
     const rings = [-1, 0, 1].map((f) => `<circle cx="${c}" cy="${c}" r="${r0 + f * span * k}" fill="none" stroke="#bbb" stroke-dasharray="${f ? '3,3' : ''}"/>`).join('');
     const legend = section.series.map((s, i) => `<span style="color:${colours[i % colours.length]}">&#9632; ${esc(s.label)}</span>`).join(' ');
-    el.insertAdjacentHTML('beforeend', `<svg width="${size}" height="${size}" viewBox="0 0 ${size} ${size}">${rings}${paths}</svg>
+    el.insertAdjacentHTML('beforeend', `<svg width="${size}" height="${size}" viewBox="0 0 ${size} ${size}" style="overflow:visible;margin:0 9em">${rings}${paths}${marks}</svg>
       <p class="legend-note">${legend}; rings: nominal and &plusmn;${fmt(span, 1)} µm radial deviation.</p>`);
   },
 };
