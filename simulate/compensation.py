@@ -62,6 +62,9 @@ GRID = 1e-4
 #: The contract of a correction (not another program).
 MAX_OFFSET = 1e-3          # m from the nominal path
 TIME_RATIO = (0.8, 1.25)   # compensated / nominal program time [-]
+#: Shares of the interpolator's junction jerk the correction's curvature may use, tried in turn until
+#: the written program keeps its time contract (:func:`limit_curvature`).
+CURVATURE_SHARES = (0.9, 0.45, 0.225, 0.1125)
 
 
 @dataclass(frozen=True)
@@ -767,7 +770,7 @@ def curvature_limit(path: NominalPath, run: int, sigma: np.ndarray, limits: Path
 
 
 def limit_curvature(path: NominalPath, corr: Correction, s: CompensationSettings,
-                    limits: PathLimits | None = None, max_passes: int = 400) -> Correction:
+                    limits: PathLimits | None = None, max_passes: int = 400, share: float = 0.9) -> Correction:
     """Smooth the correction locally until its curvature (second derivative along the path of the
     sideways and the upward component) stays below :func:`curvature_limit`.
 
@@ -788,7 +791,7 @@ def limit_curvature(path: NominalPath, corr: Correction, s: CompensationSettings
         if len(g) < 5:
             out.append(v)
             continue
-        kmax = curvature_limit(path, r, g, limits)
+        kmax = curvature_limit(path, r, g, limits, share)
         _, h, up = path.frame(r, g)
         comp = np.stack([np.sum(v * h, axis=1), np.sum(v * up, axis=1)], axis=1)
         dg = float(g[1] - g[0])
@@ -959,12 +962,18 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
         for k in range(1, s.iterations + 1):
             new = update_correction(real, dev, prev, s)
             prev = (real, dev)
-            corr = blend_corners(path, new, tool_radius) if tool_radius else new
-            corr = limit_curvature(path, corr, s)
-            wp = write_program(path, corr, s, header=f"{header} iteration {k}".strip())
-            f = Path(tmp) / f"iteration{k}.nc"
-            f.write_text(wp.text, encoding="utf-8")
-            setup = _load(f, path, spindle_rpm, require_spindle)
+            blended = blend_corners(path, new, tool_radius) if tool_radius else new
+            # the curvature limit is the interpolator's junction rule at the edge (pieces of one cycle's
+            # length); where the written program still runs longer than its contract, the limit is
+            # halved and the program written again (interpolation only, no simulation)
+            for share in CURVATURE_SHARES:
+                corr = limit_curvature(path, blended, s, share=share)
+                wp = write_program(path, corr, s, header=f"{header} iteration {k}".strip())
+                f = Path(tmp) / f"iteration{k}.nc"
+                f.write_text(wp.text, encoding="utf-8")
+                setup = _load(f, path, spindle_rpm, require_spindle)
+                if setup.interp.duration / t_nom <= TIME_RATIO[1]:
+                    break
             run = simulate(setup, 1.0)
             raw = deviation_field(path, wp, run, GRID)
             dev = deviation_field(path, wp, run, s.smoothing)

@@ -70,3 +70,39 @@ def test_a_correction_within_the_limit_is_left_alone(small):
     corr.values[r] = (40e-6 * np.sin(2 * np.pi * (g - g[0]) / 20e-3))[:, None] * h
     out = limit_curvature(path, corr, CompensationSettings())
     np.testing.assert_allclose(out.values[r], corr.values[r], rtol=0, atol=1e-15)   # frame round-off only
+
+
+def _rattling(amplitude, freq):
+    """Tip = command + D + a wave in time (a drive's own oscillation, not a function of the path)."""
+    from simulate.compensation import SimulationRun
+
+    def sim(setup, scale=1.0):
+        t = np.asarray(setup.interp.t)
+        wave = amplitude * np.sin(2 * np.pi * freq * t)
+        return SimulationRun(setup, setup.interp.xyz + D + wave[:, None] * np.array([0.6, 0.8, 0.0]))
+
+    return sim
+
+
+D = np.array([40e-6, -25e-6, 15e-6])
+
+
+@pytest.mark.parametrize("shares", [None, (1e6,)])
+def test_a_drive_oscillation_is_not_written_into_the_program(small, monkeypatch, shares):
+    """With the curvature limit the corrected program keeps its time contract and cancels the
+    constant deviation; without it (the limit lifted) the program copies the wave and is slower than
+    the contract allows."""
+    import simulate.compensation as comp
+    from simulate.compensation import compensate
+
+    if shares is not None:
+        monkeypatch.setattr(comp, "CURVATURE_SHARES", shares)
+    prog, _ = small
+    setup = load_program(prog)
+    res = compensate(setup, _rattling(60e-6, 5.0), CompensationSettings(iterations=1, secant=False))
+    ratio = res.iterations[1].time_ratio
+    if shares is None:
+        assert res.best == 1 and ratio <= 1.25
+        assert res.iterations[1].path_rms < 0.8 * res.iterations[0].path_rms
+    else:
+        assert ratio > 1.25 and res.best == 0
