@@ -64,7 +64,9 @@ MAX_OFFSET = 1e-3          # m from the nominal path
 TIME_RATIO = (0.8, 1.25)   # compensated / nominal program time [-]
 #: Shares of the interpolator's junction jerk the correction's curvature may use, tried in turn until
 #: the written program keeps its time contract (:func:`limit_curvature`).
-CURVATURE_SHARES = (0.9, 0.45, 0.225, 0.1125)
+#: Steps of 0.8: the largest share within the contract is kept (a halved share smoothed away much of the
+#: correction the contract allowed).
+CURVATURE_SHARES = tuple(0.9 * 0.8 ** i for i in range(10))
 
 
 @dataclass(frozen=True)
@@ -965,7 +967,7 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
             blended = blend_corners(path, new, tool_radius) if tool_radius else new
             # the curvature limit is the interpolator's junction rule at the edge (pieces of one cycle's
             # length); where the written program still runs longer than its contract, the limit is
-            # halved and the program written again (interpolation only, no simulation)
+            # lowered and the program written again (interpolation only, no simulation)
             for share in CURVATURE_SHARES:
                 corr = limit_curvature(path, blended, s, share=share)
                 wp = write_program(path, corr, s, header=f"{header} iteration {k}".strip())
