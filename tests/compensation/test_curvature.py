@@ -6,8 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simulate.compensation import (CompensationSettings, Correction, NominalPath, curvature_limit,
-                                   limit_curvature)
+from simulate.compensation import (
+    CompensationSettings,
+    Correction,
+    NominalPath,
+    curvature_limit,
+    limit_curvature,
+)
 from simulate.pipeline import load_program
 from simulate.toolpath.interpolation import PathLimits
 
@@ -65,7 +70,7 @@ def test_a_correction_within_the_limit_is_left_alone(small):
     path = NominalPath.of(load_program(prog))
     r, g, _ = _line_run(path)
     corr = Correction.zero(path)
-    _, h, v = path.frame(r, g)
+    _, h, _ = path.frame(r, g)
     # 40 um over a 20 mm wavelength: curvature 4 1/m, well below 45 1/m
     corr.values[r] = (40e-6 * np.sin(2 * np.pi * (g - g[0]) / 20e-3))[:, None] * h
     out = limit_curvature(path, corr, CompensationSettings())
