@@ -34,6 +34,9 @@ Choices where the method is vague (stated so they can be replaced):
   all other lines are copied unchanged, so the program stays the same program with the same feeds.
   Short pieces of nearly the same direction keep the feed through the interpolator's look-ahead
   (its junction speed limit depends on the direction change, :mod:`simulate.toolpath.interpolation`).
+- **Curvature limit.** The correction's curvature stays within what the interpolator passes at the
+  original speed (:func:`limit_curvature`): a drive's own oscillation (gear rattle in the play,
+  stick-slip) is not a function of the path and is not copied into the program.
 - **Corners.** On an arc whose radius is at most the tool radius (the tool turning round a convex
   corner of the part) the correction is blended between its neighbours' (:func:`blend_corners`).
 - **Stopping.** Iterate at most ``iterations`` times; stop at the first iteration that does not
