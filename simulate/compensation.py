@@ -34,6 +34,9 @@ Choices where the method is vague (stated so they can be replaced):
   all other lines are copied unchanged, so the program stays the same program with the same feeds.
   Short pieces of nearly the same direction keep the feed through the interpolator's look-ahead
   (its junction speed limit depends on the direction change, :mod:`simulate.toolpath.interpolation`).
+- **Curvature limit.** The correction's curvature stays within what the interpolator passes at the
+  original speed (:func:`limit_curvature`): a drive's own oscillation (gear rattle in the play,
+  stick-slip) is not a function of the path and is not copied into the program.
 - **Corners.** On an arc whose radius is at most the tool radius (the tool turning round a convex
   corner of the part) the correction is blended between its neighbours' (:func:`blend_corners`).
 - **Stopping.** Iterate at most ``iterations`` times; stop at the first iteration that does not
@@ -62,6 +65,11 @@ GRID = 1e-4
 #: The contract of a correction (not another program).
 MAX_OFFSET = 1e-3          # m from the nominal path
 TIME_RATIO = (0.8, 1.25)   # compensated / nominal program time [-]
+#: Shares of the interpolator's junction jerk the correction's curvature may use, tried in turn until
+#: the written program keeps its time contract (:func:`limit_curvature`).
+#: Steps of 0.8: the largest share within the contract is kept (a halved share smoothed away much of the
+#: correction the contract allowed).
+CURVATURE_SHARES = tuple(0.9 * 0.8 ** i for i in range(10))
 
 
 @dataclass(frozen=True)
@@ -748,6 +756,62 @@ def blend_corners(path: NominalPath, corr: Correction, tool_radius: float) -> Co
     return Correction(corr.grids, out)
 
 
+def curvature_limit(path: NominalPath, run: int, sigma: np.ndarray, limits: PathLimits | None = None,
+                    share: float = 0.9) -> np.ndarray:
+    """Largest curvature [1/m] a correction may add at arc lengths ``sigma`` [m] of a feed run without
+    slowing the program down.
+
+    The interpolator sees a path written as pieces through junctions: a direction change ``dt`` at a
+    junction costs the jerk ``v dt / T^2`` (:mod:`simulate.toolpath.interpolation`, limit ``beta J``).
+    A corrected path of curvature ``k`` turns by ``k v T`` per cycle at speed ``v``, so the original
+    speed is kept only while ``v^2 k / T <= beta J``, i.e. ``k <= share beta J T / v^2`` at the
+    original program's local speed ``v`` (``share`` 0.9, the margin of :func:`_junction_limit`).
+    """
+    lim = limits or PathLimits()
+    it = path.setup.interp
+    v = np.interp(sigma, np.asarray(it.s, float), np.asarray(it.v, float))
+    v = np.clip(v, 1e-4, None)
+    return share * lim.junction_jerk_share * lim.jerk * lim.cycle / v ** 2
+
+
+def limit_curvature(path: NominalPath, corr: Correction, s: CompensationSettings,
+                    limits: PathLimits | None = None, max_passes: int = 400, share: float = 0.9) -> Correction:
+    """Smooth the correction locally until its curvature (second derivative along the path of the
+    sideways and the upward component) stays below :func:`curvature_limit`.
+
+    Why: a deviation the drives make on their own, e.g. a gear rattling in its play (a limit cycle
+    whose phase the state, not the path, sets) or friction stick-slip, appears as a fast wave along
+    the path. A mirror correction cannot cancel it (it is not a function of the commanded path), and
+    writing it into the program makes the interpolator slow down at every junction (the program
+    then takes longer than its contract allows). Only the part of the correction the program can
+    carry at its own speed is kept; the mean (b/2 of a loaded gear, the deflection) stays.
+
+    Each pass replaces the correction, where the limit is exceeded (widened by ``s.smoothing``), by
+    its box average over ``s.smoothing``, blended in with a smooth weight so that no kink is made at
+    the edge of the smoothed zone.
+    """
+    out = []
+    for r, g in enumerate(corr.grids):
+        v = corr.values[r]
+        if len(g) < 5:
+            out.append(v)
+            continue
+        kmax = curvature_limit(path, r, g, limits, share)
+        _, h, up = path.frame(r, g)
+        comp = np.stack([np.sum(v * h, axis=1), np.sum(v * up, axis=1)], axis=1)
+        dg = float(g[1] - g[0])
+        for _ in range(max_passes):
+            k = np.linalg.norm(np.gradient(np.gradient(comp, dg, axis=0), dg, axis=0), axis=1)   # curvature vector
+            bad = k > kmax
+            bad[:2] = bad[-2:] = False   # one-sided differences at the run's ends
+            if not bad.any():
+                break
+            w = np.clip(_box(_box(bad.astype(float), 2 * s.smoothing) * 1e3, s.smoothing), 0.0, 1.0)
+            comp = comp + w[:, None] * (_box(comp, s.smoothing) - comp)
+        out.append(comp[:, :1] * h + comp[:, 1:] * up)
+    return Correction(corr.grids, out)
+
+
 # ----------------------------------------------------------------------------- the iteration
 
 
@@ -903,11 +967,18 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
         for k in range(1, s.iterations + 1):
             new = update_correction(real, dev, prev, s)
             prev = (real, dev)
-            corr = blend_corners(path, new, tool_radius) if tool_radius else new
-            wp = write_program(path, corr, s, header=f"{header} iteration {k}".strip())
-            f = Path(tmp) / f"iteration{k}.nc"
-            f.write_text(wp.text, encoding="utf-8")
-            setup = _load(f, path, spindle_rpm, require_spindle)
+            blended = blend_corners(path, new, tool_radius) if tool_radius else new
+            # the curvature limit is the interpolator's junction rule at the edge (pieces of one cycle's
+            # length); where the written program still runs longer than its contract, the limit is
+            # lowered and the program written again (interpolation only, no simulation)
+            for share in CURVATURE_SHARES:
+                corr = limit_curvature(path, blended, s, share=share)
+                wp = write_program(path, corr, s, header=f"{header} iteration {k}".strip())
+                f = Path(tmp) / f"iteration{k}.nc"
+                f.write_text(wp.text, encoding="utf-8")
+                setup = _load(f, path, spindle_rpm, require_spindle)
+                if setup.interp.duration / t_nom <= TIME_RATIO[1]:
+                    break
             run = simulate(setup, 1.0)
             raw = deviation_field(path, wp, run, GRID)
             dev = deviation_field(path, wp, run, s.smoothing)

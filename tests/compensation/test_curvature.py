@@ -1,0 +1,113 @@
+"""The curvature limit of the correction: what the interpolator passes at the original speed, and the
+local smoothing that keeps a correction within it (a drive's own fast oscillation is not written
+into the program, the mean offset is)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from simulate.compensation import (
+    CompensationSettings,
+    Correction,
+    NominalPath,
+    curvature_limit,
+    limit_curvature,
+)
+from simulate.pipeline import load_program
+from simulate.toolpath.interpolation import PathLimits
+
+
+def _line_run(path):
+    """The run and the grid mask of the first line's cruising middle (F1200, away from its ends)."""
+    r = 0
+    g = Correction.zero(path).grids[r]
+    i = next(k for k, s in enumerate(path.segments) if path.run[k] == r)
+    a, b = path.sigma0[i], path.sigma0[i] + path.segments[i].length
+    return r, g, (g > a + 8e-3) & (g < b - 8e-3)
+
+
+def _curvature(path, corr, r):
+    g = corr.grids[r]
+    _, h, v = path.frame(r, g)
+    comp = np.stack([np.sum(corr.values[r] * h, axis=1), np.sum(corr.values[r] * v, axis=1)], axis=1)
+    d = float(g[1] - g[0])
+    return np.linalg.norm(np.gradient(np.gradient(comp, d, axis=0), d, axis=0), axis=1)
+
+
+def test_limit_is_the_junction_jerk_rule_at_the_programmed_speed(small):
+    prog, _ = small
+    path = NominalPath.of(load_program(prog))
+    r, g, mid = _line_run(path)
+    lim = PathLimits()
+    v = 1200e-3 / 60                          # F1200 [m/s], cruising
+    expected = 0.9 * lim.junction_jerk_share * lim.jerk * lim.cycle / v ** 2   # 45 1/m
+    np.testing.assert_allclose(curvature_limit(path, r, g[mid]), expected, rtol=1e-6)
+    # slower near the run's start: more curvature allowed there
+    assert curvature_limit(path, r, g[:1])[0] > 2 * expected
+
+
+def test_fast_wave_is_smoothed_to_the_limit_and_the_mean_offset_kept(small):
+    prog, _ = small
+    path = NominalPath.of(load_program(prog))
+    r, g, mid = _line_run(path)
+    corr = Correction.zero(path)
+    _, h, v = path.frame(r, g)
+    # a 2.4 mm wave of 100 um sideways (a gear rattling at 14 Hz passed at 33 mm/s: curvature 685 1/m)
+    # on a 50 um offset, and 30 um upwards
+    side = 50e-6 + 100e-6 * np.sin(2 * np.pi * (g - g[0]) / 2.4e-3)
+    corr.values[r] = side[:, None] * h + 30e-6 * v
+    out = limit_curvature(path, corr, CompensationSettings())
+    k = _curvature(path, out, r)
+    kmax = curvature_limit(path, r, g)
+    assert np.all(k[2:-2] <= kmax[2:-2] * 1.001)
+    got_side = np.sum(out.values[r] * h, axis=1)
+    assert np.abs(got_side[mid] - 50e-6).max() < 5e-6      # the wave is gone, the offset stays
+    np.testing.assert_allclose(np.sum(out.values[r] * v, axis=1)[mid], 30e-6, atol=1e-9)
+
+
+def test_a_correction_within_the_limit_is_left_alone(small):
+    prog, _ = small
+    path = NominalPath.of(load_program(prog))
+    r, g, _ = _line_run(path)
+    corr = Correction.zero(path)
+    _, h, _ = path.frame(r, g)
+    # 40 um over a 20 mm wavelength: curvature 4 1/m, well below 45 1/m
+    corr.values[r] = (40e-6 * np.sin(2 * np.pi * (g - g[0]) / 20e-3))[:, None] * h
+    out = limit_curvature(path, corr, CompensationSettings())
+    np.testing.assert_allclose(out.values[r], corr.values[r], rtol=0, atol=1e-15)   # frame round-off only
+
+
+def _rattling(amplitude, freq):
+    """Tip = command + D + a wave in time (a drive's own oscillation, not a function of the path)."""
+    from simulate.compensation import SimulationRun
+
+    def sim(setup, scale=1.0):
+        t = np.asarray(setup.interp.t)
+        wave = amplitude * np.sin(2 * np.pi * freq * t)
+        return SimulationRun(setup, setup.interp.xyz + D + wave[:, None] * np.array([0.6, 0.8, 0.0]))
+
+    return sim
+
+
+D = np.array([40e-6, -25e-6, 15e-6])
+
+
+@pytest.mark.parametrize("shares", [None, (1e6,)])
+def test_a_drive_oscillation_is_not_written_into_the_program(small, monkeypatch, shares):
+    """With the curvature limit the corrected program keeps its time contract and cancels the
+    constant deviation; without it (the limit lifted) the program copies the wave and is slower than
+    the contract allows."""
+    import simulate.compensation as comp
+    from simulate.compensation import compensate
+
+    if shares is not None:
+        monkeypatch.setattr(comp, "CURVATURE_SHARES", shares)
+    prog, _ = small
+    setup = load_program(prog)
+    res = compensate(setup, _rattling(60e-6, 5.0), CompensationSettings(iterations=1, secant=False))
+    ratio = res.iterations[1].time_ratio
+    if shares is None:
+        assert res.best == 1 and ratio <= 1.25
+        assert res.iterations[1].path_rms < 0.8 * res.iterations[0].path_rms
+    else:
+        assert ratio > 1.25 and res.best == 0
