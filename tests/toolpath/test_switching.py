@@ -120,6 +120,14 @@ def test_dead_band_edges():
     # a reversal between two consecutive samples outside the band
     ev = switching_events(np.array([[2 * thr], [-2 * thr], [2 * thr]]), thr)
     assert _steps(ev.reversal) == [1, 2] and _steps(ev.stop) == []
+    # step 0 at the threshold is rest: no direction yet, so moving off either way is no reversal
+    ev = switching_events(np.array([[thr], [-2 * thr], [-thr], [2 * thr]]), thr)
+    assert _steps(ev.reversal) == [3] and _steps(ev.stop) == [2]
+    ev = switching_events(np.array([[-thr], [2 * thr]]), thr)
+    assert _steps(ev.reversal) == [] and _steps(ev.stop) == []
+    # a zero-width dead band: only exact zeros are rest
+    ev = switching_events(np.array([[1.0], [0.0], [1e-300], [0.0], [-1e-300]]), 0.0)
+    assert _steps(ev.stop) == [1, 3] and _steps(ev.reversal) == [4]
 
 
 def test_axes_are_independent_bits():
