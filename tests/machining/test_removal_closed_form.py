@@ -148,3 +148,6 @@ def test_program_stepover_keeps_the_slope_cusp_below_one_micrometre():
     assert 0.85e-3 < s < 0.9e-3
     assert flat_cusp_height(R, alpha, 1.01 * s) > 1e-6
     assert flat_stepover(R, 0.0, 1e-6) == 2 * R and flat_cusp_height(R, alpha, 2.1 * R) == math.inf
+    # up to the diameter the passes still overlap: at s = 2R the cusp is the whole tan(a) R
+    assert flat_cusp_height(R, alpha, 2 * R) == pytest.approx(math.tan(alpha) * R, rel=1e-12)
+    assert flat_cusp_height(R, alpha, 1.5 * R) == pytest.approx(math.tan(alpha) * R * (1 - math.sqrt(1 - 0.5625)))
