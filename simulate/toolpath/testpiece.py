@@ -40,7 +40,7 @@ above the plane (exact on the centre lines): across the feed the flat end mill a
 radius ``R / tan(alpha)`` (95 mm for R = 5 mm at 3 deg), and the cusp between passes a step-over ``s``
 apart is ``h = tan(alpha) (R - sqrt(R^2 - s^2/4)) ~= s^2 / (8 R_eff)``, the scallop height of a
 ball-end mill of that radius (plane geometry; ``docs/ideal-part.md``). The step-over is the largest
-that keeps ``h`` at or below :attr:`Technology.cusp` (1 um: below the resolution of the Table-2 rows),
+that keeps ``h`` at or below :attr:`Technology.cusp` (1 µm: below the resolution of the Table-2 rows),
 0.87 mm for the default tool. Both long edges of the face are free (the strip's inner wall
 drops to the floor), so the face is split into equal bands no wider than that step-over with one
 pass on each band's centre line: no point of the face is farther than half a step-over from a pass.
@@ -201,7 +201,7 @@ class Technology:
         Spindle speed, rev/min (default 12000).
     tool_number : int
     cusp : float
-        Largest cusp height the slope finishing passes may leave, m (default 1 um; module docstring).
+        Largest cusp height the slope finishing passes may leave, m (default 1 µm; module docstring).
     """
 
     tool_diameter: float = 0.010
@@ -400,7 +400,7 @@ def _validate_tech(piece: TestPiece, tech: Technology) -> None:
     if not (tech.spindle >= 0 and math.isfinite(tech.spindle)):
         raise InputError("spindle speed must be >= 0 rev/min", field="spindle")
     if not (1e-8 <= tech.cusp <= 1e-3):
-        raise InputError("slope cusp height must be within 0.01..1000 um", field="cusp")
+        raise InputError("slope cusp height must be within 0.01..1000 µm", field="cusp")
 
 
 def _offset_convex(verts_ccw: np.ndarray, a: float) -> np.ndarray:
