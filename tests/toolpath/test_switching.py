@@ -191,3 +191,43 @@ def test_bad_input():
         switching_points(np.array([[0.0], [np.nan]]))
     with pytest.raises(ValueError, match="62 axes"):
         switching_points(np.zeros((3, 63)))
+
+
+def test_joint_trajectory_marks_reversals_across_the_stop_of_a_cartesian_turn():
+    """A line out and back (the interpolator stops at the 180 deg turn): every joint whose
+    displacement changes direction at the turn gets one reversal bit, where it moves off again
+    after coming to rest, and one stop bit before it; joints that keep their direction get none."""
+    from pathlib import Path
+
+    from simulate.robot.model import load_robot
+    from simulate.toolpath.gcode import parse_program
+    from simulate.toolpath.interpolation import interpolate
+    from simulate.toolpath.placement import joint_trajectory, load_poses
+
+    data = Path(__file__).resolve().parents[2] / "data"
+    robot = load_robot(data / "robots" / "max100.toml")
+    prog = parse_program("G21 G90\nG0 X-20 Y10 Z5\nG1 X20 Y10 Z5 F3000\nG1 X-20 Y10 Z5\nM30\n", source="turn.nc")
+    ip = interpolate(prog)
+    jt = joint_trajectory(robot, ip, load_poses(data / "poses" / "iso160.json")[0])
+    ev = switching_events(jt.qd)
+    np.testing.assert_array_equal(jt.switch, ev.stop | ev.reversal)
+    turn = int(np.argmax(ip.xyz[:, 0]))          # the tool stands still at x = 20 mm
+    for i in range(6):
+        before = jt.q[turn, i] - jt.q[0, i]
+        after = jt.q[-1, i] - jt.q[turn, i]
+        rev = _steps(ev.reversal, i + 1)
+        if abs(before) < 1e-6 or abs(after) < 1e-6:
+            continue
+        if np.sign(before) != np.sign(after):
+            (k,) = rev
+            moving = np.abs(jt.qd[:, i]) > DEFAULT_THRESHOLD
+            prev = int(np.flatnonzero(moving[:k])[-1])   # last motion before the reversal
+            assert np.sign(jt.qd[prev, i]) == np.sign(before) and np.sign(jt.qd[k, i]) == np.sign(after)
+            assert abs(k - turn) < 10
+            # the samples between rest in the dead band: a stop where they start, if there are any
+            assert not moving[prev + 1:k].any()
+            assert [s for s in _steps(ev.stop, i + 1) if prev < s <= k] == ([prev + 1] if k > prev + 1 else [])
+        else:
+            assert rev == []
+    # the turn is slow enough that some joint passes through the dead band: a reversal across rest
+    assert any(_steps(ev.stop, i + 1) and _steps(ev.reversal, i + 1) for i in range(6))
