@@ -82,6 +82,25 @@ def _slope_window(size: int, spacing: float) -> tuple[float, float]:
     return (lo[0] + 2 * lo[1] + lo[2]) / 4, (hi[0] + 2 * hi[1] + hi[2]) / 4
 
 
+def test_min_zone_plane_through_three_probed_lines_stands_at_their_weighted_mean():
+    """The closed form behind the slope bound: three lines along x at 1/4, 1/2, 3/4 of the face width,
+    each at a constant height c_i above the 3 deg face; the minimum-zone plane stands
+    (c_1 + 2 c_2 + c_3) / 4 above it on the middle line (seeded random heights up to the cusp)."""
+    from simulate.evaluation.fits import fit_plane_mz
+
+    piece = iso_test_piece(320)
+    y0, y1 = piece.slope_y
+    x = np.linspace(*piece.slope_x, 50)
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        c = rng.uniform(0.0, CUSP, 3)
+        ys = [y0 + f * (y1 - y0) for f in (0.25, 0.5, 0.75)]
+        pts = np.concatenate([np.column_stack([x, np.full_like(x, y), piece.slope_height(x) + ci])
+                              for y, ci in zip(ys, c)])
+        dz = fit_plane_mz(pts).z_at(piece.slope_x[0], ys[1]) - float(piece.slope_height(piece.slope_x[0]))
+        assert dz == pytest.approx((c[0] + 2 * c[1] + c[2]) / 4, abs=1e-12)
+
+
 def test_ideal_robot_machines_iso160_to_the_drawing_coarse():
     """iso160, 2 mm and 1 mm dexels (a few seconds each): every row within 5 um at both, the slope
     height within [0, cusp] = [0, 4 um] (a 0.7 D slope step-over gives 9.6 um at 2 mm), every other
