@@ -40,20 +40,21 @@ above the plane (exact on the centre lines): across the feed the flat end mill a
 radius ``R / tan(alpha)`` (95 mm for R = 5 mm at 3 deg), and the cusp between passes a step-over ``s``
 apart is ``h = tan(alpha) (R - sqrt(R^2 - s^2/4)) ~= s^2 / (8 R_eff)``, the scallop height of a
 ball-end mill of that radius (plane geometry; ``docs/ideal-part.md``). The step-over is the largest
-that keeps ``h`` at or below :attr:`Technology.cusp`, 1.74 mm for the default tool and 4 µm. Both long edges of the face are free (the strip's inner wall
-drops to the floor), so the face is split into equal bands no wider than that step-over with one
-pass on each band's centre line: no point of the face is farther than half a step-over from a pass.
+that keeps ``h`` at or below :attr:`Technology.cusp`, 1.74 mm for the default tool and 4 µm. Both long
+edges of the face are free (the strip's inner wall drops to the floor), so the face is split into equal
+bands no wider than that step-over with one pass on each band's centre line: no point of the face is
+farther than half a step-over from a pass.
 
 Cusp target (4 µm) against its cost. The acceptance is an ideal robot within 5 µm of the drawing on
 every Table-2 row; the row the cusp reaches is the slope height zMZ (tolerance 20 µm). The virtual CMM
 probes the face on three lines along x at 1/4, 1/2 and 3/4 of its width, each at a constant height
 ``c_i`` in ``[0, h]`` above the plane (the cusp profile does not vary along the feed); the minimum-zone
 plane through three parallel lines is the Chebyshev line through their heights, whose value on the
-middle line is ``(c_1 + 2 c_2 + c_3) / 4``, so the ideal robot's slope height error lies in
-``[0, h]`` (measured about 0.55 h). The largest cusp with that bound clearly inside 5 µm is 4 µm
-(1 µm margin, a fifth of the 20 µm tolerance): 15 slope passes on iso320 instead of 29 at 1 µm, 8
-instead of 15 on iso160 (120,975 and 46,456 steps of 2 ms instead of 192,080 and 65,481; the former 0.7 D
-step-over, which left up to 35 µm, had 64,448 and 30,287). Each pass costs a full length of the
+middle line is ``(c_1 + 2 c_2 + c_3) / 4``, so the ideal robot's slope height error lies in ``[0, h]``
+(measured 0.6-1.5 µm at 4 µm, spacings 0.25-2 mm). The largest cusp with that bound clearly inside 5 µm
+is 4 µm (1 µm margin, a fifth of the 20 µm tolerance): 15 slope passes on iso320 instead of 29 at 1 µm,
+8 instead of 15 on iso160 (120,975 and 46,456 steps of 2 ms instead of 192,080 and 65,481; the former
+0.7 D step-over, which left up to 35 µm, had 64,448 and 30,287). Each pass costs a full length of the
 face, so a finer cusp buys nothing the acceptance can see at the price of every simulation.
 """
 from __future__ import annotations

@@ -15,8 +15,8 @@ from greybench.support import DATA_DIR, resolve_robot
 from simulate import defaults
 from simulate.evaluation.features import TABLE2
 from simulate.pipeline import Components, MachiningJob, MachiningSettings, load_program, run_job
-from simulate.toolpath.placement import load_poses
 from simulate.toolpath.gcode import Arc, read_program
+from simulate.toolpath.placement import load_poses
 from simulate.toolpath.testpiece import Technology, iso_test_piece
 
 IDEAL = Components(deflection=False, friction=False, switching=False, servo=False)
