@@ -99,3 +99,42 @@ def test_shipped_programs_match_the_generator(size):
     assert (data / f"iso{size}.nc").read_text() == finishing_program(iso_test_piece(size))
     stock = json.loads((data / f"iso{size}.stock.json").read_text())
     assert stock == json.loads(json.dumps(stock_description(iso_test_piece(size), program=f"iso{size}.nc")))
+
+
+@pytest.mark.parametrize("size", [160, 320])
+def test_slope_passes_leave_cusps_below_the_target(size):
+    """Every point of the slope face lies within half a step-over of a pass centre line, so the cusp
+    (flat end mill on the 3 deg face: tan(a) (R - sqrt(R^2 - dy^2)) at dy from a pass) is <= the
+    default target of 4 um; the shipped programs take 15 (iso320) and 8 (iso160) passes."""
+    from simulate.toolpath.testpiece import flat_cusp_height, flat_stepover
+
+    piece = iso_test_piece(size)
+    tech = Technology()
+    r = tech.tool_diameter / 2
+    segs = parse_program(finishing_program(piece, tech)).segments
+    ys = sorted({round(s.start[1], 9) for s in segs if not isinstance(s, Arc) and not s.rapid
+                 and abs(s.end[0] - s.start[0]) > 0.3 * piece.block and abs(s.end[2] - s.start[2]) > 1e-4})
+    y0, y1 = piece.slope_y
+    face = np.linspace(y0, y1, 2001)
+    dy = np.min(np.abs(face[:, None] - np.asarray(ys)[None, :]), axis=1)
+    worst = math.tan(piece.slope_angle) * (r - np.sqrt(r * r - dy ** 2))
+    assert worst.max() <= tech.cusp * (1 + 1e-9)
+    step = flat_stepover(r, piece.slope_angle, tech.cusp)
+    assert dy.max() <= step / 2 + 1e-12
+    # the fewest passes that do it: one fewer could not cover the face within half a step-over each
+    assert len(ys) == math.ceil((y1 - y0) / step)
+    assert tech.cusp == 4e-6 and len(ys) == {160: 8, 320: 15}[size]
+    assert flat_cusp_height(r, piece.slope_angle, 2 * dy.max()) <= tech.cusp * (1 + 1e-9)
+    # a coarser target needs fewer passes
+    coarse = Technology(cusp=20e-6)
+    segs = parse_program(finishing_program(piece, coarse)).segments
+    n = len({round(s.start[1], 9) for s in segs if not isinstance(s, Arc) and not s.rapid
+             and abs(s.end[0] - s.start[0]) > 0.3 * piece.block and abs(s.end[2] - s.start[2]) > 1e-4})
+    assert n == math.ceil((y1 - y0) / flat_stepover(r, piece.slope_angle, 20e-6)) < len(ys)
+
+
+@pytest.mark.parametrize("cusp", [0.0, 2e-3, float("nan")])
+def test_bad_cusp_target(cusp):
+    with pytest.raises(InputError) as ei:
+        finishing_program(iso_test_piece(160), Technology(cusp=cusp))
+    assert ei.value.field == "cusp"
