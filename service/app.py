@@ -202,6 +202,19 @@ def _succeeded(rec: JobRecord) -> None:
         raise Conflict(f"job {rec.id} is {rec.state.value}, no result{reason}")
 
 
+def _out_file(request: Request, job_id: str, kind: JobKind, name: str, files: dict[str, str]) -> FileResponse:
+    """A file of a succeeded job's ``out`` folder, one of ``files`` (name -> media type); 404 naming the
+    known files otherwise, 409 while the job has no result."""
+    rec = _job(request, job_id, kind)
+    _succeeded(rec)
+    if name not in files:
+        raise NotFound(f"no file '{name}' (known: {', '.join(files)})")
+    path = inside(request.app.state.manager.job_dir(job_id) / "out", name)
+    if not path.is_file():
+        raise NotFound(f"no file '{name}' in job {job_id}")
+    return FileResponse(path, media_type=files[name], filename=name)
+
+
 def _result(request: Request, rec: JobRecord, name: str, read):
     """``read(path)`` of a result file of a succeeded job; a missing, altered or unreadable file
     marks the job failed and answers 409 naming the job and the file."""

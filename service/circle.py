@@ -121,7 +121,7 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
     """Register the circle routes on the service app; ``svc`` is :mod:`service.app`,
     whose request helpers the routes share (passed in, so this module does not import it back)."""
     from service.states import JobKind
-    from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, inside
+    from service.paths import JOB_ID_PATTERN, NAME_PATTERN
 
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
     not_found = {404: {"model": ErrorBody}}
@@ -147,14 +147,7 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
              responses={**not_found, 409: {"model": ErrorBody}})
     def circle_file(request: Request, job_id: str = job_id_param,
                     name: str = PathParam(pattern=NAME_PATTERN, description="file name (see the list)")):
-        rec = svc._job(request, job_id, JobKind.circle)
-        svc._succeeded(rec)
-        if name not in FILES:
-            raise NotFound(f"no file '{name}' (known: {', '.join(FILES)})")
-        path = inside(request.app.state.manager.job_dir(job_id) / "out", name)
-        if not path.is_file():
-            raise NotFound(f"no file '{name}' in job {job_id}")
-        return FileResponse(path, media_type=FILES[name], filename=name)
+        return svc._out_file(request, job_id, JobKind.circle, name, FILES)
 
 
 def run(request: dict, job_dir: Path, progress) -> dict:
