@@ -25,10 +25,10 @@ from typing import Annotated, Literal
 
 from fastapi import FastAPI, Path as PathParam, Request
 from fastapi.responses import FileResponse, JSONResponse
-from pydantic import Field, model_validator
+from pydantic import Field
 
 from identify.errors import InputError
-from service.schemas import AxisFriction, ErrorBody, Finite, JobStatus, Name, PoseIn, Strict
+from service.schemas import ErrorBody, Finite, JobStatus, SinglePoseJob, Strict
 
 #: Files a finished job serves, with their media types.
 FILES = {"circle.csv": "text/csv", "circle.png": "image/png", "summary.json": "application/json"}
@@ -52,23 +52,8 @@ class CircleOptions(Strict):
     ff_friction: bool = Field(False, description="the NC's friction feed-forward on")
 
 
-class CircleRequest(Strict):
-    robot: Name = Field("max100", description="robot name in data/robots")
-    pose_set: Name | None = Field(None, description="named pose file in data/poses (with 'pose' a name)")
-    pose: Name | PoseIn = Field(description="pose name in pose_set, or an inline pose")
-    friction: list[AxisFriction] = Field(default_factory=list, max_length=6,
-                                         description="friction model per axis; axes not listed use 'champion' "
-                                                     "when registered, else the robot file's friction")
+class CircleRequest(SinglePoseJob):
     options: CircleOptions = Field(default_factory=CircleOptions)
-
-    @model_validator(mode="after")
-    def _checks(self) -> "CircleRequest":
-        if isinstance(self.pose, str) and self.pose_set is None:
-            raise ValueError("a pose given by name needs 'pose_set'")
-        axes = [f.axis for f in self.friction]
-        if len(set(axes)) != len(axes):
-            raise ValueError("each axis at most once in 'friction'")
-        return self
 
 
 def _spec(options: dict):

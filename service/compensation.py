@@ -28,7 +28,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field, model_validator
 
 from identify.errors import InputError
-from service.schemas import AxisFriction, ErrorBody, JobStatus, Name, PoseIn, Strict
+from service.schemas import ErrorBody, JobStatus, Name, SinglePoseJob, Strict
 from simulate.defaults import RANKING_DEXEL_SPACING
 
 #: Files a finished job serves, with their media types.
@@ -47,28 +47,17 @@ class CompensationOptions(Strict):
                                       description="further stiffness multipliers [-] to evaluate both programs with")
 
 
-class CompensationRequest(Strict):
+class CompensationRequest(SinglePoseJob):
     program: Name | None = Field(None, description="named program in data/programs (e.g. iso160); or give gcode")
     gcode: str | None = Field(None, max_length=2_000_000, description="G-code text (mm, as in the program)")
     stock: Name | None = Field(None, description="stock description data/programs/<stock>.stock.json; default: the "
                                                  "named program's")
-    robot: Name = Field("max100", description="robot name in data/robots")
-    pose_set: Name | None = Field(None, description="named pose file in data/poses (with 'pose' a name)")
-    pose: Name | PoseIn = Field(description="pose name in pose_set, or an inline pose")
-    friction: list[AxisFriction] = Field(default_factory=list, max_length=6,
-                                         description="friction model per axis; axes not listed use 'champion' "
-                                                     "when registered, else the robot file's friction")
     options: CompensationOptions = Field(default_factory=CompensationOptions)
 
     @model_validator(mode="after")
     def _one_of_each(self) -> "CompensationRequest":
         if (self.program is None) == (self.gcode is None):
             raise ValueError("give exactly one of 'program' (a name) and 'gcode' (text)")
-        if isinstance(self.pose, str) and self.pose_set is None:
-            raise ValueError("a pose given by name needs 'pose_set'")
-        axes = [f.axis for f in self.friction]
-        if len(set(axes)) != len(axes):
-            raise ValueError("each axis at most once in 'friction'")
         if any(not (0 < s <= 100) for s in self.options.check_scales):
             raise ValueError("check_scales must be in (0, 100]")
         return self

@@ -154,6 +154,26 @@ class SimulationRequest(Strict):
         return self
 
 
+class SinglePoseJob(Strict):
+    """The fields of a job at one pose (circle, compensation): robot, pose, friction model per axis."""
+
+    robot: Name = Field("max100", description="robot name in data/robots")
+    pose_set: Name | None = Field(None, description="named pose file in data/poses (with 'pose' a name)")
+    pose: Name | PoseIn = Field(description="pose name in pose_set, or an inline pose")
+    friction: list[AxisFriction] = Field(default_factory=list, max_length=6,
+                                         description="friction model per axis; axes not listed use 'champion' "
+                                                     "when registered, else the robot file's friction")
+
+    @model_validator(mode="after")
+    def _pose_and_axes(self) -> "SinglePoseJob":
+        if isinstance(self.pose, str) and self.pose_set is None:
+            raise ValueError("a pose given by name needs 'pose_set'")
+        axes = [f.axis for f in self.friction]
+        if len(set(axes)) != len(axes):
+            raise ValueError("each axis at most once in 'friction'")
+        return self
+
+
 class JobStatus(Strict):
     model_config = ConfigDict(extra="forbid", populate_by_name=True, allow_inf_nan=False)
 

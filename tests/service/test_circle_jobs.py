@@ -31,6 +31,9 @@ def test_bad_circle_input_is_4xx_naming_the_field(client):
     assert r.status_code == 422
     r = client.post("/circles", headers=HEADERS, json={"pose": "pose1"})
     assert r.status_code == 422   # a pose name needs a pose set
+    twice = [{"axis": 1, "model": "robot"}, {"axis": 1, "model": "robot"}]
+    r = client.post("/circles", headers=HEADERS, json={**base, "friction": twice})
+    assert r.status_code == 422 and "at most once" in r.text
     r = client.post("/circles", headers=HEADERS, json={**base, "robot": "nope"})
     assert r.status_code == 404
     assert client.post("/circles", headers={}, json=base).status_code == 401
