@@ -131,9 +131,9 @@ def read_measured_table(path: str | Path, pose: str | None) -> MeasuredTable:
         if "deviation_mm" in f:
             key, scale = "deviation_mm", 1e-3
         else:
-            key, scale = "deviation", legacy_scale
-            if scale is None:
+            if legacy_scale is None:
                 raise InputError(f"unit must be 'mm' or 'm', got {unit!r}", source=src, field="unit")
+            key, scale = "deviation", legacy_scale
         dv = f.get(key)
         if isinstance(dv, dict):
             if pose is None:

@@ -16,7 +16,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-
 from simulate.explain.calibration import Calibration, calibrate
 from simulate.explain.causes import Cause, Choice, Sensitivities, all_causes, choose, sensitivities
 from simulate.explain.comparison import PointComparison, compare_points, rms

@@ -60,8 +60,9 @@ class Signatures:
         return out
 
 
-def circle_harmonics(phi: np.ndarray, r: np.ndarray, orders: int = 15) -> np.ndarray:
-    """Least-squares Fourier amplitudes (orders 0..orders) of r(phi); order 0 is the mean."""
+def circle_harmonics(phi: np.ndarray, r: np.ndarray, orders: int = 15) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares Fourier amplitudes (orders 0..orders) of r(phi), order 0 the mean (units of ``r``),
+    and the fitted coefficients ``(c0, a1, b1, a2, b2, ...)`` of ``c0 + sum a_k cos k phi + b_k sin k phi``."""
     cols = [np.ones_like(phi)]
     for k in range(1, orders + 1):
         cols += [np.cos(k * phi), np.sin(k * phi)]

@@ -265,7 +265,7 @@ def joint_trajectory(robot, interp: Interpolation, placement: Placement, *, q_ho
     if check_speed:
         ratio = np.abs(qd) / np.asarray(robot.vmax)[None, :]
         if (ratio > 1.0).any():
-            k, i = np.unravel_index(int(np.argmax(ratio > 1.0)), ratio.shape)
+            k, i = (int(v) for v in np.unravel_index(int(np.argmax(ratio > 1.0)), ratio.shape))
             raise InputError(f"pose '{placement.name}': joint A{i + 1} speed {abs(qd[k, i]):.3f} rad/s exceeds "
                              f"its limit {robot.vmax[i]:.3f} rad/s at t={interp.t[k]:.3f} s "
                              f"(a configuration change or a path too fast for this placement)",
