@@ -79,10 +79,6 @@ class Scan:
     def __contains__(self, name: str) -> bool:
         return name in self.points
 
-    @property
-    def n_points(self) -> int:
-        return int(sum(len(v) for v in self.points.values()))
-
 
 def _line(p0, p1, spacing, margin):
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)

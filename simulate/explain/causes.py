@@ -65,10 +65,6 @@ class Cause:
     def name(self) -> str:
         return f"{self.kind}:{self.axis}" if self.axis else self.kind
 
-    @property
-    def n_params(self) -> int:
-        return 3 if self.kind == "thermal" else 1
-
     @classmethod
     def parse(cls, text: str) -> Cause:
         kind, _, ax = text.partition(":")

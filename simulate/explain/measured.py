@@ -33,15 +33,6 @@ class MeasuredScan:
     lines: dict[str, np.ndarray]
     source: str
 
-    @property
-    def n_points(self) -> int:
-        return int(sum(len(v) for v in self.points.values()))
-
-    def as_scan(self):
-        from simulate.evaluation.cmm import Scan
-
-        return Scan(points=dict(self.points), source=self.source)
-
 
 @dataclass
 class MeasuredTable:

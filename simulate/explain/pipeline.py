@@ -93,7 +93,7 @@ class Explanation:
                 "n_points": int(len(self.before.residual)), "unit": "m"}
 
 
-def _feature_rows(cmp: PointComparison, piece, residual_after=None) -> dict | None:
+def _feature_rows(cmp: PointComparison, piece) -> dict | None:
     """Table-2 rows of the measured points and of the simulated surface at the same positions."""
     from identify.errors import InputError
     from simulate.evaluation.cmm import Scan

@@ -37,13 +37,6 @@ class Signatures:
     reversal_step: dict[int, float] = field(default_factory=dict)
     reversal_spike: dict[int, float] = field(default_factory=dict)
 
-    def as_dict(self) -> dict:
-        return {"size_m": self.size, "ovality_m": self.ovality, "ovality_direction_deg": self.ovality_direction,
-                "lobing_m": self.lobing, "lobing_order": self.lobing_order, "trend_m_per_s": self.trend,
-                "trend_change_m": self.trend_change, "height_offset_m": self.height_offset,
-                "reversal_step_m": {str(k): v for k, v in self.reversal_step.items()},
-                "reversal_spike_m": {str(k): v for k, v in self.reversal_spike.items()}}
-
     def rows(self) -> list[tuple[str, str]]:
         """(name, value text in um / deg) for tables."""
         um = 1e6

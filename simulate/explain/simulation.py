@@ -175,14 +175,6 @@ def stock_workpiece(setup: PartSetup) -> TriDexel:
     return pipeline_stock(setup.program_setup, settings_of(setup))
 
 
-def cutter_of(robot: Robot):
-    """The robot file's tool as a machining cutter (module docstring;
-    :func:`simulate.evaluation.cutter.robot_cutter`)."""
-    from simulate.evaluation.cutter import robot_cutter
-
-    return robot_cutter(robot)
-
-
 def servo_error(robot: Robot, setup: PartSetup, force: np.ndarray | None = None) -> np.ndarray:
     """Drive tracking error ``p(q_link) - p(q_cmd)`` (N, 3), workpiece frame, m, of the drives alone on the
     commanded path (friction and play on): for sensitivities of the drive's parameters
