@@ -64,6 +64,14 @@ def _gain_driver(ranking: Ranking, best: str, other: str, row: str) -> str:
     return f"; mostly {c}: {cb[c][row] / MM:+.4f} vs {co[c][row] / MM:+.4f} mm"
 
 
+# the names simulate.evaluation.circle draws with (new code: simulate.figures)
+_plt = pyplot
+
+
+def _save(fig, path: Path) -> str:
+    return save_png(fig, path, dpi=100)
+
+
 def _rank_colours(values: list[float]) -> list[tuple]:
     """Green (best, smallest |value|) to red (worst) per row, like the paper's Table 2."""
     import matplotlib
