@@ -166,7 +166,7 @@ def dexel_bytes(lower, upper, spacing: float) -> tuple[tuple[int, int, int], flo
     n = np.maximum(1, np.ceil((np.asarray(upper) - np.asarray(lower)) / spacing - 1e-9))
     nx, ny, nz = (float(v) for v in n)
     rays = (ny * nz, nx * nz, nx * ny)
-    size = sum(r * (c * BYTES_PER_INTERVAL + 4) for r, c in zip(rays, DEXEL_CAPACITY))
+    size = sum(r * (c * BYTES_PER_INTERVAL + 4) for r, c in zip(rays, DEXEL_CAPACITY, strict=True))
     return (int(nx), int(ny), int(nz)), float(size)
 
 

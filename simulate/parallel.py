@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import multiprocessing
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from identify.errors import InputError
 
@@ -59,7 +60,7 @@ class Backend:
     def close(self, abandon: bool = False) -> None:
         pass
 
-    def __enter__(self) -> "Backend":
+    def __enter__(self) -> Backend:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:

@@ -20,11 +20,23 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from identify.errors import InputError, read_json
 from simulate import defaults
+
+if TYPE_CHECKING:  # the stages' types only: their modules load numba kernels, imported when a job runs
+    from simulate.evaluation.cmm import Scan
+    from simulate.evaluation.features import FeatureTable
+    from simulate.machining.dexel import TriDexel
+    from simulate.machining.simulation import MachiningResult, StepTable
+    from simulate.machining.tools import Cutter
+    from simulate.robot.model import Robot
+    from simulate.toolpath.gcode import Program
+    from simulate.toolpath.interpolation import Interpolation
+    from simulate.toolpath.placement import JointTrajectory, Placement
 
 
 @dataclass(frozen=True)
@@ -147,9 +159,9 @@ class ProgramSetup:
 
     program: Path
     source: str
-    parsed: object
-    interp: object
-    stock: Path
+    parsed: Program
+    interp: Interpolation
+    stock: Path | None
     stock_doc: dict
     spindle_rpm: float
 
@@ -207,13 +219,13 @@ class MachiningJob:
         thermal drift candidate).
     """
 
-    program: object
-    robot: object
-    placement: object
-    friction: dict = field(default_factory=dict)
+    program: ProgramSetup | str | Path
+    robot: Robot | str | Path
+    placement: Placement
+    friction: dict[int, str] = field(default_factory=dict)
     components: Components = field(default_factory=Components)
     settings: MachiningSettings = field(default_factory=MachiningSettings)
-    stock: object = None
+    stock: str | Path | None = None
     offset: np.ndarray | None = None
 
 
@@ -247,19 +259,19 @@ class MachiningOutcome:
     """
 
     program: ProgramSetup
-    robot: object
-    trajectory: object
-    workpiece: object
-    result: object
-    cutter: object
+    robot: Robot
+    trajectory: JointTrajectory
+    workpiece: TriDexel
+    result: MachiningResult
+    cutter: Cutter
     tracking_error: np.ndarray
-    scan: object = None
-    table: object = None
-    friction: list = field(default_factory=list)
-    timings: dict = field(default_factory=dict)
+    scan: Scan | None = None
+    table: FeatureTable | None = None
+    friction: list[dict] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
 
     @property
-    def steps(self):
+    def steps(self) -> StepTable:
         return self.result.steps
 
 
@@ -288,7 +300,7 @@ def piece_size(program: ProgramSetup, size: int | None) -> int | None:
     return None if named is None else int(named)
 
 
-def stock_workpiece(program: ProgramSetup, settings: MachiningSettings):
+def stock_workpiece(program: ProgramSetup, settings: MachiningSettings) -> TriDexel:
     """The stock as a tri-dexel model at ``settings.spacing``, trimmed ``settings.stock_floor`` under
     the lowest programmed cutting height when that is set."""
     from simulate.machining.dexel import DEFAULT_CAPACITY, TriDexel, raise_floor, read_stock_solids
@@ -305,7 +317,7 @@ def stock_workpiece(program: ProgramSetup, settings: MachiningSettings):
     return TriDexel.from_solids(raise_floor(read_stock_solids(program.stock), floor), settings.spacing, capacity=cap)
 
 
-def _robot(robot):
+def _robot(robot: Robot | str | Path) -> Robot:
     from simulate.robot.model import Robot, load_robot
 
     return robot if isinstance(robot, Robot) else load_robot(robot)
@@ -327,10 +339,10 @@ class PreparedJob:
     """
 
     program: ProgramSetup
-    robot: object
-    trajectory: object
+    robot: Robot
+    trajectory: JointTrajectory
     size: int | None
-    timings: dict = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
 
     @property
     def steps(self) -> int:
@@ -338,7 +350,7 @@ class PreparedJob:
         return len(self.trajectory.t)
 
 
-def prepare(job: MachiningJob, *, trajectory=None) -> PreparedJob:
+def prepare(job: MachiningJob, *, trajectory: JointTrajectory | None = None) -> PreparedJob:
     """Read and interpolate the program (unless shared), load the robot, solve the inverse kinematics
     (unless ``trajectory`` is given: same kinematics, program and placement)."""
     from simulate.toolpath.placement import joint_trajectory
@@ -426,7 +438,7 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
             raise InputError(f"not the {size} mm test piece for the virtual CMM: {exc.message}",
                              source=str(prog.stock), field="size") from None
         if s.features:
-            from simulate.evaluation.features import evaluate_scan   # scipy.optimize: only when evaluated
+            from simulate.evaluation.features import evaluate_scan  # scipy.optimize: only when evaluated
 
             table = evaluate_scan(scan, piece)
         timings["cmm + features"] = time.perf_counter() - c0

@@ -21,15 +21,12 @@ from __future__ import annotations
 
 import csv
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from identify.errors import InputError
-from identify.files import as_created
 from simulate.toolpath.testpiece import TestPiece
 
 #: Probe groups :func:`simulate.evaluation.features.evaluate_scan` needs.
@@ -81,10 +78,6 @@ class Scan:
 
     def __contains__(self, name: str) -> bool:
         return name in self.points
-
-    @property
-    def n_points(self) -> int:
-        return int(sum(len(v) for v in self.points.values()))
 
 
 def _line(p0, p1, spacing, margin):
@@ -150,8 +143,7 @@ def probe_plan(piece: TestPiece, spacing: float = 0.002, tool_diameter: float = 
         add(name, np.column_stack([xy, np.full(len(xy), zs)]), [nrm[0], nrm[1], 0.0])
     # top: the corners of the square outside the band the circle's floor pass cut
     g = np.arange(-h + 0.002, h - 0.002 + 1e-12, spacing)
-    gx, gy = np.meshgrid(g + sx, g + sy, indexing="ij")
-    gx, gy = gx.ravel(), gy.ravel()
+    gx, gy = (a.ravel() for a in np.meshgrid(g + sx, g + sy, indexing="ij"))
     keep = np.hypot(gx - cx, gy - cy) > R + 2 * r_tool + 0.002
     add("square_top", np.column_stack([gx[keep], gy[keep], np.full(keep.sum(), piece.square_z[1])]), z_up)
     off = h + min(r_tool / 2, 0.0025)
@@ -219,7 +211,7 @@ def probe(workpiece, piece: TestPiece, spacing: float = 0.002, search: float = 0
             raise InputError(f"feature '{g.name}' lies outside the dexel grid", field="workpiece")
         pts, seen = [], set()
         miss = 0
-        for p, n_vec, ax, ijk, ok in zip(g.points, g.normals, axes, idx, inside):
+        for p, n_vec, ax, ijk, ok in zip(g.points, g.normals, axes, idx, inside, strict=True):
             if not ok:
                 miss += 1
                 continue
@@ -252,24 +244,17 @@ def probe(workpiece, piece: TestPiece, spacing: float = 0.002, search: float = 0
 
 
 def write_scan(scan: Scan, path: str | Path) -> Path:
-    """Write ``scan.csv`` (module docstring) atomically (temp file + rename)."""
+    """Write ``scan.csv`` (module docstring) atomically, coordinates exact
+    (:func:`simulate.robot.tables.write_table`)."""
+    import pandas as pd
+
+    from simulate.robot.tables import write_table
+
     path = Path(path)
     if not path.parent.exists():
         raise InputError("output folder does not exist", source=str(path.parent))
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as f:
-            w = csv.writer(f)
-            w.writerow(SCAN_COLUMNS)
-            for name, pts in scan.points.items():
-                for x, y, z in pts:
-                    w.writerow([name, repr(float(x)), repr(float(y)), repr(float(z))])
-        as_created(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    rows = [(name, *map(float, p)) for name, pts in scan.points.items() for p in pts]
+    return write_table(pd.DataFrame(rows, columns=list(SCAN_COLUMNS)), path)
 
 
 def read_scan(path: str | Path) -> Scan:

@@ -42,8 +42,7 @@ import numpy as np
 
 from identify.errors import InputError
 from simulate.evaluation.cmm import FEATURE_NAMES, Scan
-from simulate.evaluation.fits import (angle_between, fit_circle_ls, fit_circle_mz, fit_line_ls, fit_line_mz,
-                                      fit_plane_mz)
+from simulate.evaluation.fits import angle_between, fit_circle_ls, fit_circle_mz, fit_line_ls, fit_line_mz, fit_plane_mz
 from simulate.toolpath.testpiece import TestPiece
 
 MM = 1e-3

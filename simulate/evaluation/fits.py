@@ -311,14 +311,14 @@ def fit_line_mz(pts) -> LineFit:
     for k in range(h):
         a, b = hull[k], hull[(k + 1) % h]
         e = b - a
-        L = math.hypot(e[0], e[1])
-        if L <= 1e-15 * scale:
+        length = math.hypot(e[0], e[1])
+        if length <= 1e-15 * scale:
             continue
-        nrm = np.array([-e[1], e[0]]) / L
+        nrm = np.array([-e[1], e[0]]) / length
         s = (hull - a) @ nrm
         w = s.max() - s.min()
         if w < best[0]:
-            best = (w, e / L, nrm * 0.5 * (s.max() + s.min()) + a)
+            best = (w, e / length, nrm * 0.5 * (s.max() + s.min()) + a)
     w, dloc, ploc = best
     d = _orient(R.T @ dloc)
     return LineFit(point=R.T @ ploc + m, direction=d, straightness=float(w), method=FitMethod.MINIMUM_ZONE)

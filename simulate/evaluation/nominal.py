@@ -54,8 +54,8 @@ def finished_solids(piece: TestPiece) -> list[Prism]:
     return [
         Prism("base", box(-h, h, -h, h), (0, 0), 0.0, piece.base_bottom, 0.0),
         Prism("square", box(cx - s, cx + s, cy - s, cy + s), (0, 0), 0.0, piece.square_z[0], piece.square_z[1]),
-        Prism("circle", None, tuple(piece.circle_center), piece.circle_diameter / 2, piece.circle_z[0],
-              piece.circle_z[1]),
+        Prism("circle", None, (piece.circle_center[0], piece.circle_center[1]), piece.circle_diameter / 2,
+              piece.circle_z[0], piece.circle_z[1]),
         Prism("angle", np.asarray(piece.angle_corners, float), (0, 0), 0.0, piece.angle_z[0], piece.angle_z[1]),
         Prism("slope", box(x0, x1, y0, y1), (0, 0), 0.0, 0.0, piece.slope_z0 - m * x0, m),
     ]
@@ -65,13 +65,12 @@ def _polygon_chord(verts: np.ndarray, a_axis: int, c: np.ndarray):
     """Interval along axis ``a_axis`` (0: x, 1: y) of lines at other-coordinate ``c`` inside a convex polygon."""
     lo = np.full(len(c), -np.inf)
     hi = np.full(len(c), np.inf)
-    e_axis = 1 - a_axis
     n = len(verts)
     for k in range(n):
         p, q = verts[k], verts[(k + 1) % n]
         # inside of a CCW polygon: cross(q - p, X - p) >= 0, linear in the ray coordinate a
         d = q - p
-        # X = (a, c) in (a_axis, e_axis) order
+        # X = (a, c) in (a_axis, other axis) order
         # cross = d_x*(X_y - p_y) - d_y*(X_x - p_x)
         if a_axis == 0:  # X = (a, c): cross = d0*(c - p1) - d1*(a - p0)
             coef, const = -d[1], d[0] * (c - p[1]) + d[1] * p[0]

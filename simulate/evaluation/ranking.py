@@ -26,15 +26,15 @@ the dexel grid: no tool reaches it and it would only multiply the horizontal ray
 from __future__ import annotations
 
 import json
-import math
-import os
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from identify.errors import InputError
+from identify.files import write_text_atomic
 from simulate import defaults
 from simulate.evaluation.cmm import Scan, write_scan
 from simulate.evaluation.features import FeatureTable
@@ -42,6 +42,8 @@ from simulate.parallel import run_all
 from simulate.pipeline import Components, MachiningJob, MachiningSettings, ProgramSetup, run_job
 from simulate.toolpath.placement import Placement
 
+if TYPE_CHECKING:
+    from simulate.machining.simulation import StepTable
 
 #: The three component names whose share the report shows.
 COMPONENTS = ("deflection", "friction", "switching")
@@ -112,7 +114,7 @@ class PoseResult:
     components: Components
     table: FeatureTable
     scan: Scan
-    steps: object = None
+    steps: StepTable | None = None
     tcp_error: np.ndarray | None = None
     workpiece_file: Path | None = None
     timings: dict = field(default_factory=dict)
@@ -223,6 +225,8 @@ def _run_job(job: _Job) -> PoseResult:
     mo = run_job(MachiningJob(program=job.program, robot=job.robot, placement=pl, friction=dict(job.friction),
                               components=comp, settings=job.settings.machining()))
     res, scan, table = mo.result, mo.scan, mo.table
+    if scan is None or table is None:  # only with size 0 (no virtual CMM): nothing to rank on
+        raise InputError("ranking needs the test piece's virtual CMM scan: size must be 160 or 320 mm", field="size")
     wfile = None
     if job.out_dir is not None:
         d = Path(job.out_dir) / pl.name
@@ -232,9 +236,7 @@ def _run_job(job: _Job) -> PoseResult:
         meta = {"program": str(Path(job.program.program).resolve()), "robot": str(job.robot), "pose": pl.name,
                 "xyz": pl.xyz.tolist(), "rpy": pl.rpy.tolist(), "spacing_m": job.settings.spacing,
                 "components": comp.label(), "friction": mo.friction, "units": "m, workpiece frame"}
-        tmp = d / ".meta.json.tmp"
-        tmp.write_text(json.dumps(meta, indent=1))
-        os.replace(tmp, d / "meta.json")
+        write_text_atomic(d / "meta.json", json.dumps(meta, indent=1))
     keep = job.keep_steps
     jt = mo.trajectory
     return PoseResult(pose=pl.name, components=comp, table=table, scan=scan,

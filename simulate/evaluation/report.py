@@ -11,14 +11,16 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 
+from identify.files import atomic_file, write_text_atomic
+from identify.records import markdown_table
 from simulate.evaluation.features import MM, ROW_SURFACES, FeatureTable
 from simulate.evaluation.ranking import COMPONENTS, Ranking, ranking_json
 from simulate.evaluation.trace import trace_point
+from simulate.figures import pyplot, save_png
 from simulate.toolpath.switching import axes_of
 from simulate.toolpath.testpiece import TestPiece, iso_test_piece
 
@@ -56,27 +58,18 @@ def _gain_driver(ranking: Ranking, best: str, other: str, row: str) -> str:
         return ""
     sgn = 1.0 if ranking.results[other].table[row].deviation >= 0 else -1.0
     push = {k: sgn * (co[k][row] - cb[k][row]) for k in cb}
-    c = max(push, key=push.get)
+    c = max(push, key=push.__getitem__)
     if push[c] <= 0:
         return "; no single component"
     return f"; mostly {c}: {cb[c][row] / MM:+.4f} vs {co[c][row] / MM:+.4f} mm"
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+# the names simulate.evaluation.circle draws with (new code: simulate.figures)
+_plt = pyplot
 
 
 def _save(fig, path: Path) -> str:
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=100, bbox_inches="tight")
-    _plt().close(fig)
-    os.replace(tmp, path)
-    return path.name
+    return save_png(fig, path, dpi=100)
 
 
 def _rank_colours(values: list[float]) -> list[tuple]:
@@ -91,7 +84,7 @@ def _rank_colours(values: list[float]) -> list[tuple]:
 
 
 def table2_image(ranking: Ranking, path: Path) -> str:
-    plt = _plt()
+    plt = pyplot()
     poses = [p.name for p in ranking.placements]
     rows = ranking.results[poses[0]].table.rows
     cell, colours = [], []
@@ -101,8 +94,8 @@ def table2_image(ranking: Ranking, path: Path) -> str:
         colours.append(["white"] * 3 + _rank_colours(vals))
     fig, ax = plt.subplots(figsize=(3 + 1.6 * len(poses) + 3, 0.45 * len(rows) + 1))
     ax.axis("off")
-    t = ax.table(cellText=cell, cellColours=colours, colLabels=["feature", "nominal [mm]", "tolerance [mm]"] + [f"{p} [mm]" for p in poses],
-                 loc="center")
+    t = ax.table(cellText=cell, cellColours=colours,
+                 colLabels=["feature", "nominal [mm]", "tolerance [mm]"] + [f"{p} [mm]" for p in poses], loc="center")
     t.auto_set_font_size(False)
     t.set_fontsize(9)
     t.scale(1, 1.4)
@@ -111,11 +104,11 @@ def table2_image(ranking: Ranking, path: Path) -> str:
                 ranking.results[poses[j - 3]].table.rows[i - 1].tolerance:
             c.get_text().set_fontweight("bold")  # in tolerance, as the paper's bold values
     ax.set_title("Deviation [mm] per pose (green best, red worst per row; bold: in tolerance)")
-    return _save(fig, path)
+    return save_png(fig, path, dpi=100)
 
 
 def deviation_map(scan, piece: TestPiece, path: Path, title: str) -> str:
-    plt = _plt()
+    plt = pyplot()
     pts, dev = [], []
     for name, p in scan.points.items():
         pts.append(p)
@@ -129,11 +122,11 @@ def deviation_map(scan, piece: TestPiece, path: Path, title: str) -> str:
     ax.set_xlabel("x [mm] (workpiece)")
     ax.set_ylabel("y [mm]")
     ax.set_title(title)
-    return _save(fig, path)
+    return save_png(fig, path, dpi=100)
 
 
 def process_plot(steps, path: Path, title: str) -> str:
-    plt = _plt()
+    plt = pyplot()
     t = np.asarray(steps.t)
     f = np.linalg.norm(np.asarray(steps.force), axis=1)
     d = np.linalg.norm(np.asarray(steps.deflection), axis=1) / 1e-6
@@ -148,11 +141,11 @@ def process_plot(steps, path: Path, title: str) -> str:
     axs[2].set_yscale("log")
     axs[2].set_xlabel("t [s]")
     axs[0].set_title(title)
-    return _save(fig, path)
+    return save_png(fig, path, dpi=100)
 
 
 def switching_plot(xyz, switch, path: Path, title: str) -> str:
-    plt = _plt()
+    plt = pyplot()
     xyz = np.asarray(xyz)
     sw = np.asarray(switch)
     fig, ax = plt.subplots(figsize=(7, 6))
@@ -167,7 +160,7 @@ def switching_plot(xyz, switch, path: Path, title: str) -> str:
     ax.set_xlabel("x [mm] (workpiece)")
     ax.set_ylabel("y [mm]")
     ax.set_title(title)
-    return _save(fig, path)
+    return save_png(fig, path, dpi=100)
 
 
 def worst_point(table: FeatureTable, scan, piece: TestPiece) -> tuple[str, str, np.ndarray, float]:
@@ -200,20 +193,20 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
     md.append("")
     md.append("Score = sum over the ten rows of |deviation| / tolerance (lower is better); ties: more rows in "
               "tolerance.")
-    md += ["", "| rank | pose | score | rows in tolerance |", "|---|---|---|---|"]
-    for e in ranking.entries:
-        md.append(f"| {e.rank} | {e.pose} | {e.score:.2f} | {e.in_tolerance}/10 |")
-    md += ["", "## Table 2: feature deviations [mm]", "", f"![table 2]({img.name}/{table2_image(ranking, img / 'table2.png')})", ""]
-    md.append("| feature | nominal [mm] | tolerance [mm] | " + " | ".join(f"{p} [mm]" for p in poses) + " |")
-    md.append("|---|---|---|" + "---|" * len(poses))
+    md += [""] + markdown_table(("rank", "pose", "score", "rows in tolerance"),
+                                [(e.rank, e.pose, f"{e.score:.2f}", f"{e.in_tolerance}/10") for e in ranking.entries])
+    md += ["", "## Table 2: feature deviations [mm]", "",
+           f"![table 2]({img.name}/{table2_image(ranking, img / 'table2.png')})", ""]
     rows = ranking.results[poses[0]].table.rows
+    table2 = []
     for r in rows:
         vals = []
         for p in poses:
-            row = ranking.results[p].table[r.name]
-            s = f"{row.deviation / MM:+.4f}"
-            vals.append(f"**{s}**" if row.in_tolerance else s)
-        md.append(f"| {r.name} | {r.nominal_text()} | {r.tolerance / MM:.3f} | " + " | ".join(vals) + " |")
+            fr = ranking.results[p].table[r.name]
+            s = f"{fr.deviation / MM:+.4f}"
+            vals.append(f"**{s}**" if fr.in_tolerance else s)
+        table2.append([r.name, r.nominal_text(), f"{r.tolerance / MM:.3f}", *vals])
+    md += markdown_table(("feature", "nominal [mm]", "tolerance [mm]", *(f"{p} [mm]" for p in poses)), table2)
     # why the best wins
     best = ranking.best
     md += ["", "## Why the best pose wins", ""]
@@ -243,13 +236,14 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
             con = ranking.contributions(p)
             if not sh:
                 continue
-            md += ["", f"### {p}", "", "| feature | " + " | ".join(f"{c} [mm]" for c in con) + " | driver |",
-                   "|---|" + "---|" * (len(con) + 1)]
+            cells = []
             for r in rows:
-                drv = max(sh[r.name], key=sh[r.name].get)
-                md.append(f"| {r.name} | " + " | ".join(f"{con[c][r.name] / MM:+.4f}" for c in con)
-                          + f" | {drv} ({100 * sh[r.name][drv]:.0f}%) |")
-            md.append("| share of the score | " + " | ".join(f"{100 * sh['score'][c]:.0f}%" for c in con) + " | |")
+                share = sh[r.name]
+                drv = max(share, key=share.__getitem__)
+                cells.append([r.name, *(f"{con[c][r.name] / MM:+.4f}" for c in con),
+                              f"{drv} ({100 * share[drv]:.0f}%)"])
+            cells.append(["share of the score", *(f"{100 * sh['score'][c]:.0f}%" for c in con), ""])
+            md += ["", f"### {p}", ""] + markdown_table(("feature", *(f"{c} [mm]" for c in con), "driver"), cells)
     md += ["", "## Per pose", ""]
     for p in poses:
         res = ranking.results[p]
@@ -257,8 +251,8 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
         md.append(f"![deviations {p}]({img.name}/"
                   f"{deviation_map(res.scan, piece, img / f'{p}_deviation.png', f'{p}: probe deviations')})")
         if res.steps is not None:
-            md.append(f"![process {p}]({img.name}/"
-                      f"{process_plot(res.steps, img / f'{p}_process.png', f'{p}: force, deflection, tracking error')})")
+            plot = process_plot(res.steps, img / f"{p}_process.png", f"{p}: force, deflection, tracking error")
+            md.append(f"![process {p}]({img.name}/{plot})")
         if trajectories and p in trajectories:
             xyz, sw = trajectories[p]
             md.append(f"![switching {p}]({img.name}/"
@@ -273,18 +267,15 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
                              program=str(program) if program else None)
             md.append(f"`greybench trace --workpiece {Path(res.workpiece_file).parent} --point "
                       f"{','.join(f'{v / MM:.3f}' for v in point)}` gives {tr.n_ends} dexel ends from these lines:")
-            md += ["", "| line | program | t [s] | max deflection [um] | max force [N] | switching axes |",
-                   "|---|---|---|---|---|---|"]
-            for ln in tr.lines[:8]:
-                md.append(f"| {ln.line} | `{ln.text}` | {ln.t_first:.3f}..{ln.t_last:.3f} | "
-                          f"{ln.max_deflection / 1e-6:.1f} | {ln.max_force:.1f} | "
-                          f"{','.join(f'A{a}' for a in axes_of(ln.switching)) or '-'} |")
+            md += [""] + markdown_table(
+                ("line", "program", "t [s]", "max deflection [um]", "max force [N]", "switching axes"),
+                [(ln.line, f"`{ln.text}`", f"{ln.t_first:.3f}..{ln.t_last:.3f}", f"{ln.max_deflection / 1e-6:.1f}",
+                  f"{ln.max_force:.1f}", ",".join(f"A{a}" for a in axes_of(ln.switching)) or "-")
+                 for ln in tr.lines[:8]])
         md.append("")
     path = out / "report.md"
-    tmp = out / ".report.md.tmp"
-    tmp.write_text("\n".join(md) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    with atomic_file(path) as tmp:
+        tmp.write_text("\n".join(md) + "\n", encoding="utf-8")
     summary = ranking_json(ranking)   # what `rank-poses --json` prints: unit-named fields
-    (out / "ranking.json.tmp").write_text(json.dumps(summary, indent=1))
-    os.replace(out / "ranking.json.tmp", out / "ranking.json")
+    write_text_atomic(out / "ranking.json", json.dumps(summary, indent=1))
     return path

@@ -84,11 +84,11 @@ def calibrate(robot: Robot, setup, measured, comparison: PointComparison, X: np.
     # the columns were evaluated at the nominal comparison's points; later comparisons keep the same
     # measured points, but may drop one whose simulated surface moved out of reach: align by index
     key0 = {(f, ln, tuple(p)): i for i, (f, ln, p) in enumerate(zip(comparison.feature, comparison.line,
-                                                                  map(tuple, comparison.points)))}
+                                                                  map(tuple, comparison.points), strict=True))}
 
     def residual_cols(cmp: PointComparison):
         idx = np.array([key0.get((f, ln, tuple(p)), -1) for f, ln, p in
-                        zip(cmp.feature, cmp.line, map(tuple, cmp.points))])
+                        zip(cmp.feature, cmp.line, map(tuple, cmp.points), strict=True)])
         ok = idx >= 0
         return cmp.residual[ok], X[idx[ok]]
 
@@ -107,7 +107,7 @@ def calibrate(robot: Robot, setup, measured, comparison: PointComparison, X: np.
     for it in range(max(1, int(max_sims))):
         try:
             rob, off, sim, cmp = run(theta)
-        except RuntimeError as exc:
+        except RuntimeError:
             # the coupled loop failed for this parameter (e.g. a joint so soft that the step-to-step
             # deflection feedback diverges): back off half-way towards the last good value
             history.append((theta.copy(), float("inf")))

@@ -6,9 +6,10 @@ pattern of deviations on the part. The discrepancy ``r = measured - simulated`` 
 compared with each pattern.
 
 Sensitivities: a robot with the change theta would make a part whose deviations are those of the
-nominal simulation plus ``X theta``, so ``r ~ X theta`` (per unit of the cause's parameter theta; ``k*`` the simulation step that created the
-surface at a probe point, ``n`` the nominal outward normal; first order, the envelope of the cutter is
-moved by the tool-position change at the step that made it):
+nominal simulation plus ``X theta``, so ``r ~ X theta`` (per unit of the cause's parameter theta;
+``k*`` the simulation step that created the surface at a probe point, ``n`` the nominal outward
+normal; first order, the envelope of the cutter is moved by the tool-position change at the step
+that made it):
 
 =================  ==============================  ================================================
 cause              theta                           column ``d(deviation)/dtheta`` at a point
@@ -32,8 +33,8 @@ Choice (nested models, each cause against "no discrepancy"): least-squares fit o
 ``dBIC = n ln(RSS0 / RSS) - p ln n`` (Schwarz; larger is better) and a held-out test: 5 folds of
 contiguous blocks in time, the cause must cut the held-out RMS by at least :data:`MIN_HELDOUT_GAIN`.
 The best-scoring cause that passes both tests (score above :data:`MIN_SCORE`, held-out gain) is
-named, otherwise ``none`` (nothing beats the noise). The threshold is a choice: with 1 parameter and ~20 candidates the best
-pure-noise score is below about 10 - ln n.
+named, otherwise ``none`` (nothing beats the noise). The threshold is a choice: with 1 parameter and
+~20 candidates the best pure-noise score is below about 10 - ln n.
 """
 from __future__ import annotations
 
@@ -64,12 +65,8 @@ class Cause:
     def name(self) -> str:
         return f"{self.kind}:{self.axis}" if self.axis else self.kind
 
-    @property
-    def n_params(self) -> int:
-        return 3 if self.kind == "thermal" else 1
-
     @classmethod
-    def parse(cls, text: str) -> "Cause":
+    def parse(cls, text: str) -> Cause:
         kind, _, ax = text.partition(":")
         return cls(kind, int(ax) if ax else 0)
 
@@ -88,8 +85,11 @@ def all_causes(robot: Robot) -> list[Cause]:
 
 
 def scale_friction(spec: FrictionSpec, factor: float) -> FrictionSpec:
-    """LuGre of one joint with fc, fs, s0, s1, nu scaled by ``factor`` (the torque scales exactly)."""
+    """LuGre of one joint with fc, fs, s0, s1, nu scaled by ``factor`` (the torque scales exactly).
+    Only inline LuGre joints are candidates (:func:`all_causes`): a model reference has no levels to scale."""
     lg = spec.lugre
+    if lg is None:
+        raise ValueError(f"friction model {spec.model!r} has no inline LuGre levels to scale")
     return FrictionSpec(lugre=LuGreParams(fc=lg.fc * factor, fs=lg.fs * factor, vs=lg.vs, delta=lg.delta,
                                           s0=lg.s0 * factor, s1=lg.s1 * factor, nu=lg.nu * factor))
 

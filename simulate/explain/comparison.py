@@ -35,9 +35,14 @@ class FeatureGeometry:
     center: np.ndarray | None = None
     radius: float = 0.0
 
+    def __post_init__(self) -> None:
+        if self.center is None and (self.normal is None or self.point is None):
+            raise ValueError(f"feature {self.name!r}: a plane needs a point and a normal, a circle its centre")
+
     def normals(self, pts: np.ndarray) -> np.ndarray:
         """Outward unit normals at points (N, 3)."""
         if self.center is None:
+            assert self.normal is not None  # a plane (__post_init__)
             return np.broadcast_to(self.normal, pts.shape).copy()
         d = pts[:, :2] - self.center
         r = np.hypot(d[:, 0], d[:, 1])
@@ -190,7 +195,13 @@ def compare_points(measured, workpiece, steps, piece: TestPiece) -> PointCompari
     Points the simulation has no surface for (outside the grid or beyond :data:`SEARCH`) are dropped.
     """
     geos = feature_geometry(piece)
-    F, P, N, L, M, S, K = [], [], [], [], [], [], []
+    F: list[str] = []
+    P: list[np.ndarray] = []
+    N: list[np.ndarray] = []
+    L: list[np.ndarray] = []
+    M: list[np.ndarray] = []
+    S: list[np.ndarray] = []
+    K: list[np.ndarray] = []
     for name, pts in measured.points.items():
         geo = geos[name]
         nrm = geo.normals(pts)
@@ -198,8 +209,8 @@ def compare_points(measured, workpiece, steps, piece: TestPiece) -> PointCompari
         ds, st = probe_simulated(workpiece, geo, pts, nrm)
         ok = np.isfinite(ds)
         F += [name] * int(ok.sum())
-        P.append(pts[ok]); N.append(nrm[ok]); L.append(measured.lines[name][ok]); M.append(dm[ok])
-        S.append(ds[ok]); K.append(st[ok])
+        for acc, part in ((P, pts), (N, nrm), (L, measured.lines[name]), (M, dm), (S, ds), (K, st)):
+            acc.append(part[ok])
     step = np.concatenate(K) if K else np.zeros(0, np.int64)
     tt = np.asarray(steps.t, float)
     t = np.where(step >= 0, tt[np.clip(step, 0, len(tt) - 1)], np.nan)

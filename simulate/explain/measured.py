@@ -33,15 +33,6 @@ class MeasuredScan:
     lines: dict[str, np.ndarray]
     source: str
 
-    @property
-    def n_points(self) -> int:
-        return int(sum(len(v) for v in self.points.values()))
-
-    def as_scan(self):
-        from simulate.evaluation.cmm import Scan
-
-        return Scan(points=dict(self.points), source=self.source)
-
 
 @dataclass
 class MeasuredTable:
@@ -131,9 +122,9 @@ def read_measured_table(path: str | Path, pose: str | None) -> MeasuredTable:
         if "deviation_mm" in f:
             key, scale = "deviation_mm", 1e-3
         else:
-            key, scale = "deviation", legacy_scale
-            if scale is None:
+            if legacy_scale is None:
                 raise InputError(f"unit must be 'mm' or 'm', got {unit!r}", source=src, field="unit")
+            key, scale = "deviation", legacy_scale
         dv = f.get(key)
         if isinstance(dv, dict):
             if pose is None:

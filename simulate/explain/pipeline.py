@@ -16,7 +16,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-
 from simulate.explain.calibration import Calibration, calibrate
 from simulate.explain.causes import Cause, Choice, Sensitivities, all_causes, choose, sensitivities
 from simulate.explain.comparison import PointComparison, compare_points, rms
@@ -94,7 +93,7 @@ class Explanation:
                 "n_points": int(len(self.before.residual)), "unit": "m"}
 
 
-def _feature_rows(cmp: PointComparison, piece, residual_after=None) -> dict | None:
+def _feature_rows(cmp: PointComparison, piece) -> dict | None:
     """Table-2 rows of the measured points and of the simulated surface at the same positions."""
     from identify.errors import InputError
     from simulate.evaluation.cmm import Scan

@@ -8,29 +8,15 @@ before and after. The gain is the re-simulated one (:mod:`simulate.explain.pipel
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
+from identify.files import atomic_file
+from identify.records import markdown_table
+from simulate.figures import pyplot, save_png
+
 UM = 1e6
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(fig, path: Path) -> str:
-    tmp = path.with_name("." + path.name + ".tmp.png")
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    os.replace(tmp, path)
-    _plt().close(fig)
-    return path.name
 
 
 def roundness_plot(ex, path: Path) -> str | None:
@@ -39,7 +25,7 @@ def roundness_plot(ex, path: Path) -> str | None:
     m = b.feature == "circle_wall"
     if m.sum() < 8:
         return None
-    plt = _plt()
+    plt = pyplot()
     c = np.asarray(ex.setup.piece.circle_center)
     fig, axs = plt.subplots(1, 2, subplot_kw={"projection": "polar"}, figsize=(11, 5))
     phi = np.arctan2(b.points[m, 1] - c[1], b.points[m, 0] - c[0])
@@ -50,14 +36,14 @@ def roundness_plot(ex, path: Path) -> str | None:
     allv = np.concatenate([b.measured[m], b.simulated[m], a.simulated[ma]]) * UM
     base = max(10.0, 1.5 * float(np.max(np.abs(allv)))) if len(allv) else 10.0
     for ax, (title, ph, sim, oo) in zip(axs, (("before calibration", phi, b.simulated[m], o),
-                                               ("after calibration", phia, a.simulated[ma], oa))):
+                                               ("after calibration", phia, a.simulated[ma], oa)), strict=True):
         ax.plot(phi[o], base + b.measured[m][o] * UM, "k.", ms=2, label="measured")
         ax.plot(ph[oo], base + sim[oo] * UM, "-", color="tab:red", lw=1, label="simulated")
         ax.plot(np.linspace(0, 2 * np.pi, 200), np.full(200, base), ":", color="grey", lw=0.8, label="nominal")
         ax.set_title(f"circle wall, {title}\n(radius axis: {base:.0f} um + deviation [um])", fontsize=9)
         ax.set_rlim(0, base + float(np.max(np.abs(allv))) * 1.1 + 1)
         ax.legend(fontsize=7, loc="lower left")
-    return _save(fig, path)
+    return save_png(fig, path, dpi=110)
 
 
 def _along(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -78,10 +64,10 @@ def straightness_plot(ex, path: Path) -> str | None:
     feats = [f for f in b.features() if f != "circle_wall"]
     if not feats:
         return None
-    plt = _plt()
+    plt = pyplot()
     n = len(feats)
     fig, axs = plt.subplots(n, 1, figsize=(9, 1.9 * n + 0.6), squeeze=False)
-    for ax, f in zip(axs[:, 0], feats):
+    for ax, f in zip(axs[:, 0], feats, strict=True):
         m = b.feature == f
         s = _along(b.points[m], b.normals[m][0])
         o = np.argsort(s)
@@ -97,12 +83,12 @@ def straightness_plot(ex, path: Path) -> str | None:
     axs[0, 0].legend(fontsize=7, ncol=3)
     axs[-1, 0].set_xlabel("position along the feature [mm]")
     fig.suptitle("straightness: deviation from the nominal surface (outward +)", fontsize=9)
-    return _save(fig, path)
+    return save_png(fig, path, dpi=110)
 
 
 def time_plot(ex, path: Path) -> str:
     """Discrepancy against the time its surface was cut, before and after; switching points marked."""
-    plt = _plt()
+    plt = pyplot()
     b, a = ex.before, ex.after
     jt = ex.setup.trajectory(ex.robot)
     fig, ax = plt.subplots(figsize=(9, 3))
@@ -116,7 +102,7 @@ def time_plot(ex, path: Path) -> str:
     ax.set_xlabel("time of cut [s] (grey: axis stops / reversals)")
     ax.set_ylabel("[um]")
     ax.legend(fontsize=7)
-    return _save(fig, path)
+    return save_png(fig, path, dpi=110)
 
 
 def write_report(ex, out_dir: str | Path, measured_source: str = "") -> Path:
@@ -135,8 +121,9 @@ def write_report(ex, out_dir: str | Path, measured_source: str = "") -> Path:
                   f"({len(c.history)} re-simulations).")
     else:
         md[-1] += (": no candidate explains the discrepancy better than the noise; the robot file is unchanged.")
-    md += ["", f"RMS measured - simulated: **{ex.rms_before * UM:.2f} um before**, **{ex.rms_after * UM:.2f} um after** "
-               f"calibration (re-simulated, not predicted); gain = 1 - after/before = **{ex.gain * 100:.1f} %**.", ""]
+    md += ["", f"RMS measured - simulated: **{ex.rms_before * UM:.2f} um before**, "
+               f"**{ex.rms_after * UM:.2f} um after** calibration (re-simulated, not predicted); "
+               f"gain = 1 - after/before = **{ex.gain * 100:.1f} %**.", ""]
     md += ["## Measured vs simulated deviations", ""]
     p = roundness_plot(ex, img / "roundness.png")
     if p:
@@ -145,31 +132,29 @@ def write_report(ex, out_dir: str | Path, measured_source: str = "") -> Path:
     if p:
         md.append(f"![straightness]({img.name}/{p})")
     md.append(f"![discrepancy over time]({img.name}/{time_plot(ex, img / 'discrepancy_time.png')})")
-    md += ["", "## RMS per feature [um]", "", "| feature | points | before | after |", "|---|---|---|---|"]
-    for f, (rb, ra) in ex.rms_by_feature().items():
-        md.append(f"| {f} | {int((ex.before.feature == f).sum())} | {rb * UM:.2f} | {ra * UM:.2f} |")
-    md.append(f"| **all** | {len(ex.before.residual)} | {ex.rms_before * UM:.2f} | {ex.rms_after * UM:.2f} |")
+    rms = [(f, int((ex.before.feature == f).sum()), f"{rb * UM:.2f}", f"{ra * UM:.2f}")
+           for f, (rb, ra) in ex.rms_by_feature().items()]
+    rms.append(("**all**", len(ex.before.residual), f"{ex.rms_before * UM:.2f}", f"{ex.rms_after * UM:.2f}"))
+    md += ["", "## RMS per feature [um]", ""] + markdown_table(("feature", "points", "before", "after"), rms)
     if ex.features_before is not None:
-        md += ["", "## Table 2 rows [mm]: measured vs simulated", "",
-               "| row | measured | simulated before | simulated after |", "|---|---|---|---|"]
+        table2 = []
         for k, (m, s) in ex.features_before.items():
             sa = ex.features_after[k][1] if ex.features_after else float("nan")
-            md.append(f"| {k} | {m * 1e3:+.4f} | {s * 1e3:+.4f} | {sa * 1e3:+.4f} |")
-    md += ["", "## Signatures of the discrepancy", "", "| signature | measured - simulated | fitted cause |",
-           "|---|---|---|"]
+            table2.append((k, f"{m * 1e3:+.4f}", f"{s * 1e3:+.4f}", f"{sa * 1e3:+.4f}"))
+        md += ["", "## Table 2 rows [mm]: measured vs simulated", ""] + markdown_table(
+            ("row", "measured", "simulated before", "simulated after"), table2)
     cs = dict(ex.cause_signatures.rows()) if ex.cause_signatures is not None else {}
-    for k, v in ex.signatures.rows():
-        md.append(f"| {k} | {v} | {cs.get(k, '-')} |")
+    md += ["", "## Signatures of the discrepancy", ""] + markdown_table(
+        ("signature", "measured - simulated", "fitted cause"),
+        [(k, v, cs.get(k, "-")) for k, v in ex.signatures.rows()])
     md += ["", "## Cause ranking", "",
            "Score: dBIC of the cause's sensitivity fit against no discrepancy (larger is better; a cause is named "
-           "above 10 with at least 10 % held-out RMS gain).", "",
-           "| cause | score | held-out gain | fitted change |", "|---|---|---|---|"]
-    for f in ex.choice.ranking:
-        md.append(f"| {f.cause} | {f.score:.1f} | {f.heldout_gain * 100:.1f} % | "
-                  f"{', '.join(f'{v:.3g}' for v in f.theta)} |")
+           "above 10 with at least 10 % held-out RMS gain).", ""]
+    md += markdown_table(("cause", "score", "held-out gain", "fitted change"),
+                         [(f.cause, f"{f.score:.1f}", f"{f.heldout_gain * 100:.1f} %",
+                           ", ".join(f"{v:.3g}" for v in f.theta)) for f in ex.choice.ranking])
     md += ["", "Timings [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in ex.timings.items()), ""]
     path = out / "report.md"
-    tmp = out / ".report.md.tmp"
-    tmp.write_text("\n".join(md) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    with atomic_file(path) as tmp:
+        tmp.write_text("\n".join(md) + "\n", encoding="utf-8")
     return path

@@ -37,13 +37,6 @@ class Signatures:
     reversal_step: dict[int, float] = field(default_factory=dict)
     reversal_spike: dict[int, float] = field(default_factory=dict)
 
-    def as_dict(self) -> dict:
-        return {"size_m": self.size, "ovality_m": self.ovality, "ovality_direction_deg": self.ovality_direction,
-                "lobing_m": self.lobing, "lobing_order": self.lobing_order, "trend_m_per_s": self.trend,
-                "trend_change_m": self.trend_change, "height_offset_m": self.height_offset,
-                "reversal_step_m": {str(k): v for k, v in self.reversal_step.items()},
-                "reversal_spike_m": {str(k): v for k, v in self.reversal_spike.items()}}
-
     def rows(self) -> list[tuple[str, str]]:
         """(name, value text in um / deg) for tables."""
         um = 1e6
@@ -60,8 +53,9 @@ class Signatures:
         return out
 
 
-def circle_harmonics(phi: np.ndarray, r: np.ndarray, orders: int = 15) -> np.ndarray:
-    """Least-squares Fourier amplitudes (orders 0..orders) of r(phi); order 0 is the mean."""
+def circle_harmonics(phi: np.ndarray, r: np.ndarray, orders: int = 15) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares Fourier amplitudes (orders 0..orders) of r(phi), order 0 the mean (units of ``r``),
+    and the fitted coefficients ``(c0, a1, b1, a2, b2, ...)`` of ``c0 + sum a_k cos k phi + b_k sin k phi``."""
     cols = [np.ones_like(phi)]
     for k in range(1, orders + 1):
         cols += [np.cos(k * phi), np.sin(k * phi)]

@@ -18,19 +18,24 @@ Choices stated:
 """
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from identify.errors import InputError
 from simulate import defaults
 from simulate.robot.model import Robot
-from simulate.toolpath.placement import Placement
+from simulate.toolpath.placement import JointTrajectory, Placement
 from simulate.toolpath.testpiece import TestPiece
+
+if TYPE_CHECKING:  # simulate.pipeline imports the machining kernels: loaded when a part is simulated
+    from simulate.machining.dexel import TriDexel
+    from simulate.pipeline import ProgramSetup
+    from simulate.toolpath.interpolation import Interpolation
 
 
 @dataclass
@@ -41,7 +46,7 @@ class PartSetup:
     ----------
     program : Path
         G-code file.
-    stock : Path
+    stock : Path or None
         Stock description JSON (``<program stem>.stock.json`` unless given).
     placement : Placement
         Workpiece pose in the robot base frame.
@@ -53,24 +58,24 @@ class PartSetup:
         Name in ``data/materials.toml``.
     spindle_rpm : float
         rev/min.
-    interp : object
-        :class:`simulate.toolpath.interpolation.Interpolation` of the program (robot independent).
+    interp : simulate.toolpath.interpolation.Interpolation
+        The program at the 2 ms cycle (robot independent).
     program_setup : simulate.pipeline.ProgramSetup
         The pipeline's pose-independent stage (program, interpolation, stock, spindle).
     """
 
     program: Path
-    stock: Path
+    stock: Path | None
     placement: Placement
     piece: TestPiece
     spacing: float
     material: str
     spindle_rpm: float
-    interp: object
-    program_setup: object = None
-    _trajectory: object = field(default=None, repr=False)
+    interp: Interpolation
+    program_setup: ProgramSetup
+    _trajectory: JointTrajectory | None = field(default=None, repr=False)
 
-    def trajectory(self, robot: Robot):
+    def trajectory(self, robot: Robot) -> JointTrajectory:
         """Joint trajectory (IK + switching points); depends on the kinematics only, so it is cached."""
         if self._trajectory is None:
             from simulate.pipeline import MachiningJob, prepare
@@ -163,19 +168,11 @@ def settings_of(setup: PartSetup):
                              require_spindle=True, stock_floor=defaults.STOCK_FLOOR, capacity=(32, 32, 16), size=0)
 
 
-def stock_workpiece(setup: PartSetup):
+def stock_workpiece(setup: PartSetup) -> TriDexel:
     """The stock as a tri-dexel model, trimmed under the lowest cutting height (module docstring)."""
     from simulate.pipeline import stock_workpiece as pipeline_stock
 
     return pipeline_stock(setup.program_setup, settings_of(setup))
-
-
-def cutter_of(robot: Robot):
-    """The robot file's tool as a machining cutter (module docstring;
-    :func:`simulate.evaluation.cutter.robot_cutter`)."""
-    from simulate.evaluation.cutter import robot_cutter
-
-    return robot_cutter(robot)
 
 
 def servo_error(robot: Robot, setup: PartSetup, force: np.ndarray | None = None) -> np.ndarray:

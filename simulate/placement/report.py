@@ -12,23 +12,24 @@
   screen at each grid point; placements that fail the screen are grey, the given poses and the best
   are marked. With fewer than four simulated candidates it shows the compliance proxy instead.
 
-All files are written into a temporary folder beside ``out_dir`` and moved in at the end: all or none.
+Everything is computed (the heat map drawn) before the first file is written, and each file is
+written atomically: a failure leaves ``out_dir`` as it was, other files in it are kept.
 """
 from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
-import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from identify.records import write_table
-from simulate.placement.search import CandidateStatus, SearchResult
+from identify.files import atomic_file
+from identify.records import markdown_table, write_table
+from simulate.figures import pyplot, save_png
 from simulate.placement.screen import screen
+from simulate.placement.search import CandidateStatus, SearchResult
 
 MM = 1e-3
 UM = 1e-6
@@ -107,13 +108,10 @@ def _surrogate(result: SearchResult):
     return coef, r2, len(sims)
 
 
-def heatmap(result: SearchResult, robot, interp, path: Path, grid: int = HEATMAP_GRID, source: str = "") -> dict:
-    """Plot the heat map (module docstring) to ``path``; returns what it shows."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def heatmap(result: SearchResult, robot, interp, grid: int = HEATMAP_GRID, source: str = "") -> tuple[Any, dict]:
+    """Draw the heat map (module docstring): the figure (for :func:`simulate.figures.save_png`) and what
+    it shows."""
+    plt = pyplot()
     sp, b, st = result.space, result.best, result.settings
     xs = np.linspace(*sp.x, grid)
     ys = np.linspace(*sp.y, grid)
@@ -160,11 +158,7 @@ def heatmap(result: SearchResult, robot, interp, path: Path, grid: int = HEATMAP
                  f"screen\nwhite: given poses, red star: best, dots: other simulations (their own yaw and z)",
                  fontsize=9)
     ax.set_aspect("equal")
-    tmp = path.with_name("." + path.name + ".tmp.png")
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    os.replace(tmp, path)
-    return {"shows": what, "feasible_cells": int(np.isfinite(comp).sum()), "cells": grid * grid}
+    return fig, {"shows": what, "feasible_cells": int(np.isfinite(comp).sum()), "cells": grid * grid}
 
 
 def _f(v: float, fmt: str = ".3f") -> str:
@@ -193,7 +187,7 @@ def report_text(result: SearchResult, *, program: str, robot: str, poses: str, s
                   f"(**{100 * result.improvement:.2f} %** lower), {b.in_tolerance}/10 rows in tolerance "
                   f"({g.in_tolerance}/10).", ""]
     edges = [f"{ax} {'lower' if v - lo < hi - v else 'upper'}" for ax, v, (lo, hi) in
-             zip("xyz", b.placement.xyz, (result.space.x, result.space.y, result.space.z))
+             zip("xyz", b.placement.xyz, (result.space.x, result.space.y, result.space.z), strict=True)
              if min(v - lo, hi - v) < 0.02 * (hi - lo)]
     if b.origin != "given" and edges:
         lines += [f"The best lies at the edge of the searched box ({', '.join(edges)}): a wider box "
@@ -204,17 +198,15 @@ def report_text(result: SearchResult, *, program: str, robot: str, poses: str, s
     # per Table-2 row: best vs every given pose
     given = result.given
     cols = ([f"`{name}`"] if b.origin != "given" else []) + [f"`{c.name}`" for c in given]
-    lines += ["## Table-2 rows [mm]: best against the given poses", "",
-              "| row | tolerance | " + " | ".join(cols) + " | change of abs(dev)/tol (best vs best given) |",
-              "|---|---:|" + "---:|" * len(cols) + "---:|"]
     gr = {r["name"]: r for r in g.rows}
-    changes = []
+    changes, cells = [], []
     for k, r in enumerate(b.rows):
         vals = ([r["deviation_m"]] if b.origin != "given" else []) + [c.rows[k]["deviation_m"] for c in given]
         d = (abs(r["deviation_m"]) - abs(gr[r["name"]]["deviation_m"])) / r["tolerance_m"]
         changes.append((d, r["name"]))
-        lines.append(f"| {r['name']} | {r['tolerance_m'] / MM:.3f} | " + " | ".join(f"{v / MM:+.4f}" for v in vals)
-                     + f" | {d:+.3f} |")
+        cells.append([r["name"], f"{r['tolerance_m'] / MM:.3f}", *(f"{v / MM:+.4f}" for v in vals), f"{d:+.3f}"])
+    lines += ["## Table-2 rows [mm]: best against the given poses", ""]
+    lines += markdown_table(("row", "tolerance", *cols, "change of abs(dev)/tol (best vs best given)"), cells)
     lines.append("")
     better = sorted([c for c in changes if c[0] < 0])
     worse = sorted([c for c in changes if c[0] > 0], reverse=True)
@@ -226,36 +218,35 @@ def report_text(result: SearchResult, *, program: str, robot: str, poses: str, s
         bd, gd = b.stats.get("rms_deflection_m", math.nan), g.stats.get("rms_deflection_m", math.nan)
         bt, gt = b.stats.get("rms_tracking_error_m", math.nan), g.stats.get("rms_tracking_error_m", math.nan)
         comp = "deflection" if abs(bd - gd) >= abs(bt - gt) else "servo tracking (friction, backlash)"
-        lines += ["| component along the cut | best | best given |", "|---|---:|---:|",
-                  f"| RMS deflection [µm] | {_f(bd / UM, '.2f')} | {_f(gd / UM, '.2f')} |",
-                  f"| RMS servo tracking error [µm] | {_f(bt / UM, '.2f')} | {_f(gt / UM, '.2f')} |",
-                  f"| switching points [-] | {b.screen.switching} | {g.screen.switching} |",
-                  f"| compliance, path mean [µm/N] | {_f(b.screen.compliance / UM)} | "
-                  f"{_f(g.screen.compliance / UM)} |",
-                  f"| smallest joint-limit margin [deg] | {_f(math.degrees(b.screen.limit_margin), '.1f')} | "
-                  f"{_f(math.degrees(g.screen.limit_margin), '.1f')} |",
-                  f"| smallest wrist angle from singular [deg] | {_f(math.degrees(b.screen.wrist_angle), '.1f')} | "
-                  f"{_f(math.degrees(g.screen.wrist_angle), '.1f')} |", "",
+        lines += markdown_table(("component along the cut", "best", "best given"), [
+            ("RMS deflection [µm]", _f(bd / UM, ".2f"), _f(gd / UM, ".2f")),
+            ("RMS servo tracking error [µm]", _f(bt / UM, ".2f"), _f(gt / UM, ".2f")),
+            ("switching points [-]", b.screen.switching, g.screen.switching),
+            ("compliance, path mean [µm/N]", _f(b.screen.compliance / UM), _f(g.screen.compliance / UM)),
+            ("smallest joint-limit margin [deg]", _f(math.degrees(b.screen.limit_margin), ".1f"),
+             _f(math.degrees(g.screen.limit_margin), ".1f")),
+            ("smallest wrist angle from singular [deg]", _f(math.degrees(b.screen.wrist_angle), ".1f"),
+             _f(math.degrees(g.screen.wrist_angle), ".1f"))])
+        lines += ["",
                   f"The component that changed most is the **{comp}**. (Component shares by switching each off: "
                   f"`rank-poses --shares` on `best.json`.)", ""]
-    lines += ["## Heat map", "", f"![score over x-y](heatmap.png)", "",
+    lines += ["## Heat map", "", "![score over x-y](heatmap.png)", "",
               f"{heat['shows']}; {heat['feasible_cells']} of {heat['cells']} grid placements pass the screen.", ""]
     n_skip = counts.get("skipped", 0)
     lines += ["## Search history", "", f"The candidates in the order drawn, the skipped ones left out here ({n_skip} "
-              "dominated on both proxies; `history.csv` has every candidate and column).", "",
-              "| # | name | status | x [mm] | y [mm] | z [mm] | yaw [deg] | score | switching | compliance [µm/N] | "
-              "note |", "|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+              "dominated on both proxies; `history.csv` has every candidate and column).", ""]
+    history = []
     for c in result.candidates:
         if c.status is CandidateStatus.skipped:
             continue
-        sc = _f(c.score, ".4f") if c.status is CandidateStatus.simulated else (
-            f"≥ {c.predicted:.3f} (predicted)" if c.status is CandidateStatus.skipped else "-")
-        note = c.message if c.status is not CandidateStatus.skipped else "dominated on both proxies"
-        lines.append(f"| {c.index} | {c.name} | {c.status.value} | {c.placement.xyz[0] / MM:.1f} | "
-                     f"{c.placement.xyz[1] / MM:.1f} | {c.placement.xyz[2] / MM:.1f} | "
-                     f"{math.degrees(c.placement.rpy[2]):.1f} | {sc} | "
-                     f"{c.screen.switching if c.screen.switching >= 0 else '-'} | "
-                     f"{_f(c.screen.compliance / UM)} | {note.replace('|', '/')[:120]} |")
+        sc = _f(c.score, ".4f") if c.status is CandidateStatus.simulated else "-"
+        history.append((c.index, c.name, c.status.value, f"{c.placement.xyz[0] / MM:.1f}",
+                        f"{c.placement.xyz[1] / MM:.1f}", f"{c.placement.xyz[2] / MM:.1f}",
+                        f"{math.degrees(c.placement.rpy[2]):.1f}", sc,
+                        c.screen.switching if c.screen.switching >= 0 else "-", _f(c.screen.compliance / UM),
+                        c.message[:120]))
+    lines += markdown_table(("#", "name", "status", "x [mm]", "y [mm]", "z [mm]", "yaw [deg]", "score", "switching",
+                             "compliance [µm/N]", "note"), history)
     lines += ["", "Method: `docs/placement-search.md`.", ""]
     return "\n".join(lines)
 
@@ -268,26 +259,25 @@ def write_outputs(result: SearchResult, out_dir: str | Path, *, given_doc: dict,
                   robot_name: str, poses: str, size: int) -> dict:
     """Write every file (module docstring) into ``out_dir``; returns :func:`summary` with the file names."""
     out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.optimize-"))
+    fig, heat = heatmap(result, robot, interp, source=program)
     try:
-        (tmp / "best.json").write_text(json.dumps(best_document(result, given_doc), indent=1) + "\n", encoding="utf-8")
-        write_table(history_table(result), tmp / "history.csv")
-        heat = heatmap(result, robot, interp, tmp / "heatmap.png", source=program)
-        (tmp / "report.md").write_text(report_text(result, program=program, robot=robot_name, poses=poses, size=size,
-                                                   heat=heat), encoding="utf-8")
+        history = history_table(result)
         info = summary(result)
         info["heatmap"] = heat["shows"]
-        (tmp / "summary.json").write_text(json.dumps(finite(info), indent=1) + "\n", encoding="utf-8")
-        out_dir.mkdir(exist_ok=True)
-        files = []
-        for f in sorted(tmp.iterdir()):
-            os.replace(f, out_dir / f.name)
-            files.append(str(out_dir / f.name))
-        info["files"] = files
-        return info
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        texts = {"best.json": json.dumps(best_document(result, given_doc), indent=1) + "\n",
+                 "report.md": report_text(result, program=program, robot=robot_name, poses=poses, size=size,
+                                          heat=heat),
+                 "summary.json": json.dumps(finite(info), indent=1) + "\n"}
+    except BaseException:
+        pyplot().close(fig)
+        raise
+    save_png(fig, out_dir / "heatmap.png", dpi=110)
+    write_table(history, out_dir / "history.csv")
+    for name, text in texts.items():
+        with atomic_file(out_dir / name) as tmp:
+            tmp.write_text(text, encoding="utf-8")
+    info["files"] = [str(out_dir / f) for f in sorted(["heatmap.png", "history.csv", *texts])]
+    return info
 
 
 def finite(obj):

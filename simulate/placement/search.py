@@ -37,10 +37,11 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -100,7 +101,7 @@ class SearchSpace:
 
     @classmethod
     def around(cls, placements: list[Placement], xy_margin: float = XY_MARGIN,
-               z_margin: float = Z_MARGIN) -> "SearchSpace":
+               z_margin: float = Z_MARGIN) -> SearchSpace:
         """The given poses' bounding box widened by the margins [m], every yaw, their first roll/pitch."""
         xyz = np.array([p.xyz for p in placements], float)
         lo, hi = xyz.min(axis=0), xyz.max(axis=0)
@@ -300,9 +301,13 @@ def evaluate(job: _Eval) -> dict:
     def rms(v):
         return float(np.sqrt(np.mean(np.sum(np.asarray(v)[sel] ** 2, axis=1))))
 
-    return {"score": float(mo.table.score), "in_tolerance": int(mo.table.n_in_tolerance),
+    table = mo.table
+    if table is None:  # only with size 0 (no virtual CMM): nothing to score
+        raise InputError("the search needs the test piece's virtual CMM scan: size must be 160 or 320 mm",
+                         field="size")
+    return {"score": float(table.score), "in_tolerance": int(table.n_in_tolerance),
             "rows": [{"name": r.name, "deviation_m": float(r.deviation), "tolerance_m": float(r.tolerance),
-                      "nominal": r.nominal_text()} for r in mo.table.rows],
+                      "nominal": r.nominal_text()} for r in table.rows],
             "stats": {"rms_deflection_m": rms(st.deflection), "rms_tracking_error_m": rms(mo.tracking_error)},
             "wall_s": time.perf_counter() - c0}
 
@@ -441,7 +446,6 @@ def run_search(plan: SearchPlan, *, progress: Callable[[float, str], None] | Non
     from simulate.parallel import ProcessBackend, RayBackend
 
     settings, prog, rob, space = plan.settings, plan.program, plan.robot, plan.space
-    kw = dict(limit_margin=settings.limit_margin, wrist_margin=settings.wrist_margin, source=str(prog.program))
     candidates = [dataclasses.replace(c) for c in plan.given]
     placements = plan.placements
     estimate = plan.estimate_s
@@ -535,15 +539,16 @@ def run_search(plan: SearchPlan, *, progress: Callable[[float, str], None] | Non
                 stop = "budget"
                 break
             room = slots if settings.max_simulations is None else min(slots, settings.max_simulations - n_sim)
-            batch: list[tuple[Candidate, object]] = []
-            held: list[tuple[Candidate, object]] = []   # skipped this round, told at its end
+            batch: list[tuple[Candidate, optuna.trial.Trial]] = []
+            held: list[tuple[Candidate, optuna.trial.Trial]] = []   # skipped this round, told at its end
             asks = 0
             while len(batch) < room and asks < SCREENS_PER_SLOT * room and elapsed() + estimate <= settings.budget_s:
                 asks += 1
                 trial = study.ask(dists)
                 name = _unique(f"candidate_{len(candidates)}", taken)
                 pl = space.placement(name, trial.params)
-                res = screen(rob, prog.interp, pl, **kw)
+                res = screen(rob, prog.interp, pl, limit_margin=settings.limit_margin,
+                             wrist_margin=settings.wrist_margin, source=str(prog.program))
                 c = Candidate(len(candidates), "search", pl, res, CandidateStatus.rejected)
                 candidates.append(c)
                 if not res.ok:

@@ -122,13 +122,13 @@ def _rnea_kernel(dh, mass, com, inertia, rotor, q, qd, qdd, g0, tau):
             e2 = a2 + d0 * x1 - d1 * x0 + w0 * c1 - w1 * c0
             m = mass[i]
             Fc[i, 0] = m * e0; Fc[i, 1] = m * e1; Fc[i, 2] = m * e2
-            I = inertia[i]
-            Iw0 = I[0, 0] * w0 + I[0, 1] * w1 + I[0, 2] * w2
-            Iw1 = I[1, 0] * w0 + I[1, 1] * w1 + I[1, 2] * w2
-            Iw2 = I[2, 0] * w0 + I[2, 1] * w1 + I[2, 2] * w2
-            Nc[i, 0] = I[0, 0] * d0 + I[0, 1] * d1 + I[0, 2] * d2 + w1 * Iw2 - w2 * Iw1
-            Nc[i, 1] = I[1, 0] * d0 + I[1, 1] * d1 + I[1, 2] * d2 + w2 * Iw0 - w0 * Iw2
-            Nc[i, 2] = I[2, 0] * d0 + I[2, 1] * d1 + I[2, 2] * d2 + w0 * Iw1 - w1 * Iw0
+            Ic = inertia[i]
+            Iw0 = Ic[0, 0] * w0 + Ic[0, 1] * w1 + Ic[0, 2] * w2
+            Iw1 = Ic[1, 0] * w0 + Ic[1, 1] * w1 + Ic[1, 2] * w2
+            Iw2 = Ic[2, 0] * w0 + Ic[2, 1] * w1 + Ic[2, 2] * w2
+            Nc[i, 0] = Ic[0, 0] * d0 + Ic[0, 1] * d1 + Ic[0, 2] * d2 + w1 * Iw2 - w2 * Iw1
+            Nc[i, 1] = Ic[1, 0] * d0 + Ic[1, 1] * d1 + Ic[1, 2] * d2 + w2 * Iw0 - w0 * Iw2
+            Nc[i, 2] = Ic[2, 0] * d0 + Ic[2, 1] * d1 + Ic[2, 2] * d2 + w0 * Iw1 - w1 * Iw0
             w[i, 0] = w0; w[i, 1] = w1; w[i, 2] = w2
             wd[i, 0] = d0; wd[i, 1] = d1; wd[i, 2] = d2
             wp0, wp1, wp2 = w0, w1, w2

@@ -27,9 +27,8 @@ from numba import njit
 from identify.errors import InputError
 from simulate.robot.model import Robot
 
-#: DH twists of the OPW form, and the theta offsets that make ``q = 0`` the OPW zero.
+#: DH twists of the OPW form (the analytic inverse needs them).
 OPW_ALPHA = np.array([-np.pi / 2, 0.0, np.pi / 2, -np.pi / 2, np.pi / 2, 0.0])
-OPW_THETA_OFFSET = np.array([0.0, -np.pi / 2, np.pi / 2, 0.0, 0.0, 0.0])
 
 #: |sin(q5)| below this flags a wrist singularity (axes 4 and 6 aligned) [-].
 WRIST_SINGULAR_TOL = 1e-3
@@ -194,14 +193,6 @@ def _frames_kernel(dh, q, out):
                 out[k, i + 1, r, 3] += out[k, i, r, 3]
             out[k, i + 1, 3, 0] = 0.0; out[k, i + 1, 3, 1] = 0.0
             out[k, i + 1, 3, 2] = 0.0; out[k, i + 1, 3, 3] = 1.0
-
-
-def frames(robot: Robot, q) -> np.ndarray:
-    """DH frames 0 (base) .. 6 (flange) in the base frame: (N, 7, 4, 4) (or (7, 4, 4) for q (6,))."""
-    q2, single = _as_q(q)
-    out = np.empty((q2.shape[0], 7, 4, 4))
-    _frames_kernel(_dh(robot), q2, out)
-    return out[0] if single else out
 
 
 @njit(cache=True)

@@ -44,7 +44,6 @@ import dataclasses
 import math
 import os
 import re
-import tempfile
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from identify.errors import InputError
-from identify.files import as_created
+from identify.files import atomic_file
 
 N_JOINTS = 6
 
@@ -194,7 +193,7 @@ class ServoGains:
         for f in dataclasses.fields(self):
             object.__setattr__(self, f.name, _frozen(getattr(self, f.name), (N_JOINTS,)))
 
-    def with_changes(self, **changes) -> "ServoGains":
+    def with_changes(self, **changes) -> ServoGains:
         return dataclasses.replace(self, **changes)
 
 
@@ -303,13 +302,13 @@ class Robot:
         """Motor+gear inertia reflected to the joint side, ``gear_ratio**2 * motor_inertia`` [kg m^2]."""
         return self.gear_ratio ** 2 * self.motor_inertia
 
-    def with_changes(self, **changes) -> "Robot":
+    def with_changes(self, **changes) -> Robot:
         """A copy with some fields replaced (validated like a loaded file, minus the file)."""
         new = dataclasses.replace(self, **changes)
         _validate(new, source=self.source or "<robot>")
         return new
 
-    def equals(self, other: "Robot") -> bool:
+    def equals(self, other: Robot) -> bool:
         """True when every value (arrays exactly) equals ``other``'s, ignoring ``source``."""
         return _as_dict(self) == _as_dict(other)
 
@@ -348,10 +347,10 @@ def _vector(table: dict, key: str, n: int, where: str, source: str, default=None
     return arr
 
 
-def _check_inertia(I: np.ndarray, field_name: str, source: str) -> None:
-    if not np.allclose(I, I.T, rtol=0, atol=1e-12 * max(1.0, np.abs(I).max())):
+def _check_inertia(inertia: np.ndarray, field_name: str, source: str) -> None:
+    if not np.allclose(inertia, inertia.T, rtol=0, atol=1e-12 * max(1.0, np.abs(inertia).max())):
         raise InputError("inertia must be symmetric", source=source, field=field_name)
-    ev = np.linalg.eigvalsh(I)
+    ev = np.linalg.eigvalsh(inertia)
     if ev.min() < -1e-12:
         raise InputError("inertia must be positive semi-definite", source=source, field=field_name)
     # triangle inequality of principal moments (a physical rigid body)
@@ -398,7 +397,7 @@ def robot_from_dict(data: dict, source: str = "<robot>") -> Robot:
         raise InputError(f"need exactly {N_JOINTS} [[joint]] tables, found {n}", source=source, field="joint")
     vals: dict[str, list] = {k: [] for k in JOINT_SCALARS}
     com, inertia, names, frictions = [], [], [], []
-    servo = {k: [] for k in SERVO_KEYS}
+    servo: dict[str, list] = {k: [] for k in SERVO_KEYS}
     drive: dict[str, list] = {"damping": [], "rated_torque": [], "friction_side": []}
     for i, jt in enumerate(joints):
         where = f"joint[{i + 1}]"
@@ -599,22 +598,13 @@ def robot_to_toml(robot: Robot) -> str:
 
 
 def save_robot(robot: Robot, path: str | os.PathLike) -> Path:
-    """Write ``robot`` as a TOML robot file (atomically: temp file, then rename).
+    """Write ``robot`` as a TOML robot file (atomically: :func:`identify.files.atomic_file`).
 
     ``load_robot(save_robot(r, p))`` equals ``r`` exactly (floats written with their shortest
     round-trip representation). Comments of a hand-written source file are not kept.
     """
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     text = robot_to_toml(robot)
-    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        as_created(tmp)
-        os.replace(tmp, p)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_file(p) as tmp:
+        tmp.write_text(text, encoding="utf-8")
     return p

@@ -17,7 +17,7 @@ Link compliance (paper 2.1, ref. [26]: beam models of the bodies) is an added te
 """
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -2,19 +2,18 @@
 
 Pose tables: columns ``x, y, z`` [m] and ``qw, qx, qy, qz`` (unit quaternion, scalar first) of the
 TCP in the robot base frame. Joint tables: ``q1..q6`` [rad] (plus ``ok`` from the inverse).
-Writes go to a temporary file that is then renamed: nothing half-written on error.
+Writes go through :func:`identify.records.write_table` (atomic: nothing half-written on error).
 """
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from identify import records
 from identify.errors import InputError
-from identify.files import as_created
 
 POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 JOINT_COLUMNS = tuple(f"q{i}" for i in range(1, 7))
@@ -37,24 +36,21 @@ def read_table(path: str | os.PathLike) -> pd.DataFrame:
         raise InputError(f"cannot read table: {str(exc).splitlines()[0]}", source=str(p)) from None
 
 
+def exact_floats(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with every float column as the shortest text that reads back as the same number
+    (``repr``; NaN empty, as CSV writes it), for a CSV that round-trips exactly."""
+    out = df.copy()
+    for name in out.columns:
+        if pd.api.types.is_float_dtype(out[name]):
+            out[name] = [repr(float(v)) if v == v else "" for v in out[name].to_numpy()]
+    return out
+
+
 def write_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
-    """Write CSV or Parquet (by extension) atomically: temp file in the same folder, then rename."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=p.suffix)
-    os.close(fd)
-    try:
-        if _is_parquet(p):
-            df.to_parquet(tmp, index=False)
-        else:
-            df.to_csv(tmp, index=False, float_format="%.17g")
-        as_created(tmp)
-        os.replace(tmp, p)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return p
+    """Write a pose, joint or axis table as CSV or Parquet by extension (``.csv``, ``.parquet``, ``.pq``)
+    with :func:`identify.records.write_table`, CSV floats exact (:func:`exact_floats`): poses and joint
+    angles read back are the numbers written (``robot fk`` then ``robot ik`` loses nothing)."""
+    return records.write_table(df if _is_parquet(Path(path)) else exact_floats(df), path)
 
 
 def numeric_columns(df: pd.DataFrame, columns, source: str) -> np.ndarray:
@@ -112,5 +108,6 @@ def frame_from_poses(T) -> pd.DataFrame:
     """Pose columns from transforms (N, 4, 4)."""
     T = np.asarray(T, dtype=float)
     q = matrix_to_quat(T[:, :3, :3])
-    data = {"x": T[:, 0, 3], "y": T[:, 1, 3], "z": T[:, 2, 3], "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]}
+    data = {"x": T[:, 0, 3], "y": T[:, 1, 3], "z": T[:, 2, 3],
+            "qw": q[:, 0], "qx": q[:, 1], "qy": q[:, 2], "qz": q[:, 3]}
     return pd.DataFrame(data)

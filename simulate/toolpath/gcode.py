@@ -271,8 +271,8 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
             raise InputError(f"program continues after its end (M2/M30 on line {ended_at})",
                              source=source, line=lineno, column=words[0][3])
 
-        def err(msg: str, col: int) -> InputError:
-            return InputError(msg, source=source, line=lineno, column=col)
+        def err(msg: str, col: int, line: int = lineno) -> InputError:
+            return InputError(msg, source=source, line=line, column=col)
 
         seen: dict[str, int] = {}
         values: dict[str, float] = {}
@@ -330,7 +330,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
             if values["T"] != int(values["T"]) or values["T"] < 0:
                 raise err("tool number T must be a non-negative integer", seen["T"])
             tool = int(values["T"])
-        for code, col in mcodes:
+        for code, _col in mcodes:
             if code == 3:
                 spindle_on = True
             elif code == 5:

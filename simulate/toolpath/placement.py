@@ -203,8 +203,6 @@ class JointTrajectory:
         Joint velocities by backward differences (paper eq. 22), rad/s.
     switch : numpy.ndarray of int, (N,)
         Switching integers (:func:`simulate.toolpath.switching.switching_points`).
-    T_base_tcp : numpy.ndarray, (N, 4, 4)
-        Commanded TCP poses in the robot base frame, m.
     placement : Placement
     """
 
@@ -214,7 +212,6 @@ class JointTrajectory:
     q: np.ndarray
     qd: np.ndarray
     switch: np.ndarray
-    T_base_tcp: np.ndarray
     placement: Placement
 
 
@@ -265,10 +262,10 @@ def joint_trajectory(robot, interp: Interpolation, placement: Placement, *, q_ho
     if check_speed:
         ratio = np.abs(qd) / np.asarray(robot.vmax)[None, :]
         if (ratio > 1.0).any():
-            k, i = np.unravel_index(int(np.argmax(ratio > 1.0)), ratio.shape)
+            k, i = (int(v) for v in np.unravel_index(int(np.argmax(ratio > 1.0)), ratio.shape))
             raise InputError(f"pose '{placement.name}': joint A{i + 1} speed {abs(qd[k, i]):.3f} rad/s exceeds "
                              f"its limit {robot.vmax[i]:.3f} rad/s at t={interp.t[k]:.3f} s "
                              f"(a configuration change or a path too fast for this placement)",
                              source=source, line=int(interp.line[k]))
     return JointTrajectory(t=interp.t, line=interp.line, xyz=interp.xyz, q=q, qd=qd,
-                           switch=switching_points(qd, switch_threshold), T_base_tcp=T, placement=placement)
+                           switch=switching_points(qd, switch_threshold), placement=placement)

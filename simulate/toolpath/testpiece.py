@@ -61,14 +61,14 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from identify.errors import InputError
+from identify.files import atomic_file
 
 SIZES = (160, 320)
 
@@ -359,7 +359,6 @@ def finishing_program(piece: TestPiece, tech: Technology | None = None) -> str:
     _polygon_contour(w, piece.angle_corners, piece.angle_z[0], safe_z, tech, "angle 30/60 deg")
 
     # Slope: zig-zag along x; tool bottom at the plane height under its uphill rim.
-    m = math.tan(piece.slope_angle)
     x0, x1 = piece.slope_x
     y0, y1 = piece.slope_y
     xa, xb = x0 - r - 0.002, x1 + r + 0.002
@@ -482,17 +481,8 @@ def write_test_piece(out: str | Path, size: int = 320, tech: Technology | None =
     stock = json.dumps(stock_description(piece, tech, program=out.name), indent=1)
     if not out.parent.exists():
         raise InputError("output folder does not exist", source=str(out.parent))
-    tmp = []
-    try:
+    # both temporaries are written before either is renamed into place: the pair stays consistent
+    with ExitStack() as stack:
         for path, content in ((out, text), (stock_path, stock)):
-            fd, name = tempfile.mkstemp(dir=out.parent, prefix=f".{path.name}.", suffix=".tmp")
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(content)
-            tmp.append((name, path))
-        for name, path in tmp:
-            os.replace(name, path)
-    finally:
-        for name, _ in tmp:
-            if os.path.exists(name):
-                os.unlink(name)
+            stack.enter_context(atomic_file(path)).write_text(content, encoding="utf-8")
     return out, stock_path

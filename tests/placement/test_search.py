@@ -53,12 +53,17 @@ def test_budget_is_respected():
 
 def test_best_json_is_ranked_first_by_rank_poses(tmp_path):
     out = tmp_path / "search"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")      # a file of the user's in --out is kept
     res = runner.invoke(app, ["optimize-pose", "--program", str(PROGRAM), "--robot", ROBOT, "--poses", str(POSES),
                               "--out", str(out), "--budget-s", "300", "--workers", "2", "--spacing", "1",
                               "--max-simulations", "4", "--seed", "1", "--json"])
     assert res.exit_code == 0, res.output
     info = json.loads(res.stdout)
-    assert {p.name for p in out.iterdir()} >= {"best.json", "report.md", "heatmap.png", "history.csv"}
+    written = {"best.json", "report.md", "heatmap.png", "history.csv", "summary.json"}
+    assert {p.name for p in out.iterdir()} == written | {"notes.txt"}      # and no temporary left
+    assert (out / "notes.txt").read_text() == "mine"
+    assert info["files"] == [str(out / f) for f in sorted(written)]
     given = json.loads(POSES.read_text())
     best = json.loads((out / "best.json").read_text())
     assert best["poses"][:len(given["poses"])] == given["poses"]      # the given poses unchanged
