@@ -9,9 +9,9 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from greybench.commands.machining import cutter_from_robot, machining_job
-from greybench.support import DATA_DIR, out
+from greybench.support import DATA_DIR, out, resolve_robot
 from identify.errors import InputError
+from simulate.run import cutter_from_robot, machining_job
 
 
 def bench_machining(
@@ -54,7 +54,7 @@ def bench_machining(
     t0 = time.perf_counter()
     from simulate.pipeline import prepare, stock_workpiece
 
-    job = machining_job(program, "max100", pose, None, spacing_mm=spacing)
+    job = machining_job(program, resolve_robot("max100"), pose, None, spacing_mm=spacing)
     pj = prepare(job)
     placement, rob, jt, cutter = job.placement, pj.robot, pj.trajectory, cutter_from_robot(pj.robot)
     wp = stock_workpiece(pj.program, job.settings)

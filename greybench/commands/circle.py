@@ -1,31 +1,18 @@
 """``greybench circle``: the virtual circular test (ISO 230-4, ballbar) of the robot at a pose."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import typer
 
+from greybench import options as o
 from greybench.support import emit_json, err, guarded, out, print_summary, progress, resolve_robot
-from identify.errors import InputError
-
-
-def _centre(text: str | None):
-    if text is None:
-        return (0.0, 0.0, 0.0)
-    try:
-        vals = [float(v) for v in text.split(",")]
-    except ValueError:
-        vals = []
-    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
-        raise InputError(f"expected three numbers x,y,z in mm, got {text!r}", field="center-mm")
-    return tuple(v * 1e-3 for v in vals)
 
 
 def circle(
-    robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
-    pose: Path = typer.Option(..., "--pose", help="Pose file (JSON) [m, rad]."),
-    name: str | None = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
+    robot: o.Robot = "max100",
+    pose: o.Pose = ...,
+    name: o.PoseName = None,
     radius_mm: float = typer.Option(50.0, "--radius-mm", help="Circle radius [mm]."),
     feed_mm_min: float = typer.Option(2000.0, "--feed-mm-min", help="Feed along the circle [mm/min]."),
     plane: str = typer.Option("xy", "--plane", help="Plane of the workpiece frame: xy, yz or zx."),
@@ -39,7 +26,7 @@ def circle(
                                          help="Factor on every joint's Coulomb and static friction levels [-]."),
     ff_friction: bool = typer.Option(False, "--ff-friction",
                                      help="NC friction feed-forward on (off: the NC does not know the friction)."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+    as_json: o.Json = False,
 ) -> None:
     """Simulate a circle through the machining pipeline (drives, friction models, no cutting) and
     evaluate it as a ballbar test.
@@ -52,8 +39,9 @@ def circle(
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import load_poses, select_pose
 
+    centre = o.numbers(center_mm, 3, "center-mm", "mm") if center_mm is not None else (0.0, 0.0, 0.0)
     spec = CircleSpec(radius=radius_mm * 1e-3, feed=feed_mm_min / 6e4, plane=plane.lower(),
-                      center=_centre(center_mm), ccw=not cw)
+                      center=tuple(v / o.MM_PER_M for v in centre), ccw=not cw)
     placement = select_pose(load_poses(pose), name, source=str(pose))
     rob = load_robot(resolve_robot(robot))
     with progress("circle: simulating", total=None) as advance:
