@@ -78,8 +78,3 @@ def numbers(text: str, n: int, field: str, unit: str) -> tuple[float, ...]:
     if len(vals) != n or not all(math.isfinite(v) for v in vals):
         raise InputError(f"expected {n} finite comma-separated numbers [{unit}], got {text!r}", field=field)
     return vals
-
-
-def check_axis(axis: int | None) -> None:
-    if axis is not None and axis < 1:
-        raise InputError(f"axis must be >= 1, got {axis}", field="--axis")

@@ -16,7 +16,7 @@ import functools
 import json
 import math
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -27,7 +27,7 @@ from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeElapsedCo
 
 from identify.errors import InputError
 from identify.progress import Advance, plain
-from simulate.run import check_cost  # noqa: F401  (the machining commands' cost check, re-exported)
+from simulate.run import DATA_DIR, check_cost, resolve_robot  # noqa: F401  (the simulation's, named for the commands)
 
 #: Width [characters] of stdout when it is not a terminal: wide enough that no table is folded or cut.
 PIPE_WIDTH = 4096
@@ -50,9 +50,6 @@ class _Console(Console):
 
 out = _Console()
 err = _Console(stderr=True)
-
-#: Folder with the robot files, poses, programs and sample records shipped with the project.
-DATA_DIR = Path(__file__).resolve().parents[1] / "data"
 
 
 def guarded(fn: Callable) -> Callable:
@@ -128,27 +125,19 @@ def progress(description: str, total: float | None = None, enabled: bool = True)
             yield advance
 
 
-def print_summary(title: str, info: dict) -> None:
-    """A two-column (item, value) table of a command's summary on stdout."""
+def print_table(title: str, columns: Sequence[str], rows: Iterable[Sequence[object]], left: int = 1) -> None:
+    """A table on stdout: the first ``left`` columns left-aligned, the others right; floats with 6
+    significant digits. Titles and cells are rich markup (``\\[s]`` for a literal ``[s]``)."""
     from rich.table import Table
 
     table = Table(title=title)
-    table.add_column("item")
-    table.add_column("value", justify="right")
-    for k, v in info.items():
-        table.add_row(str(k), f"{v:.6g}" if isinstance(v, float) else str(v))
+    for i, col in enumerate(columns):
+        table.add_column(col, justify="left" if i < left else "right")
+    for row in rows:
+        table.add_row(*(f"{v:.6g}" if isinstance(v, float) else str(v) for v in row))
     out.print(table)
 
 
-def resolve_robot(name_or_path: str) -> Path:
-    """A robot given by name (``max100`` -> ``data/robots/max100.toml``) or by path."""
-    p = Path(name_or_path)
-    if p.suffix == ".toml" or p.exists():
-        if not p.exists():
-            raise InputError("robot file not found", source=str(p))
-        return p
-    candidate = DATA_DIR / "robots" / f"{name_or_path}.toml"
-    if not candidate.exists():
-        known = sorted(x.stem for x in (DATA_DIR / "robots").glob("*.toml"))
-        raise InputError(f"unknown robot '{name_or_path}' (known: {', '.join(known)})", field="robot")
-    return candidate
+def print_summary(title: str, info: dict[str, Any]) -> None:
+    """A two-column (item, value) table of a command's summary on stdout."""
+    print_table(title, ("item", "value"), info.items())

@@ -8,12 +8,13 @@ and reports progress to an :class:`identify.progress.Advance` (silent by default
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from identify.errors import InputError
-from identify.progress import Advance
+from identify.progress import Advance, Progress, quiet
 
 if TYPE_CHECKING:
     import subprocess
@@ -21,6 +22,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from identify.axis_limits import AxisLimits
+    from identify.diagnosis import DiagnosisResult, SavedDiagnosis
     from identify.metrics import Metrics
     from identify.models import FrictionModel
     from identify.plant import Effect, SynthResult
@@ -70,6 +72,21 @@ def synth_record(trajectory: Path, out_file: Path, *, config: Path | None = None
                      magnitude=magnitude, seed=seed, positions_only=positions_only)
     write_table(res.frame, out_file)
     return res
+
+
+def load_pair(train: Path, test: Path | None, axis: int | None, *, linear: bool = False,
+              cutoff: float | None = None) -> tuple[AxisRecord, AxisRecord | None]:
+    """A training and an optional test record (joint ``axis`` of robot logs, errors naming ``--axis``);
+    ``linear`` declares a linear axis (m, N). The test record is differentiated like the training
+    record (``cutoff`` [Hz], else the one chosen for it): the model learns on that filter."""
+    from identify.records import load_axis_record
+
+    if axis is not None and axis < 1:
+        raise InputError(f"axis must be >= 1, got {axis}", field="--axis")
+    train_rec = load_axis_record(train, axis, linear=True if linear else None, cutoff_hz=cutoff, axis_field="--axis")
+    test_rec = (load_axis_record(test, axis, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz,
+                                 axis_field="--axis") if test is not None else None)
+    return train_rec, test_rec
 
 
 @dataclass
@@ -150,3 +167,73 @@ def wait_until_answers(url: str, proc: subprocess.Popen[Any], timeout_s: float =
             pass
         time.sleep(poll_s)
     return False
+
+
+@dataclass(frozen=True)
+class UIRun:
+    """How :func:`run_ui` ended: the UI's URL, whether it answered, and its exit code."""
+
+    url: str
+    answered: bool
+    code: int
+
+
+def run_ui(host: str, port: int, on_ready: Callable[[str], None], progress: Progress = quiet) -> UIRun:
+    """Start the MLflow UI on the tracking store (:func:`identify.tracking.ui_command`; its own messages
+    go to stderr), call ``on_ready(url)`` once it answers and run it until it exits or Ctrl-C stops it;
+    stop it at once when it does not answer (a taken port)."""
+    import subprocess
+
+    from identify.tracking import ui_command
+
+    if not 0 < port < 65536:
+        raise InputError("must be 1..65535", field="--port")
+    local = {"0.0.0.0": "127.0.0.1", "::": "[::1]"}.get(host, f"[{host}]" if ":" in host else host)
+    url = f"http://{local}:{port}/"
+    proc = subprocess.Popen(ui_command(host, port), stdout=2)
+    try:
+        with progress(f"starting the MLflow UI on port {port}", None):
+            up = wait_until_answers(url, proc)
+        if not up:
+            proc.terminate()
+            return UIRun(url, False, proc.wait())
+        on_ready(url)
+        return UIRun(url, True, proc.wait())
+    except KeyboardInterrupt:
+        proc.terminate()
+        return UIRun(url, True, proc.wait())
+
+
+@dataclass(frozen=True)
+class Diagnosed:
+    """What :func:`diagnose_files` gives: the training record (its derivative note), the diagnosis and
+    where it was saved."""
+
+    train: AxisRecord
+    result: DiagnosisResult
+    saved: SavedDiagnosis
+
+
+def diagnose_files(train: Path, test: Path, out_dir: Path, *, seed: int = 0, generations: int = 30,
+                   threshold: float | None = None, track: bool = True, linear: bool = False,
+                   cutoff: float | None = None, advance: Advance | None = None) -> Diagnosed:
+    """Diagnose a friction record pair (:func:`identify.diagnosis.diagnose`: baseline fit, held-out
+    tests, extended refit) and save it into ``out_dir`` (:func:`identify.diagnosis.save_diagnosis`,
+    with MLflow runs when ``track``). ``threshold`` [-] as a share of the held-out noise RMS (default
+    :data:`identify.diagnosis.SCORE_THRESHOLD`); ``cutoff`` [Hz] for records without qd/qdd."""
+    from identify.diagnosis import SCORE_THRESHOLD, diagnose, save_diagnosis
+    from identify.records import load_record, record_params
+
+    threshold = SCORE_THRESHOLD if threshold is None else threshold
+    if generations < 1:
+        raise InputError("must be >= 1", field="--generations")
+    if not threshold >= 0:
+        raise InputError("must be >= 0", field="--threshold")
+    train_rec = load_record(train, linear=True if linear else None, cutoff_hz=cutoff)
+    test_rec = load_record(test, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
+    if (train_rec.tau_rb is None) != (test_rec.tau_rb is None):
+        raise InputError("both records need a 'tau_rb' column, or neither", source=str(test), field="tau_rb")
+    (advance or Advance()).describe("baseline fit, held-out tests, extended refit")
+    result = diagnose(train_rec, test_rec, seed=seed, generations=generations, threshold=threshold)
+    saved = save_diagnosis(result, train_rec, test_rec, out_dir, track=track, extra_params=record_params(train_rec))
+    return Diagnosed(train_rec, result, saved)

@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     from identify.models import FrictionModel
     from simulate.evaluation.ranking import Components as RankComponents
     from simulate.evaluation.ranking import Ranking, RankSettings
+    from simulate.evaluation.trace import Trace
     from simulate.explain.pipeline import Explanation
     from simulate.machining.simulation import MachiningResult
     from simulate.machining.tools import Cutter
@@ -35,6 +36,23 @@ if TYPE_CHECKING:
     from simulate.toolpath.placement import JointTrajectory, Placement
 
 MM = 1e-3
+#: Folder with the robot files, poses, programs and sample records shipped with the project.
+DATA_DIR = Path(__file__).resolve().parents[1] / "data"
+
+
+def resolve_robot(name_or_path: str) -> Path:
+    """A robot given by name (``max100`` -> ``data/robots/max100.toml``) or by path; ``InputError``
+    naming the file or ``robot`` (with the known names)."""
+    p = Path(name_or_path)
+    if p.suffix == ".toml" or p.exists():
+        if not p.exists():
+            raise InputError("robot file not found", source=str(p))
+        return p
+    candidate = DATA_DIR / "robots" / f"{name_or_path}.toml"
+    if not candidate.exists():
+        known = sorted(x.stem for x in (DATA_DIR / "robots").glob("*.toml"))
+        raise InputError(f"unknown robot '{name_or_path}' (known: {', '.join(known)})", field="robot")
+    return candidate
 
 
 def _folder(out_dir: Path | None, field: str = "out") -> None:
@@ -443,9 +461,9 @@ def train_robot(log: Path, robot: Path, make: Callable[[], FrictionModel], axes:
                 test: Path | None = None, experiment: str = "train-robot", register: bool = True,
                 model_name: str = "", progress: Progress = quiet) -> tuple[list[dict[str, Any]], str]:
     """Fit one friction model (``make()``, called ``model_name``) per robot axis from a six-axis log,
-    split by the rigid-body model into axis records with tau_rb [Nm] (:func:`simulate.robot.prepare.prepare_log`), one MLflow run
-    per axis under a parent run (:func:`identify.tracking.fit_axes`). Gives the per-axis rows and the
-    parent run id."""
+    split by the rigid-body model into axis records with tau_rb [Nm]
+    (:func:`simulate.robot.prepare.prepare_log`), one MLflow run per axis under a parent run
+    (:func:`identify.tracking.fit_axes`). Gives the per-axis rows and the parent run id."""
     import tempfile
 
     from identify.tracking import fit_axes
@@ -513,3 +531,17 @@ def inverse_table(rob: Robot, in_file: Path, out_file: Path, *, q_start: Sequenc
     cols["status"] = [IKStatus(s).name for s in res.status]
     write_table(pd.DataFrame(cols), out_file)
     return int(res.ok.sum()), {s.name: int(np.sum(res.status == s)) for s in IKStatus}
+
+
+def trace_workpiece(workpiece: Path, point: Sequence[float], radius: float, program: Path | None = None) -> Trace:
+    """The program lines and times that machined the surface within ``radius`` [m] of ``point`` [m,
+    workpiece frame] (:func:`simulate.evaluation.trace.trace_point`) of a saved virtual workpiece (a
+    rank-poses pose folder or the .npz); line texts from ``program`` or the one recorded with it."""
+    import numpy as np
+
+    from simulate.evaluation.trace import resolve_workpiece, trace_point
+    from simulate.machining.virtual_workpiece import VirtualWorkpiece
+
+    f, meta = resolve_workpiece(workpiece)
+    prog = str(program) if program is not None else meta.get("program")
+    return trace_point(VirtualWorkpiece.load(f), np.asarray(point, float), radius, program=prog)

@@ -6,7 +6,7 @@ from pathlib import Path
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, guarded, out, print_summary, progress, resolve_robot
+from greybench.support import emit_json, err, print_summary, print_table, progress, resolve_robot
 
 
 def circle(
@@ -62,17 +62,10 @@ def circle(
         return
     print_summary("circle", {"roundness_um": result.roundness_um, "radius_error_um": result.radius_error_um,
                              "largest_spike_um": result.largest_spike_um, "csv": str(csv), "png": str(png)})
-    from rich.table import Table
-
-    table = Table(title="reversal spikes")
-    for col in ("angle [deg]", "joint", "height [µm]"):
-        table.add_column(col, justify="right")
-    for s in result.spikes:
-        table.add_row(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}")
-    out.print(table)
+    print_table("reversal spikes", ("angle [deg]", "joint", "height [µm]"),
+                [(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}") for s in result.spikes], left=0)
     if not result.spikes:
         err.print("no joint reverses along this circle")
 
 
-def register(app: typer.Typer) -> None:
-    app.command("circle")(guarded(circle))
+COMMANDS = {"circle": circle}

@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from greybench import options as o
-from greybench.support import emit_json, guarded, out, progress, resolve_robot
+from greybench.support import emit_json, out, progress, resolve_robot
 from simulate.run import compensate_program
 
 
@@ -59,7 +59,7 @@ def compensate_cmd(
     probe_spacing: o.ProbeSpacing = o.PROBE_SPACING_MM,
     size: o.Size = None,
     friction: o.Friction = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object (deviations in mm).")] = False,
+    as_json: o.Json = False,
 ) -> None:
     """Pre-compensate a program from the simulation: correct the commanded path against the predicted
     tool deviation (deflection, tracking error with friction and backlash) and iterate."""
@@ -73,5 +73,4 @@ def compensate_cmd(
     print_info(info)
 
 
-def register(app: typer.Typer) -> None:
-    app.command("compensate")(guarded(compensate_cmd))
+COMMANDS = {"compensate": compensate_cmd}

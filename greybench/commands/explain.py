@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from greybench import options as o
-from greybench.support import emit_json, guarded, out, progress, resolve_robot
+from greybench.support import emit_json, out, progress, resolve_robot
 from simulate.run import explain_measured
 
 
@@ -63,5 +63,4 @@ def explain(
               (f"; report {out_dir / 'report.md'}" if out_dir is not None else ""))
 
 
-def register(app: typer.Typer) -> None:
-    app.command("explain")(guarded(explain))
+COMMANDS = {"explain": explain}

@@ -8,19 +8,16 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.table import Table
 
 from greybench import options as o
-from greybench.support import emit_json, err, guarded, out, progress, resolve_robot
+from greybench.support import emit_json, err, out, print_table, progress, resolve_robot
 from identify.axis_limits import load_axis_limits
 from identify.errors import InputError
 from identify.metrics import Metrics
 from identify.models import MODELS, FrictionModel, make_seeded, parse_model_names
 from identify.plant import Effect
-from identify.records import AxisRecord, derivative_note, load_axis_record
-from identify.workflows import COMPARE_MODELS, fit_model, make_trajectory, predict_record, synth_record
-
-__all__ = ["COMPARE_MODELS", "register"]
+from identify.records import derivative_note
+from identify.workflows import COMPARE_MODELS, fit_model, load_pair, make_trajectory, predict_record, synth_record
 
 
 class TrajectoryKind(str, Enum):
@@ -30,24 +27,10 @@ class TrajectoryKind(str, Enum):
     presliding = "presliding"
 
 
-def _metrics_table(title: str, rows: dict[str, Metrics], unit: str = "Nm") -> Table:
-    table = Table(title=title)
-    for col in ("record", f"RMSE [{unit}]", "R^2", "NRMSE", f"max error [{unit}]", "samples"):
-        table.add_column(col, justify="right" if col != "record" else "left")
-    for name, m in rows.items():
-        table.add_row(name, f"{m.rmse:.4f}", f"{m.r2:.5f}", f"{m.nrmse:.4f}", f"{m.max_error:.4f}", str(m.n))
-    return table
-
-
-def _params_table(model: FrictionModel) -> Table:
-    table = Table(title=f"{model.name} parameters")
-    table.add_column("parameter")
-    table.add_column("value", justify="right")
-    table.add_column("unit")
-    units = model.param_units()
-    for k, v in model.params_.items():
-        table.add_row(k, f"{v:.6g}", units.get(k, ""))
-    return table
+def _print_metrics(title: str, rows: dict[str, Metrics], unit: str) -> None:
+    print_table(title, ("record", f"RMSE [{unit}]", "R^2", "NRMSE", f"max error [{unit}]", "samples"),
+                [(k, f"{m.rmse:.4f}", f"{m.r2:.5f}", f"{m.nrmse:.4f}", f"{m.max_error:.4f}", m.n)
+                 for k, m in rows.items()])
 
 
 def trajectory(
@@ -60,7 +43,7 @@ def trajectory(
     rate: Annotated[float, typer.Option("--rate", help="Sampling rate [Hz].")] = 1000.0,
     out_file: Annotated[Path, typer.Option("--out", help="Output table, .csv or .parquet: t [s], q [rad], qd [rad/s], "
                                                          "qdd [rad/s^2].")] = ...,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object with the peaks.")] = False,
+    as_json: o.Json = False,
 ) -> None:
     """Generate an excitation trajectory within the axis's position, velocity [rad/s],
     acceleration [rad/s^2] and jerk [rad/s^3] limits from the robot file."""
@@ -97,7 +80,7 @@ def synth(
                                                                 "config).")] = None,
     positions_only: Annotated[bool, typer.Option("--positions-only", help="Write no qd/qdd (they must then be "
                                                                           "derived).")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object describing the record.")] = False,
+    as_json: o.Json = False,
 ) -> None:
     """Simulate one joint (inertia, LuGre friction, sensor noise, optional hidden effect) following
     a trajectory; writes t [s], q [rad], qd [rad/s], qdd [rad/s^2], tau [Nm], temp [degC], tau_load [Nm]."""
@@ -114,10 +97,6 @@ def synth(
 
 def _make(model: str, seed: int, epochs: int | None) -> FrictionModel:
     return make_seeded(model, seed, epochs, model_field="--model", epochs_field="--epochs")
-
-
-def _load(path: Path, axis: int | None, linear: bool | None, cutoff: float | None) -> AxisRecord:
-    return load_axis_record(path, axis, linear=linear, cutoff_hz=cutoff, axis_field="--axis")
 
 
 def fit(
@@ -146,11 +125,8 @@ def fit(
     record has tau_rb [Nm]); track it in MLflow, save it, print RMSE [Nm], R^2, NRMSE, max error [Nm]."""
     from simulate.coupling import coupling_warnings
 
-    o.check_axis(axis)
     est = _make(model, seed, epochs)
-    train_rec = _load(train, axis, True if linear else None, cutoff)
-    # the test record is differentiated like the training record (the model learned on that filter)
-    test_rec = _load(test, axis, train_rec.linear, cutoff or train_rec.cutoff_hz) if test else None
+    train_rec, test_rec = load_pair(train, test, axis, linear=linear, cutoff=cutoff)
     robot_file = resolve_robot(robot)
     warnings = coupling_warnings(train_rec, robot_file, axis)
     for w in warnings:
@@ -168,9 +144,11 @@ def fit(
                    "out": str(out_dir) if out_dir else None, "run": run.to_dict() if run else None,
                    **{k: v.to_dict() for k, v in res.metrics.items()}})
         return
-    out.print(_params_table(est))
+    units = est.param_units()
+    print_table(f"{est.name} parameters", ("parameter", "value", "unit"),
+                [(k, f"{v:.6g}", units.get(k, "")) for k, v in est.params_.items()])
     where = f", saved to {out_dir}" if out_dir else ""
-    out.print(_metrics_table(f"{model}: fit in {res.fit_time:.2f} s{where}", res.metrics, train_rec.units["tau"]))
+    _print_metrics(f"{model}: fit in {res.fit_time:.2f} s{where}", res.metrics, train_rec.units["tau"])
     if run:
         reg = f"; registered {run.registered} v{run.version} as {run.alias}" if run.registered else ""
         out.print(f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}")
@@ -190,7 +168,7 @@ def predict(
     cutoff: Annotated[float | None, typer.Option("--cutoff", help="Derivative cut-off [Hz] for records without "
                                                                   "qd/qdd (default: the one the model was fitted "
                                                                   "with, else chosen from the record).")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print metrics as one JSON object.")] = False,
+    as_json: o.Json = False,
 ) -> None:
     """Predict a record with a fitted model: the friction tau_friction_pred [Nm] and the total
     joint torque tau_pred [Nm], comparable to the measured tau.
@@ -201,16 +179,16 @@ def predict(
     tau_pred = tau_friction_pred + J*qdd + c. The metrics compare tau_pred with tau."""
     from identify.tracking import load_any_model
 
-    o.check_axis(axis)
     est = load_any_model(model_ref)
-    rec = _load(data, axis, getattr(est, "linear_", None) or None, cutoff or getattr(est, "cutoff_hz_", None))
+    rec, _ = load_pair(data, None, axis, linear=bool(getattr(est, "linear_", False)),
+                       cutoff=cutoff or getattr(est, "cutoff_hz_", None))
     _, m = predict_record(est, rec, out_file, source=str(data))
     if as_json:
         emit_json({"model": est.name, "out": str(out_file), "metrics": m.to_dict(),
                    "derivative_cutoff_hz": rec.cutoff_hz})
     else:
         out.print(derivative_note(rec), highlight=False)
-        out.print(_metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"]))
+        _print_metrics(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"])
 
 
 def compare(
@@ -235,10 +213,9 @@ def compare(
     fit time [s] and parameter count; every fit is a run of one MLflow experiment."""
     from identify.tracking import compare_models
 
-    o.check_axis(axis)
     names = parse_model_names(models, COMPARE_MODELS, "--models")
-    train_rec = _load(train, axis, True if linear else None, cutoff)
-    test_rec = _load(test, axis, train_rec.linear, cutoff or train_rec.cutoff_hz)
+    train_rec, test_rec = load_pair(train, test, axis, linear=linear, cutoff=cutoff)
+    assert test_rec is not None
     robot_name = resolve_robot(robot).stem
     models_ = [_make(name, seed, epochs) for name in names]  # unknown names and bad --epochs fail first
     with progress("compare", total=len(names) + (1 if track else 0)) as advance:
@@ -249,16 +226,12 @@ def compare(
         emit_json({"experiment": experiment if track else None, "parent_run_id": parent, "axis": axis or 1,
                    "rows": rows})
         return
-    table = Table(title=f"compare on {test} (axis {axis or 1}), sorted by test RMSE")
-    u = train_rec.units["tau"]
-    # units escaped: rich would read "[s]" as markup
-    for col in ("rank", "model", f"test RMSE \\[{u}]", "test R^2", f"train RMSE \\[{u}]", "fit time \\[s]",
-                "parameters"):
-        table.add_column(col, justify="left" if col == "model" else "right")
-    for i, r in enumerate(rows, 1):
-        table.add_row(str(i), r["model"], f"{r['test_rmse']:.4f}", f"{r['test_r2']:.5f}", f"{r['train_rmse']:.4f}",
-                      f"{r['fit_time_s']:.1f}", str(r["n_parameters"]))
-    out.print(table)
+    u = train_rec.units["tau"]  # units escaped: rich would read "[s]" as markup
+    print_table(f"compare on {test} (axis {axis or 1}), sorted by test RMSE",
+                ("rank", "model", f"test RMSE \\[{u}]", "test R^2", f"train RMSE \\[{u}]", "fit time \\[s]",
+                 "parameters"),
+                [(i, r["model"], f"{r['test_rmse']:.4f}", f"{r['test_r2']:.5f}", f"{r['train_rmse']:.4f}",
+                  f"{r['fit_time_s']:.1f}", r["n_parameters"]) for i, r in enumerate(rows, 1)], left=2)
     if parent:
         out.print(f"MLflow experiment '{experiment}', parent run {parent}; open it with: greybench ui")
 
@@ -296,20 +269,17 @@ def train_robot(
         emit_json({"parent_run_id": parent, "experiment": experiment, "model": model, "robot": robot_file.stem,
                    "axes": rows})
         return
-    table = Table(title=f"train-robot {robot_file.stem}: {model} per axis (parent run {parent})")
-    for col in ("axis", "train RMSE [Nm]", "train R^2", "test RMSE [Nm]", "fit time \\[s]", "registered", "run"):
-        table.add_column(col)
-    for r in rows:
-        table.add_row(str(r["axis"]), f"{r['train_rmse']:.4f}", f"{r['train_r2']:.4f}",
-                      f"{r['test_rmse']:.4f}" if "test_rmse" in r else "-", f"{r['fit_time_s']:.1f}",
-                      f"{r['registered']} v{r['version']} ({r['alias']})" if r["registered"] else "-", r["run_id"])
-    out.print(table)
+    print_table(f"train-robot {robot_file.stem}: {model} per axis (parent run {parent})",
+                ("axis", "train RMSE [Nm]", "train R^2", "test RMSE [Nm]", "fit time \\[s]", "registered", "run"),
+                [(r["axis"], f"{r['train_rmse']:.4f}", f"{r['train_r2']:.4f}",
+                  f"{r['test_rmse']:.4f}" if "test_rmse" in r else "-", f"{r['fit_time_s']:.1f}",
+                  f"{r['registered']} v{r['version']} ({r['alias']})" if r["registered"] else "-", r["run_id"])
+                 for r in rows])
 
 
 def promote(
     name: Annotated[str, typer.Option("--name", help="Registered model, e.g. max100-axis1-friction.")] = ...,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the decision as one JSON object (RMSE in "
-                                                         "Nm).")] = False,
+    as_json: o.Json = False,
 ) -> None:
     """Make the 'challenger' version 'champion': at once when there is no champion yet, otherwise
     only if its test RMSE [Nm] is lower; say by how much."""
@@ -331,37 +301,25 @@ def ui(
     """Start the MLflow UI on the tracking store (MLFLOW_TRACKING_URI or ./mlruns.db); its URL is
     printed once the UI answers (starting takes seconds to a minute), then it runs until Ctrl-C."""
     import shlex
-    import subprocess
 
     from identify.tracking import ui_command
-    from identify.workflows import wait_until_answers
+    from identify.workflows import run_ui
 
-    if not 0 < port < 65536:
-        raise InputError("must be 1..65535", field="--port")
-    cmd = ui_command(host, port)
     if print_only:
-        out.print(" ".join(shlex.quote(c) for c in cmd), highlight=False, soft_wrap=True)
+        out.print(" ".join(shlex.quote(c) for c in ui_command(host, port)), highlight=False, soft_wrap=True)
         return
-    local = {"0.0.0.0": "127.0.0.1", "::": "[::1]"}.get(host, f"[{host}]" if ":" in host else host)
-    url = f"http://{local}:{port}/"
-    proc = subprocess.Popen(cmd, stdout=2)  # mlflow's own messages to stderr: stdout carries only the URL
-    try:
-        with progress(f"starting the MLflow UI on port {port}"):
-            up = wait_until_answers(url, proc)
-        if not up:
-            proc.terminate()
-            err.print(f"error: the MLflow UI did not answer at {url} (exit code {proc.wait()}; is the port taken?)",
-                      highlight=False, markup=False, soft_wrap=True)
-            raise typer.Exit(code=1)
+
+    def ready(url: str) -> None:  # stdout carries only the URL
         out.print(f"MLflow UI: {url}", highlight=False, soft_wrap=True)
         sys.stdout.flush()
-        raise typer.Exit(code=proc.wait())
-    except KeyboardInterrupt:
-        proc.terminate()
-        raise typer.Exit(code=proc.wait()) from None
+
+    run = run_ui(host, port, ready, progress=progress)
+    if not run.answered:
+        err.print(f"error: the MLflow UI did not answer at {run.url} (exit code {run.code}; is the port taken?)",
+                  highlight=False, markup=False, soft_wrap=True)
+        raise typer.Exit(code=1)
+    raise typer.Exit(code=run.code)
 
 
-def register(app: typer.Typer) -> None:
-    for name, fn in (("trajectory", trajectory), ("synth", synth), ("fit", fit), ("predict", predict),
-                     ("compare", compare), ("train-robot", train_robot), ("promote", promote), ("ui", ui)):
-        app.command(name)(guarded(fn))
+COMMANDS = {"trajectory": trajectory, "synth": synth, "fit": fit, "predict": predict, "compare": compare,
+            "train-robot": train_robot, "promote": promote, "ui": ui}

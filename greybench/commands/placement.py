@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, guarded, out, print_summary, progress, resolve_robot
+from greybench.support import emit_json, out, print_summary, progress, resolve_robot
 from simulate.run import optimize_placement
 
 
@@ -59,5 +59,4 @@ def optimize_pose_cmd(
               f"--poses {out_dir / 'best.json'} --size {res.size} --spacing {spacing:g}")
 
 
-def register(app: typer.Typer) -> None:
-    app.command("optimize-pose")(guarded(optimize_pose_cmd))
+COMMANDS = {"optimize-pose": optimize_pose_cmd}

@@ -5,10 +5,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.table import Table
 
 from greybench import options as o
-from greybench.support import emit_json, guarded, out, print_summary, resolve_robot
+from greybench.support import emit_json, guarded, out, print_summary, print_table, resolve_robot
 from identify.errors import InputError
 from simulate.robot.model import load_robot
 
@@ -72,7 +71,7 @@ def prepare(
     out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for axis1..axis6 records (format of the "
                                                             "log).")] = ...,
     window: Annotated[float, typer.Option("--window", help="Savitzky-Golay window for qd, qdd (s).")] = 0.021,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object with the written files.")] = False,
+    as_json: JsonRun = False,
 ) -> None:
     """Split a six-axis log into axis records with tau_rb (RNEA) and tau_load (gravity/payload), in Nm."""
     from simulate.robot.prepare import prepare_log
@@ -86,16 +85,10 @@ def prepare(
     if as_json:
         emit_json(info)
         return
-    table = Table(title=f"prepare ({r.name}): {res.n_samples} samples at {res.dt * 1e3:.3g} ms")
-    table.add_column("axis")
-    table.add_column("record")
-    for i, p in enumerate(res.paths):
-        table.add_row(f"A{i + 1}", str(p))
-    out.print(table)
+    print_table(f"prepare ({r.name}): {res.n_samples} samples at {res.dt * 1e3:.3g} ms", ("axis", "record"),
+                [(f"A{i + 1}", p) for i, p in enumerate(res.paths)], left=2)
 
 
-def register(app: typer.Typer) -> None:
-    robot_app.command("fk")(guarded(fk_cmd))
-    robot_app.command("ik")(guarded(ik_cmd))
-    app.add_typer(robot_app, name="robot")
-    app.command("prepare")(guarded(prepare))
+robot_app.command("fk")(guarded(fk_cmd))
+robot_app.command("ik")(guarded(ik_cmd))
+COMMANDS = {"robot": robot_app, "prepare": prepare}

@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, guarded, print_summary, progress, resolve_robot
+from greybench.support import emit_json, print_summary, progress, resolve_robot
 
 
 def testpiece(
@@ -67,6 +67,4 @@ def interpolate_cmd(
     print_summary(f"{program.name} on {res.robot}, pose {res.placement.name}", res.summary)
 
 
-def register(app: typer.Typer) -> None:
-    app.command("testpiece")(guarded(testpiece))
-    app.command("interpolate")(guarded(interpolate_cmd))
+COMMANDS = {"testpiece": testpiece, "interpolate": interpolate_cmd}
