@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 import typer
@@ -12,6 +13,10 @@ from rich.table import Table
 from greybench.support import DATA_DIR, out, resolve_robot
 from identify.errors import InputError
 from simulate.run import cutter_from_robot, machining_job
+
+if TYPE_CHECKING:
+    from simulate.robot.model import Robot
+    from simulate.toolpath.placement import JointTrajectory, Placement
 
 
 def bench_machining(
@@ -48,7 +53,7 @@ def bench_machining(
 
     if threads < 1:
         raise InputError(f"threads must be >= 1, got {threads}", field="threads")
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]  # set at run time
     program = DATA_DIR / "programs" / "iso320.nc"
     pose = DATA_DIR / "poses" / "iso320.json"
     t0 = time.perf_counter()
@@ -56,7 +61,9 @@ def bench_machining(
 
     job = machining_job(program, resolve_robot("max100"), pose, None, spacing_mm=spacing)
     pj = prepare(job)
-    placement, rob, jt, cutter = job.placement, pj.robot, pj.trajectory, cutter_from_robot(pj.robot)
+    # the pipeline's stages are typed object: named here
+    placement, rob, jt = cast(Placement, job.placement), cast(Robot, pj.robot), cast(JointTrajectory, pj.trajectory)
+    cutter = cutter_from_robot(rob)
     wp = stock_workpiece(pj.program, job.settings)
     t_prep = time.perf_counter() - t0
     n = len(jt.t) if max_steps <= 0 else min(max_steps, len(jt.t))

@@ -332,25 +332,16 @@ def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *
 
 
 # ---- compensation, explain --------------------------------------------------------------------
-def compensate_program(program: Path, robot: Path, pose: Path, name: str | None, out_dir: Path, *,
-                       iterations: int = 4, stiffness_scale: float = 1.0, check_scales: Sequence[float] = (),
-                       gain: float = 1.0, spacing_mm: float = defaults.RANKING_DEXEL_SPACING / MM,
-                       probe_spacing_mm: float = defaults.PROBE_SPACING / MM, size: int | None = None,
-                       friction: dict[int, str] | None = None, progress: Progress = quiet) -> dict[str, Any]:
-    """Pre-compensate a program (:func:`simulate.compensation_report.run_compensation`: outputs and the
-    summary with deviations in mm). Progress in simulated 2 ms steps: the original, the iterations,
-    two runs per extra stiffness multiplier."""
-    from simulate.compensation_report import run_compensation
+def compensation_steps(program: Path, iterations: int = 4, stiffness_scale: float = 1.0,
+                       check_scales: Sequence[float] = ()) -> int:
+    """The progress total of :func:`simulate.compensation_report.run_compensation` in simulated 2 ms
+    steps: the original, the iterations, two runs per stiffness multiplier [-] other than 1."""
     from simulate.pipeline import load_program
 
     _program(program)
     n = len(load_program(program, require_spindle=True).interp.t)
     scales = {float(stiffness_scale), *map(float, check_scales)} - {1.0}
-    with progress("compensating", n * (iterations + 1 + 2 * len(scales))) as adv:
-        return run_compensation(program, robot, pose, name, out_dir, iterations=iterations,
-                                stiffness_scale=stiffness_scale, check_scales=tuple(check_scales), gain=gain,
-                                spacing_mm=spacing_mm, probe_spacing_mm=probe_spacing_mm, size=size,
-                                friction=dict(friction or {}), advance=adv)
+    return n * (iterations + 1 + 2 * len(scales))
 
 
 def write_explanation(ex: Explanation, out_dir: Path, measured_name: str) -> None:

@@ -2,17 +2,18 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import cast
 
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, print_summary, print_table, progress, resolve_robot
+from greybench.support import emit_json, err, out, print_summary, progress, resolve_robot
 
 
 def circle(
-    robot: o.Robot = "max100",
-    pose: o.Pose = ...,
-    name: o.PoseName = None,
+    robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
+    pose: Path = typer.Option(..., "--pose", help="Pose file (JSON) [m, rad]."),
+    name: str | None = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
     radius_mm: float = typer.Option(50.0, "--radius-mm", help="Circle radius [mm]."),
     feed_mm_min: float = typer.Option(2000.0, "--feed-mm-min", help="Feed along the circle [mm/min]."),
     plane: str = typer.Option("xy", "--plane", help="Plane of the workpiece frame: xy, yz or zx."),
@@ -26,7 +27,7 @@ def circle(
                                          help="Factor on every joint's Coulomb and static friction levels [-]."),
     ff_friction: bool = typer.Option(False, "--ff-friction",
                                      help="NC friction feed-forward on (off: the NC does not know the friction)."),
-    as_json: o.Json = False,
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
     """Simulate a circle through the machining pipeline (drives, friction models, no cutting) and
     evaluate it as a ballbar test.
@@ -35,13 +36,14 @@ def circle(
     deviation magnified, reversal spikes marked with the joint) and summary.json, prints roundness_um,
     radius_error_um and reversal_spikes (angle [deg], joint, height [µm]).
     """
-    from simulate.evaluation.circle import CircleSpec, evaluate_run, simulate_circle, write_outputs
+    from simulate.evaluation.circle import CircleSpec, Plane, evaluate_run, simulate_circle, write_outputs
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import load_poses, select_pose
 
     centre = o.numbers(center_mm, 3, "center-mm", "mm") if center_mm is not None else (0.0, 0.0, 0.0)
-    spec = CircleSpec(radius=radius_mm * 1e-3, feed=feed_mm_min / 6e4, plane=plane.lower(),
-                      center=tuple(v / o.MM_PER_M for v in centre), ccw=not cw)
+    # CircleSpec checks the plane and makes it a Plane
+    spec = CircleSpec(radius=radius_mm * 1e-3, feed=feed_mm_min / 6e4, plane=cast(Plane, plane.lower()),
+                      center=tuple(v * 1e-3 for v in centre), ccw=not cw)
     placement = select_pose(load_poses(pose), name, source=str(pose))
     rob = load_robot(resolve_robot(robot))
     with progress("circle: simulating", total=None) as advance:
@@ -62,8 +64,14 @@ def circle(
         return
     print_summary("circle", {"roundness_um": result.roundness_um, "radius_error_um": result.radius_error_um,
                              "largest_spike_um": result.largest_spike_um, "csv": str(csv), "png": str(png)})
-    print_table("reversal spikes", ("angle [deg]", "joint", "height [µm]"),
-                [(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}") for s in result.spikes], left=0)
+    from rich.table import Table
+
+    table = Table(title="reversal spikes")
+    for col in ("angle [deg]", "joint", "height [µm]"):
+        table.add_column(col, justify="right")
+    for s in result.spikes:
+        table.add_row(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}")
+    out.print(table)
     if not result.spikes:
         err.print("no joint reverses along this circle")
 

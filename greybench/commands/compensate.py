@@ -10,7 +10,7 @@ from rich.table import Table
 
 from greybench import options as o
 from greybench.support import emit_json, out, progress, resolve_robot
-from simulate.run import compensate_program
+from simulate.run import compensation_steps
 
 
 def print_info(info: dict[str, Any]) -> None:
@@ -38,13 +38,13 @@ def print_info(info: dict[str, Any]) -> None:
 
 
 def compensate_cmd(
-    program: o.Program = ...,
-    robot: o.Robot = "max100",
-    pose: o.Pose = ...,
-    name: o.PoseName = None,
+    program: o.Program,
+    pose: o.Pose,
     out_dir: Annotated[Path, typer.Option("--out", help="Output folder: compensated.nc, compensated.stock.json, "
                                                         "offsets.csv [mm, rad], feedforward.csv [Nm], report.md, "
-                                                        "deviation.png.")] = ...,
+                                                        "deviation.png.")],
+    robot: o.Robot = "max100",
+    name: o.PoseName = None,
     iterations: Annotated[int, typer.Option("--iterations", help="Largest number of corrected programs simulated "
                                                                  "[-].")] = 4,
     stiffness_scale: Annotated[float, typer.Option("--stiffness-scale", help="Joint stiffness multiplier [-] of the "
@@ -63,10 +63,14 @@ def compensate_cmd(
 ) -> None:
     """Pre-compensate a program from the simulation: correct the commanded path against the predicted
     tool deviation (deflection, tracking error with friction and backlash) and iterate."""
-    info = compensate_program(program, resolve_robot(robot), pose, name, out_dir, iterations=iterations,
-                              stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
-                              spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
-                              friction=o.friction_refs(friction), progress=progress)
+    from simulate.compensation_report import run_compensation
+
+    steps = compensation_steps(program, iterations, stiffness_scale, check_scale or ())
+    with progress("compensating", total=steps) as adv:
+        info = run_compensation(program, resolve_robot(robot), pose, name, out_dir, iterations=iterations,
+                                stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
+                                spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
+                                friction=o.friction_refs(friction), advance=adv)
     if as_json:
         emit_json(info)
         return

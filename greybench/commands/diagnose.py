@@ -17,11 +17,11 @@ from identify.workflows import diagnose_files
 def diagnose(
     train: Annotated[Path, typer.Option("--train", help="Training axis record (.csv/.parquet; t [s], q [rad], tau "
                                                         "[Nm], optional qd [rad/s], qdd [rad/s^2], temp [degC], "
-                                                        "tau_load [Nm]).")] = ...,
+                                                        "tau_load [Nm]).")],
     test: Annotated[Path, typer.Option("--test", help="Held-out axis record of the same joint (same columns, SI "
-                                                      "units).")] = ...,
+                                                      "units).")],
     out_dir: Annotated[Path, typer.Option("--out", help="Output folder: the extended model (params.json), baseline/, "
-                                                        "report.md with PNG plots, diagnosis.json.")] = ...,
+                                                        "report.md with PNG plots, diagnosis.json.")],
     seed: Annotated[int, typer.Option("--seed", help="Seed of the baseline's genetic algorithm [-].")] = 0,
     generations: Annotated[int, typer.Option("--generations", help="GA generations of the LuGre baseline [-].")] = 30,
     threshold: Annotated[float, typer.Option("--threshold", help="Held-out RMS torque a cause must explain to be "

@@ -44,9 +44,9 @@ def print_ranking(r: Ranking) -> None:
 
 
 def rank_poses_cmd(
-    program: o.Program = ...,
+    program: o.Program,
+    poses: o.Poses,
     robot: o.Robot = "max100",
-    poses: o.Poses = ...,
     out_dir: Annotated[Path | None, typer.Option("--out", help="Output folder: report.md, images/, per pose scan.csv "
                                                                "[m] and workpiece.npz.")] = None,
     spacing: Annotated[float, typer.Option("--spacing", help="Dexel spacing [mm] (coarser grids make the cutting "

@@ -16,11 +16,11 @@ from simulate.run import explain_measured
 def explain(
     measured: Annotated[Path, typer.Option("--measured", help="CMM scan CSV 'feature,x,y,z' [m, workpiece frame], or "
                                                               "the feature deviation table JSON of rank-poses --json "
-                                                              "[mm].")] = ...,
-    program: o.Program = ...,
+                                                              "[mm].")],
+    program: o.Program,
+    pose: o.Pose,
     robot: Annotated[str, typer.Option("--robot", help="Nominal robot: name in data/robots or a TOML path "
                                                        "[SI].")] = "max100",
-    pose: o.Pose = ...,
     name: o.PoseName = None,
     out_dir: Annotated[Path | None, typer.Option("--out", help="Output folder: report.md with PNGs, the calibrated "
                                                                "robot file robot_calibrated.toml, explain.json.")]

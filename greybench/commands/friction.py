@@ -37,12 +37,12 @@ def trajectory(
     kind: Annotated[TrajectoryKind, typer.Argument(help="universal | test (Universal Trajectory and its test "
                                                         "variant), stribeck (constant-velocity steps) | presliding "
                                                         "(slow motion).")],
+    out_file: Annotated[Path, typer.Option("--out", help="Output table, .csv or .parquet: t [s], q [rad], qd [rad/s], "
+                                                         "qdd [rad/s^2].")],
     axis: Annotated[int, typer.Option("--axis", help="Joint number 1..6 whose limits apply.")] = 1,
     robot: o.Robot = "max100",
     duration: Annotated[float, typer.Option("--duration", help="Duration [s] (universal, test, presliding).")] = 60.0,
     rate: Annotated[float, typer.Option("--rate", help="Sampling rate [Hz].")] = 1000.0,
-    out_file: Annotated[Path, typer.Option("--out", help="Output table, .csv or .parquet: t [s], q [rad], qd [rad/s], "
-                                                         "qdd [rad/s^2].")] = ...,
     as_json: o.Json = False,
 ) -> None:
     """Generate an excitation trajectory within the axis's position, velocity [rad/s],
@@ -65,8 +65,8 @@ def trajectory(
 
 def synth(
     trajectory_file: Annotated[Path, typer.Option("--trajectory", help="Trajectory table (t [s], q [rad], optional "
-                                                                       "qd, qdd).")] = ...,
-    out_file: Annotated[Path, typer.Option("--out", help="Output axis record, .csv or .parquet.")] = ...,
+                                                                       "qd, qdd).")],
+    out_file: Annotated[Path, typer.Option("--out", help="Output axis record, .csv or .parquet.")],
     effect: Annotated[Effect, typer.Option("--effect", help="Hidden effect the plain LuGre model does not "
                                                             "know.")] = Effect.NONE,
     magnitude: Annotated[float, typer.Option("--magnitude", help="Scale of the effect's strength (1 = "
@@ -100,10 +100,10 @@ def _make(model: str, seed: int, epochs: int | None) -> FrictionModel:
 
 
 def fit(
-    model: Annotated[str, typer.Option("--model", help=f"Model name: {', '.join(MODELS)}.")] = ...,
+    model: Annotated[str, typer.Option("--model", help=f"Model name: {', '.join(MODELS)}.")],
     train: Annotated[Path, typer.Option("--train", help="Training axis record, or robot log (t, q1..qN, tau1..tauN) "
                                                         "with --axis (.csv/.parquet; SI: t [s], q [rad], tau [Nm], "
-                                                        "...).")] = ...,
+                                                        "...).")],
     test: Annotated[Path | None, typer.Option("--test", help="Test record (same format) for held-out metrics "
                                                              "[Nm].")] = None,
     out_dir: Annotated[Path | None, typer.Option("--out", help="Folder for the fitted model (params.json with units, "
@@ -156,14 +156,14 @@ def fit(
 
 def predict(
     model_ref: Annotated[str, typer.Option("--model", help="Saved model folder, runs:/<run_id>/model or "
-                                                           "models:/<name>@<alias>.")] = ...,
+                                                           "models:/<name>@<alias>.")],
     data: Annotated[Path, typer.Option("--data", help="Axis record to predict (.csv/.parquet), or a robot log with "
-                                                      "--axis.")] = ...,
+                                                      "--axis.")],
     out_file: Annotated[Path, typer.Option("--out", help="Output table: the input columns plus tau_friction_pred "
                                                          "[Nm] (the friction) and tau_pred [Nm] (the total joint "
                                                          "torque: tau_friction_pred + tau_rb when the model was "
                                                          "fitted with tau_rb, else tau_friction_pred + J*qdd + "
-                                                         "c).")] = ...,
+                                                         "c).")],
     axis: o.Axis = None,
     cutoff: Annotated[float | None, typer.Option("--cutoff", help="Derivative cut-off [Hz] for records without "
                                                                   "qd/qdd (default: the one the model was fitted "
@@ -193,9 +193,9 @@ def predict(
 
 def compare(
     train: Annotated[Path, typer.Option("--train", help="Training axis record (or robot log with --axis), SI "
-                                                        "units.")] = ...,
+                                                        "units.")],
     test: Annotated[Path, typer.Option("--test", help="Test axis record (same format); the table is sorted by its "
-                                                      "RMSE [Nm].")] = ...,
+                                                      "RMSE [Nm].")],
     models: Annotated[str | None, typer.Option("--models", help="Comma-separated models (default: "
                                                                 f"{','.join(COMPARE_MODELS)}).")] = None,
     axis: o.Axis = None,
@@ -238,7 +238,7 @@ def compare(
 
 def train_robot(
     log: Annotated[Path, typer.Option("--log", help="Six-axis log: t [s], q1..q6 [rad], tau1..tau6 [Nm] "
-                                                    "(.csv/.parquet).")] = ...,
+                                                    "(.csv/.parquet).")],
     robot: o.Robot = "max100",
     model: Annotated[str, typer.Option("--model", help=f"Model name: {', '.join(MODELS)}.")] = "greybox",
     test: Annotated[Path | None, typer.Option("--test", help="Six-axis test log (same format) for test metrics "
@@ -278,7 +278,7 @@ def train_robot(
 
 
 def promote(
-    name: Annotated[str, typer.Option("--name", help="Registered model, e.g. max100-axis1-friction.")] = ...,
+    name: Annotated[str, typer.Option("--name", help="Registered model, e.g. max100-axis1-friction.")],
     as_json: o.Json = False,
 ) -> None:
     """Make the 'challenger' version 'champion': at once when there is no champion yet, otherwise

@@ -15,12 +15,12 @@ __all__ = ["COMMANDS", "cutter_from_robot"]  # the robot file's cutter, named he
 
 
 def machine(
-    program: o.Program = ...,
-    robot: o.Robot = "max100",
-    pose: o.Pose = ...,
-    name: o.PoseName = None,
+    program: o.Program,
+    pose: o.Pose,
     out_dir: Annotated[Path, typer.Option("--out", help="Output folder for the virtual workpiece (npz, m), PLY/GLB, "
-                                                        "PNG, scan.csv (m).")] = ...,
+                                                        "PNG, scan.csv (m).")],
+    robot: o.Robot = "max100",
+    name: o.PoseName = None,
     ideal: Annotated[bool, typer.Option("--ideal", help="No deflection, no tracking error, no backlash.")] = False,
     spacing: o.Spacing = o.PART_SPACING_MM,
     no_deflection: Annotated[bool, typer.Option("--no-deflection", help="Switch off the robot deflection.")] = False,

@@ -14,14 +14,14 @@ from simulate.run import optimize_placement
 
 
 def optimize_pose_cmd(
-    program: o.Program = ...,
-    robot: o.Robot = "max100",
+    program: o.Program,
     poses: Annotated[Path, typer.Option("--poses", help="Pose file (JSON) [m, rad]: the baseline, and where the "
-                                                        "search box lies.")] = ...,
+                                                        "search box lies.")],
     out_dir: Annotated[Path, typer.Option("--out", help="Output folder: best.json, report.md, heatmap.png, "
-                                                        "history.csv, summary.json.")] = ...,
+                                                        "history.csv, summary.json.")],
     budget_s: Annotated[float, typer.Option("--budget-s", help="Wall time for all simulations [s], the given "
-                                                               "poses' included.")] = ...,
+                                                               "poses' included.")],
+    robot: o.Robot = "max100",
     workers: o.Workers = 2,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the sampler [-].")] = 0,
     spacing: o.Spacing = o.RANKING_SPACING_MM,

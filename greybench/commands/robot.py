@@ -16,10 +16,10 @@ JsonRun = Annotated[bool, typer.Option("--json", help="Print one JSON object sum
 
 
 def fk_cmd(
-    robot: o.Robot = "max100",
-    in_file: Annotated[Path, typer.Option("--in", help="Joint table (.csv/.parquet), columns q1..q6 (rad).")] = ...,
+    in_file: Annotated[Path, typer.Option("--in", help="Joint table (.csv/.parquet), columns q1..q6 (rad).")],
     out_file: Annotated[Path, typer.Option("--out", help="Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, "
-                                                         "qz.")] = ...,
+                                                         "qz.")],
+    robot: o.Robot = "max100",
     flange: Annotated[bool, typer.Option("--flange", help="Flange pose instead of the TCP pose (m).")] = False,
     as_json: JsonRun = False,
 ) -> None:
@@ -37,11 +37,11 @@ def fk_cmd(
 
 
 def ik_cmd(
-    robot: o.Robot = "max100",
     in_file: Annotated[Path, typer.Option("--in", help="Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, "
-                                                       "qz.")] = ...,
+                                                       "qz.")],
     out_file: Annotated[Path, typer.Option("--out", help="Joint table (.csv/.parquet): q1..q6 (rad), ok, "
-                                                         "status.")] = ...,
+                                                         "status.")],
+    robot: o.Robot = "max100",
     q_start: Annotated[str | None, typer.Option("--q-start", help="Start configuration 'q1,..,q6' (rad); default: "
                                                                   "mid of the limits for axes 2, 3, 5 (0 for 1, 4, "
                                                                   "6).")] = None,
@@ -65,11 +65,11 @@ def ik_cmd(
 
 
 def prepare(
-    robot: o.Robot = "max100",
     log: Annotated[Path, typer.Option("--log", help="Six-axis log: t (s), q1..q6 (rad), tau1..tau6 (Nm), temp1..6 "
-                                                    "(degC).")] = ...,
+                                                    "(degC).")],
     out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for axis1..axis6 records (format of the "
-                                                            "log).")] = ...,
+                                                            "log).")],
+    robot: o.Robot = "max100",
     window: Annotated[float, typer.Option("--window", help="Savitzky-Golay window for qd, qdd (s).")] = 0.021,
     as_json: JsonRun = False,
 ) -> None:

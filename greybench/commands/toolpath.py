@@ -11,9 +11,9 @@ from greybench.support import emit_json, print_summary, progress, resolve_robot
 
 
 def testpiece(
-    size: Annotated[int, typer.Option("--size", help="Test piece size [mm]: 160 or 320.")] = 320,
     out_file: Annotated[Path, typer.Option("--out", help="G-code output (.nc); the stock goes to "
-                                                         "<stem>.stock.json.")] = ...,
+                                                         "<stem>.stock.json.")],
+    size: Annotated[int, typer.Option("--size", help="Test piece size [mm]: 160 or 320.")] = 320,
     tool_diameter: Annotated[float, typer.Option("--tool-diameter", help="Flat end mill diameter [mm].")] = 10.0,
     allowance: Annotated[float, typer.Option("--allowance", help="Finishing allowance on the stock walls "
                                                                  "[mm].")] = 0.5,
@@ -42,12 +42,12 @@ def testpiece(
 
 def interpolate_cmd(
     program: Annotated[Path, typer.Option("--program", help="G-code program (lengths in mm or inch as "
-                                                            "programmed).")] = ...,
-    robot: o.Robot = "max100",
-    pose: o.Pose = ...,
-    name: o.PoseName = None,
+                                                            "programmed).")],
+    pose: o.Pose,
     out_file: Annotated[Path, typer.Option("--out", help="Output .csv or .parquet: t [s], line, x y z [m], q1..q6 "
-                                                         "[rad], qd1..qd6 [rad/s], switch.")] = ...,
+                                                         "[rad], qd1..qd6 [rad/s], switch.")],
+    robot: o.Robot = "max100",
+    name: o.PoseName = None,
     acceleration: Annotated[float, typer.Option("--acceleration", help="Path acceleration limit A [m/s^2].")] = 2.0,
     jerk: Annotated[float, typer.Option("--jerk", help="Path jerk limit J [m/s^3].")] = 50.0,
     rapid_speed: Annotated[float, typer.Option("--rapid-speed", help="Speed of G0 moves [m/s].")] = 0.25,
