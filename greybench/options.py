@@ -47,6 +47,8 @@ Cutoff = Annotated[float | None, typer.Option("--cutoff", help="Derivative cut-o
                                                                "rate and position spectrum).")]
 Linear = Annotated[bool, typer.Option("--linear", help="A linear axis: q [m], qd [m/s], tau [N] (also declared by "
                                                        "record headers such as 'q [m]', 'tau [N]').")]
+RobotLog = Annotated[Path, typer.Option("--log", help="Six-axis log (.csv/.parquet): t [s], q1..q6 [rad], tau1..tau6 "
+                                                     "[Nm], optional temp1..temp6 [degC].")]
 Epochs = Annotated[int | None, typer.Option("--epochs", help="Adam epochs [passes] for learned models (default per "
                                                              "model).")]
 Experiment = Annotated[str, typer.Option("--experiment", help="MLflow experiment name.")]

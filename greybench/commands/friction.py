@@ -237,8 +237,7 @@ def compare(
 
 
 def train_robot(
-    log: Annotated[Path, typer.Option("--log", help="Six-axis log: t [s], q1..q6 [rad], tau1..tau6 [Nm] "
-                                                    "(.csv/.parquet).")],
+    log: o.RobotLog,
     robot: o.Robot = "max100",
     model: Annotated[str, typer.Option("--model", help=f"Model name: {', '.join(MODELS)}.")] = "greybox",
     test: Annotated[Path | None, typer.Option("--test", help="Six-axis test log (same format) for test metrics "
@@ -248,8 +247,7 @@ def train_robot(
     epochs: o.Epochs = None,
     experiment: o.Experiment = "train-robot",
     register: o.Register = True,
-    as_json: Annotated[bool, typer.Option("--json", help='Print {"parent_run_id", "axes": [...]} as one JSON '
-                                                         'object.')] = False,
+    as_json: o.Json = False,
 ) -> None:
     """Fit one friction model per robot axis from a six-axis log (split by ``greybench prepare``:
     tau_rb [Nm] from the rigid-body model), one MLflow run per axis under a parent run."""

@@ -13,12 +13,14 @@ from simulate.robot.model import load_robot
 
 robot_app = typer.Typer(no_args_is_help=True, help="Robot kinematics: poses (m, unit quaternion) <-> joints (rad).")
 JsonRun = Annotated[bool, typer.Option("--json", help="Print one JSON object summarising the run.")]
+#: The two table formats fk and ik read and write.
+JOINT_TABLE = "Joint table (.csv/.parquet): q1..q6 (rad); ik adds ok, status."
+POSE_TABLE = "Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, qz."
 
 
 def fk_cmd(
-    in_file: Annotated[Path, typer.Option("--in", help="Joint table (.csv/.parquet), columns q1..q6 (rad).")],
-    out_file: Annotated[Path, typer.Option("--out", help="Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, "
-                                                         "qz.")],
+    in_file: Annotated[Path, typer.Option("--in", help=JOINT_TABLE)],
+    out_file: Annotated[Path, typer.Option("--out", help=POSE_TABLE)],
     robot: o.Robot = "max100",
     flange: Annotated[bool, typer.Option("--flange", help="Flange pose instead of the TCP pose (m).")] = False,
     as_json: JsonRun = False,
@@ -37,10 +39,8 @@ def fk_cmd(
 
 
 def ik_cmd(
-    in_file: Annotated[Path, typer.Option("--in", help="Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, "
-                                                       "qz.")],
-    out_file: Annotated[Path, typer.Option("--out", help="Joint table (.csv/.parquet): q1..q6 (rad), ok, "
-                                                         "status.")],
+    in_file: Annotated[Path, typer.Option("--in", help=POSE_TABLE)],
+    out_file: Annotated[Path, typer.Option("--out", help=JOINT_TABLE)],
     robot: o.Robot = "max100",
     q_start: Annotated[str | None, typer.Option("--q-start", help="Start configuration 'q1,..,q6' (rad); default: "
                                                                   "mid of the limits for axes 2, 3, 5 (0 for 1, 4, "
@@ -65,8 +65,7 @@ def ik_cmd(
 
 
 def prepare(
-    log: Annotated[Path, typer.Option("--log", help="Six-axis log: t (s), q1..q6 (rad), tau1..tau6 (Nm), temp1..6 "
-                                                    "(degC).")],
+    log: o.RobotLog,
     out_dir: Annotated[Path, typer.Option("--out-dir", help="Folder for axis1..axis6 records (format of the "
                                                             "log).")],
     robot: o.Robot = "max100",
