@@ -104,7 +104,8 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
     ``ideal`` switches off deflection, tracking error and backlash; ``no_friction`` runs the servo
     without joint friction (its tracking error stays); ``no_tracking`` drops the tracking error
     altogether; ``no_switching`` drops the gear backlash (the switching-point effect) and its bits.
-    Defaults: :mod:`simulate.defaults`.
+    Defaults: :mod:`simulate.defaults`. A job whose cut time or memory exceeds the limits is refused
+    (:func:`check_cost`).
     """
     from simulate.pipeline import Components, MachiningJob, MachiningSettings
     from simulate.robot.model import load_robot
@@ -116,6 +117,7 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
         raise InputError(f"dexel spacing must be > 0 mm, got {spacing_mm}", field="spacing")
     if not (probe_spacing_mm > 0 and math.isfinite(probe_spacing_mm)):
         raise InputError(f"probe spacing must be > 0 mm, got {probe_spacing_mm}", field="probe-spacing")
+    check_cost(program, stock, spacing_mm)
     placement = select_pose(load_poses(pose), name, source=str(pose))
     rob = load_robot(robot)
     cutter_from_robot(rob)  # tool errors name the robot file's key
@@ -149,7 +151,7 @@ def machine_part(job: MachiningJob, out_dir: Path, variable: str = "deflection",
     """Simulate one part and write its outputs (:func:`write_machining_outputs`) into ``out_dir``.
 
     ``variable`` colours the surface (one of :data:`simulate.machining.virtual_workpiece.VARIABLES`).
-    Cost, colour variable and output folder are checked before any work. Progress: the coupled loop in
+    Colour variable and output folder are checked before any work. Progress: the coupled loop in
     2 ms steps ("machining"), then the files ("writing outputs").
     """
     from simulate.machining.virtual_workpiece import VARIABLES
@@ -158,13 +160,12 @@ def machine_part(job: MachiningJob, out_dir: Path, variable: str = "deflection",
     if variable not in VARIABLES:
         raise InputError(f"unknown variable '{variable}' (one of {', '.join(VARIABLES)})", field="color")
     _folder(out_dir)
-    check_cost(Path(str(job.program)), job.stock, job.settings.spacing / MM)
     pj = prepare(job)
     with progress("machining", pj.steps) as adv:
         mo = run_job(job, prepared=pj, advance=adv)
     with progress("writing outputs", len(OUTPUT_STAGES) + (mo.scan is not None)) as adv:
         write_machining_outputs(mo, out_dir, variable, advance=adv)
-    return machining_summary(mo.result)
+    return machining_summary(_result(mo))
 
 
 def write_machining_outputs(mo: MachiningOutcome, out_dir: Path, variable: str = "deflection",
@@ -182,14 +183,16 @@ def write_machining_outputs(mo: MachiningOutcome, out_dir: Path, variable: str =
     import tempfile
     from concurrent.futures import ThreadPoolExecutor
 
+    from simulate.machining.dexel import TriDexel
     from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes, render_mesh_png, render_png
 
     adv = advance if advance is not None else Advance()
+    assert isinstance(mo.workpiece, TriDexel)  # the pipeline's stages are typed object
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".machine-"))
     try:
-        vw = VirtualWorkpiece(mo.workpiece, mo.result.steps)
+        vw = VirtualWorkpiece(mo.workpiece, _result(mo).steps)
         with ThreadPoolExecutor(1, thread_name_prefix="greybench-npz") as pool:
             saved = pool.submit(vw.save, tmp / "virtual_workpiece.npz")
             adv.describe(OUTPUT_STAGES[1])
@@ -202,8 +205,9 @@ def write_machining_outputs(mo: MachiningOutcome, out_dir: Path, variable: str =
             render_mesh_png(vw, tmp / f"render3d_{variable}.png", variable)
             adv(1)
             if mo.scan is not None:
-                from simulate.evaluation.cmm import write_scan
+                from simulate.evaluation.cmm import Scan, write_scan
 
+                assert isinstance(mo.scan, Scan)
                 adv.describe("scan.csv")
                 write_scan(mo.scan, tmp / "scan.csv")
                 adv(1)
@@ -218,6 +222,14 @@ def write_machining_outputs(mo: MachiningOutcome, out_dir: Path, variable: str =
         return paths
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _result(mo: MachiningOutcome) -> MachiningResult:
+    """The outcome's per-step process values (the pipeline types its stages as object)."""
+    from simulate.machining.simulation import MachiningResult
+
+    assert isinstance(mo.result, MachiningResult)
+    return mo.result
 
 
 def machining_summary(res: MachiningResult) -> MachiningSummary:
@@ -337,9 +349,12 @@ def compensation_steps(program: Path, iterations: int = 4, stiffness_scale: floa
     """The progress total of :func:`simulate.compensation_report.run_compensation` in simulated 2 ms
     steps: the original, the iterations, two runs per stiffness multiplier [-] other than 1."""
     from simulate.pipeline import load_program
+    from simulate.toolpath.interpolation import Interpolation
 
     _program(program)
-    n = len(load_program(program, require_spindle=True).interp.t)
+    interp = load_program(program, require_spindle=True).interp
+    assert isinstance(interp, Interpolation)  # the pipeline's stages are typed object
+    n = len(interp)
     scales = {float(stiffness_scale), *map(float, check_scales)} - {1.0}
     return n * (iterations + 1 + 2 * len(scales))
 
