@@ -6,24 +6,20 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.table import Table
 
 from greybench import options as o
-from greybench.support import emit_json, out, progress, resolve_robot
+from greybench.support import emit_json, out, print_table, progress, resolve_robot
 from simulate.run import compensation_steps
 
 
 def print_info(info: dict[str, Any]) -> None:
     ev = info.get("evaluation")
     if ev is not None:
-        t = Table(title="Table-2 deviations [µm] before / after compensation "
-                        f"(robot stiffness x{ev['stiffness_scale']:g})")
-        for c in ("row", "tol", "before", "after"):
-            t.add_column(c, justify="left" if c == "row" else "right")
-        for r in ev["rows_mm"]:
-            t.add_row(r["name"], f"{r['tolerance'] * 1e3:.0f}", f"{r['before'] * 1e3:+.1f}", f"{r['after'] * 1e3:+.1f}")
-        t.add_row("sum |deviation|", "", f"{ev['sum_before_mm'] * 1e3:.1f}", f"{ev['sum_after_mm'] * 1e3:.1f}")
-        out.print(t)
+        um = [(r["name"], r["tolerance"], r["before"], r["after"]) for r in ev["rows_mm"]]
+        print_table(f"Table-2 deviations [µm] before / after compensation (robot stiffness x{ev['stiffness_scale']:g})",
+                    ("row", "tol", "before", "after"),
+                    [*[(n, f"{t * 1e3:.0f}", f"{b * 1e3:+.1f}", f"{a * 1e3:+.1f}") for n, t, b, a in um],
+                     ("sum |deviation|", "", f"{ev['sum_before_mm'] * 1e3:.1f}", f"{ev['sum_after_mm'] * 1e3:.1f}")])
         out.print(f"ratio after/before: {ev['ratio']:.3f}; rows worse than max(10 %, 2 µm): "
                   f"{', '.join(ev['rows_worse']) or 'none'}")
     for c in info.get("checks", []):

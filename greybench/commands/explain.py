@@ -3,14 +3,16 @@ about a measured part, calibrate it, and measure the gain."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.table import Table
 
 from greybench import options as o
-from greybench.support import emit_json, out, progress, resolve_robot
+from greybench.support import emit_json, out, print_table, progress, resolve_robot
 from simulate.run import explain_measured
+
+if TYPE_CHECKING:
+    from simulate.explain.pipeline import Explanation
 
 
 def explain(
@@ -42,20 +44,18 @@ def explain(
                           size=size, max_sims=max_sims, progress=progress)
     if as_json:
         emit_json(ex.as_json())
-        return
-    t = Table(title=f"explain: cause {ex.cause} (score = dBIC vs no discrepancy; named above 10)")
-    for c in ("cause", "score", "held-out gain \\[%]", "fitted change"):
-        t.add_column(c, justify="left" if c == "cause" else "right")
-    for f in ex.choice.ranking[:8]:
-        t.add_row(f.cause, f"{f.score:.1f}", f"{f.heldout_gain * 100:.1f}", ", ".join(f"{v:.3g}" for v in f.theta))
-    out.print(t)
-    ft = Table(title="RMS measured - simulated \\[um]")
-    for c in ("feature", "before", "after"):
-        ft.add_column(c, justify="left" if c == "feature" else "right")
-    for feature, (b, a) in ex.rms_by_feature().items():
-        ft.add_row(feature, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}")
-    ft.add_row("all", f"{ex.rms_before * 1e6:.2f}", f"{ex.rms_after * 1e6:.2f}")
-    out.print(ft)
+    else:
+        print_explanation(ex, out_dir)
+
+
+def print_explanation(ex: Explanation, out_dir: Path | None = None) -> None:
+    print_table(f"explain: cause {ex.cause} (score = dBIC vs no discrepancy; named above 10)",
+                ("cause", "score", "held-out gain \\[%]", "fitted change"),
+                [(f.cause, f"{f.score:.1f}", f"{f.heldout_gain * 100:.1f}", ", ".join(f"{v:.3g}" for v in f.theta))
+                 for f in ex.choice.ranking[:8]])
+    print_table("RMS measured - simulated \\[um]", ("feature", "before", "after"),
+                [*[(k, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}") for k, (b, a) in ex.rms_by_feature().items()],
+                 ("all", f"{ex.rms_before * 1e6:.2f}", f"{ex.rms_after * 1e6:.2f}")])
     if ex.calibration is not None:
         cal = ex.calibration
         out.print(f"calibrated {cal.before.param}: {cal.before.value:.6g} -> {cal.after.value:.6g} {cal.before.unit}")
