@@ -35,9 +35,9 @@ def testpiece(
         return
     piece = iso_test_piece(size)
     print_summary(f"test piece {size}", {"program": str(prog), "stock": str(stock),
-                                         "circle diameter [mm]": f"{piece.circle_diameter * o.MM_PER_M:g}",
-                                         "square side [mm]": f"{piece.square_side * o.MM_PER_M:g}",
-                                         "slope [deg]": f"{math.degrees(piece.slope_angle):g}"})
+                                         "circle diameter \\[mm]": f"{piece.circle_diameter * o.MM_PER_M:g}",
+                                         "square side \\[mm]": f"{piece.square_side * o.MM_PER_M:g}",
+                                         "slope \\[deg]": f"{math.degrees(piece.slope_angle):g}"})
 
 
 def interpolate_cmd(
