@@ -46,3 +46,13 @@ def test_explanation_in_micrometres_and_percent(capsys):
     assert cells(text, "all") == ["all", "12.00", "3.00"]
     assert "calibrated k2: 1e+06 -> 800000 Nm/rad" in text
     assert "gain (1 - rms_after/rms_before): 75.0 %; report explained/report.md" in text
+
+
+def test_an_error_line_keeps_its_units():
+    from typer.testing import CliRunner
+
+    from greybench.cli import app
+
+    res = CliRunner().invoke(app, ["trace", "--workpiece", "nowhere", "--point", "0,109"])
+    assert res.exit_code == 2
+    assert "field 'point': expected 3 finite comma-separated numbers [mm], got '0,109'" in res.output
