@@ -62,7 +62,8 @@ def bench_machining(
     job = machining_job(program, resolve_robot("max100"), pose, None, spacing_mm=spacing)
     pj = prepare(job)
     # the pipeline's stages are typed object: named here
-    placement, rob, jt = cast(Placement, job.placement), cast(Robot, pj.robot), cast(JointTrajectory, pj.trajectory)
+    placement, rob = cast("Placement", job.placement), cast("Robot", pj.robot)
+    jt = cast("JointTrajectory", pj.trajectory)
     cutter = cutter_from_robot(rob)
     wp = stock_workpiece(pj.program, job.settings)
     t_prep = time.perf_counter() - t0
