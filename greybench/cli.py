@@ -20,6 +20,8 @@ from typing import Any  # noqa: E402
 import typer  # noqa: E402
 from typer.core import TyperGroup  # noqa: E402
 
+from greybench.support import guarded  # noqa: E402
+
 
 class _LazyBench(TyperGroup):
     """``greybench bench``: the benchmark package is imported when a benchmark (or its list) is asked for."""
@@ -47,7 +49,7 @@ app = typer.Typer(no_args_is_help=True, pretty_exceptions_enable=False, add_comp
 app.add_typer(typer.Typer(cls=_LazyBench, no_args_is_help=True, rich_markup_mode=None,
                           help="Benchmarks: tables with ratios measured in one run."), name="bench")
 
-# Areas, in the order of the workflow. Each module defines register(app).
+# Areas, in the order of the workflow. Each module defines COMMANDS: name -> command function or sub-app.
 _AREAS = ["friction", "diagnose", "robot", "toolpath", "machining", "evaluation", "placement", "circle", "compensate",
           "explain", "serve"]
 #: The area of each command: a console run of one command loads only its own area, so ``greybench
@@ -78,8 +80,17 @@ def areas_for(argv: list[str]) -> list[str]:
     return [area] if area in _AREAS else list(_AREAS)
 
 
+def register_area(group: typer.Typer, area: str) -> None:
+    """Add the commands of ``greybench.commands.<area>`` to ``group``; bad input exits 2 (``guarded``)."""
+    for name, command in importlib.import_module(f"greybench.commands.{area}").COMMANDS.items():
+        if isinstance(command, typer.Typer):
+            group.add_typer(command, name=name)
+        else:
+            group.command(name)(guarded(command))
+
+
 for _name in areas_for(sys.argv):
-    importlib.import_module(f"greybench.commands.{_name}").register(app)
+    register_area(app, _name)
 
 
 def main() -> None:

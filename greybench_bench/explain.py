@@ -60,5 +60,5 @@ def bench_explain(
     t.add_row("calibration re-simulations", f"{len(ex.calibration.history) if ex.calibration else 0}")
     t.add_row("explain / one simulation \\[-]", f"{t_all / t_sim:.1f}")
     t.add_row("cause named", ex.cause)
-    t.add_row("rms before / after \\[um]", f"{ex.rms_before * 1e6:.2f} / {ex.rms_after * 1e6:.2f}")
+    t.add_row("rms before / after \\[µm]", f"{ex.rms_before * 1e6:.2f} / {ex.rms_after * 1e6:.2f}")
     out.print(t)

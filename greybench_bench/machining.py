@@ -9,9 +9,9 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from greybench.commands.machining import cutter_from_robot, machining_job
-from greybench.support import DATA_DIR, out
+from greybench.support import DATA_DIR, out, resolve_robot
 from identify.errors import InputError
+from simulate.run import cutter_from_robot, machining_job
 
 
 def bench_machining(
@@ -48,15 +48,16 @@ def bench_machining(
 
     if threads < 1:
         raise InputError(f"threads must be >= 1, got {threads}", field="threads")
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]  # set at run time
     program = DATA_DIR / "programs" / "iso320.nc"
     pose = DATA_DIR / "poses" / "iso320.json"
     t0 = time.perf_counter()
     from simulate.pipeline import prepare, stock_workpiece
 
-    job = machining_job(program, "max100", pose, None, spacing_mm=spacing)
+    job = machining_job(program, resolve_robot("max100"), pose, None, spacing_mm=spacing)
     pj = prepare(job)
-    placement, rob, jt, cutter = job.placement, pj.robot, pj.trajectory, cutter_from_robot(pj.robot)
+    placement, rob, jt = job.placement, pj.robot, pj.trajectory
+    cutter = cutter_from_robot(rob)
     wp = stock_workpiece(pj.program, job.settings)
     t_prep = time.perf_counter() - t0
     n = len(jt.t) if max_steps <= 0 else min(max_steps, len(jt.t))
@@ -182,7 +183,7 @@ def bench_machining(
     table.add_row(escape("dexel memory [MB]"), f"{dexel_mb:.0f}", "", "")
     table.add_row(escape("peak RSS [MB]"), f"{rss / 1e6:.0f}", "", "< 4096 (before the profiled run)")
     table.add_row(escape("removed volume [mm^3]"), f"{res.removed_volume * 1e9:.0f}", "", "")
-    table.add_row(escape("peak force [N] / peak deflection [um]"), f"{res.steps.peak_force.max():.1f}",
+    table.add_row(escape("peak force [N] / peak deflection [µm]"), f"{res.steps.peak_force.max():.1f}",
                   f"{np.linalg.norm(res.steps.deflection, axis=1).max() * 1e6:.1f}", "")
     out.print(table)
 

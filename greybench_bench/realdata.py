@@ -21,11 +21,11 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from greybench.commands.friction import COMPARE_MODELS
 from greybench.support import emit_json, out, progress
 from identify.errors import InputError
 from identify.models import make_model, parse_model_names
 from identify.records import load_record, read_table
+from identify.workflows import COMPARE_MODELS
 
 #: Model types in the order of the table.
 MODELS = ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox")

@@ -1,25 +1,13 @@
 """``greybench circle``: the virtual circular test (ISO 230-4, ballbar) of the robot at a pose."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
+from typing import cast
 
 import typer
 
-from greybench.support import emit_json, err, guarded, out, print_summary, progress, resolve_robot
-from identify.errors import InputError
-
-
-def _centre(text: str | None):
-    if text is None:
-        return (0.0, 0.0, 0.0)
-    try:
-        vals = [float(v) for v in text.split(",")]
-    except ValueError:
-        vals = []
-    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
-        raise InputError(f"expected three numbers x,y,z in mm, got {text!r}", field="center-mm")
-    return tuple(v * 1e-3 for v in vals)
+from greybench import options as o
+from greybench.support import emit_json, err, out, print_summary, progress, resolve_robot
 
 
 def circle(
@@ -49,12 +37,14 @@ def circle(
     radius_error_um and reversal_spikes (angle [deg], joint, excursion height [µm], and as a ballbar
     analysis splits it: spike beyond the settled trace [µm], lost motion step [µm]).
     """
-    from simulate.evaluation.circle import CircleSpec, evaluate_run, simulate_circle, write_outputs
+    from simulate.evaluation.circle import CircleSpec, Plane, evaluate_run, simulate_circle, write_outputs
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import load_poses, select_pose
 
-    spec = CircleSpec(radius=radius_mm * 1e-3, feed=feed_mm_min / 6e4, plane=plane.lower(),
-                      center=_centre(center_mm), ccw=not cw)
+    centre = o.numbers(center_mm, 3, "center-mm", "mm") if center_mm is not None else (0.0, 0.0, 0.0)
+    # CircleSpec checks the plane and makes it a Plane
+    spec = CircleSpec(radius=radius_mm * 1e-3, feed=feed_mm_min / 6e4, plane=cast(Plane, plane.lower()),
+                      center=tuple(v * 1e-3 for v in centre), ccw=not cw)
     placement = select_pose(load_poses(pose), name, source=str(pose))
     rob = load_robot(resolve_robot(robot))
     with progress("circle: simulating", total=None) as advance:
@@ -90,5 +80,4 @@ def circle(
         err.print("no joint reverses along this circle")
 
 
-def register(app: typer.Typer) -> None:
-    app.command("circle")(guarded(circle))
+COMMANDS = {"circle": circle}

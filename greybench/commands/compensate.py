@@ -3,39 +3,23 @@ machining simulation (:mod:`simulate.compensation`, outputs :mod:`simulate.compe
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated, Any
 
 import typer
-from rich.table import Table
 
-from greybench.support import emit_json, out, progress, resolve_robot
-from identify.errors import InputError
-from simulate import defaults as DEFAULTS
-
-
-def _friction(specs: list[str] | None) -> dict:
-    """``AXIS=REF`` options -> {axis: model reference}."""
-    fr = {}
-    for s in specs or []:
-        axis, sep, ref = s.partition("=")
-        if not sep or not axis.strip().isdigit() or not 1 <= int(axis) <= 6 or not ref.strip():
-            raise InputError(f"expected AXIS=MODEL with AXIS 1..6, got '{s}'", field="friction")
-        if int(axis) in fr:
-            raise InputError(f"axis {axis} given twice", field="friction")
-        fr[int(axis)] = ref.strip()
-    return fr
+from greybench import options as o
+from greybench.support import emit_json, out, print_table, progress, resolve_robot
+from simulate.run import compensation_steps
 
 
-def print_info(info: dict) -> None:
+def print_info(info: dict[str, Any]) -> None:
     ev = info.get("evaluation")
     if ev is not None:
-        t = Table(title="Table-2 deviations [µm] before / after compensation "
-                        f"(robot stiffness x{ev['stiffness_scale']:g})")
-        for c in ("row", "tol", "before", "after"):
-            t.add_column(c, justify="left" if c == "row" else "right")
-        for r in ev["rows_mm"]:
-            t.add_row(r["name"], f"{r['tolerance'] * 1e3:.0f}", f"{r['before'] * 1e3:+.1f}", f"{r['after'] * 1e3:+.1f}")
-        t.add_row("sum |deviation|", "", f"{ev['sum_before_mm'] * 1e3:.1f}", f"{ev['sum_after_mm'] * 1e3:.1f}")
-        out.print(t)
+        um = [(r["name"], r["tolerance"], r["before"], r["after"]) for r in ev["rows_mm"]]
+        print_table(f"Table-2 deviations [µm] before / after compensation (robot stiffness x{ev['stiffness_scale']:g})",
+                    ("row", "tol", "before", "after"),
+                    [*[(n, f"{t * 1e3:.0f}", f"{b * 1e3:+.1f}", f"{a * 1e3:+.1f}") for n, t, b, a in um],
+                     ("sum |deviation|", "", f"{ev['sum_before_mm'] * 1e3:.1f}", f"{ev['sum_after_mm'] * 1e3:.1f}")])
         out.print(f"ratio after/before: {ev['ratio']:.3f}; rows worse than max(10 %, 2 µm): "
                   f"{', '.join(ev['rows_worse']) or 'none'}")
     for c in info.get("checks", []):
@@ -50,58 +34,43 @@ def print_info(info: dict) -> None:
 
 
 def compensate_cmd(
-    program: Path = typer.Option(..., "--program", help="G-code program; its stock <stem>.stock.json must sit "
-                                                        "next to it."),
-    robot: str = typer.Option("max100", "--robot", help="Robot name in data/robots or a robot TOML path."),
-    pose: Path = typer.Option(..., "--pose",
-                              help="Pose file (JSON): workpiece frame in the robot base frame [m, rad]."),
-    name: str | None = typer.Option(None, "--name", help="Pose name in the file (default: the first)."),
-    out_dir: Path = typer.Option(..., "--out", help="Output folder: compensated.nc, compensated.stock.json, "
-                                                    "offsets.csv [mm, rad], feedforward.csv [Nm], report.md, "
-                                                    "deviation.png."),
-    iterations: int = typer.Option(4, "--iterations", help="Largest number of corrected programs simulated [-]."),
-    stiffness_scale: float = typer.Option(1.0, "--stiffness-scale",
-                                          help="Joint stiffness multiplier [-] of the robot the before/after "
-                                               "evaluation simulates (both programs); the compensation itself "
-                                               "iterates with the robot file's model (1)."),
-    check_scale: list[float] | None = typer.Option(None, "--check-scale",
-                                                      help="Also evaluate both programs with this stiffness "
-                                                           "multiplier [-] (repeatable, e.g. 0.8 and 1.2)."),
-    gain: float = typer.Option(1.0, "--gain", help="Damping of the update [-] (0 < gain <= 1.5)."),
-    spacing: float = typer.Option(DEFAULTS.RANKING_DEXEL_SPACING * 1e3, "--spacing",
-                                  help="Dexel spacing [mm] (the ranking's default)."),
-    probe_spacing: float = typer.Option(DEFAULTS.PROBE_SPACING * 1e3, "--probe-spacing",
-                                        help="Virtual CMM point distance [mm]."),
-    size: int | None = typer.Option(None, "--size", help="Test piece size [mm] (160 or 320; default: the "
-                                                            "stock's size_mm)."),
-    friction: list[str] | None = typer.Option(None, "--friction",
-                                                 help="AXIS=MODEL: friction model reference for a joint (saved "
-                                                      "folder, runs:/, models:/), repeatable; others keep the "
-                                                      "robot file's."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object (deviations in mm)."),
+    program: o.Program,
+    pose: o.Pose,
+    out_dir: Annotated[Path, typer.Option("--out", help="Output folder: compensated.nc, compensated.stock.json, "
+                                                        "offsets.csv [mm, rad], feedforward.csv [Nm], report.md, "
+                                                        "deviation.png.")],
+    robot: o.Robot = "max100",
+    name: o.PoseName = None,
+    iterations: Annotated[int, typer.Option("--iterations", help="Largest number of corrected programs simulated "
+                                                                 "[-].")] = 4,
+    stiffness_scale: Annotated[float, typer.Option("--stiffness-scale", help="Joint stiffness multiplier [-] of the "
+                                                   "robot the before/after evaluation simulates (both programs); the "
+                                                   "compensation itself iterates with the robot file's model (1).")]
+    = 1.0,
+    check_scale: Annotated[list[float] | None, typer.Option("--check-scale", help="Also evaluate both programs with "
+                                                            "this stiffness multiplier [-] (repeatable, e.g. 0.8 and "
+                                                            "1.2).")] = None,
+    gain: Annotated[float, typer.Option("--gain", help="Damping of the update [-] (0 < gain <= 1.5).")] = 1.0,
+    spacing: o.Spacing = o.RANKING_SPACING_MM,
+    probe_spacing: o.ProbeSpacing = o.PROBE_SPACING_MM,
+    size: o.Size = None,
+    friction: o.Friction = None,
+    as_json: o.Json = False,
 ) -> None:
     """Pre-compensate a program from the simulation: correct the commanded path against the predicted
     tool deviation (deflection, tracking error with friction and backlash) and iterate."""
     from simulate.compensation_report import run_compensation
-    from simulate.pipeline import load_program
 
-    if not program.exists():
-        raise InputError("program not found", source=str(program))
-    # progress in simulated 2 ms steps: the original, the iterations, two runs per extra stiffness
-    n = len(load_program(program, require_spindle=True).interp.t)
-    scales = {float(stiffness_scale), *map(float, check_scale or ())} - {1.0}
-    with progress("compensating", total=n * (iterations + 1 + 2 * len(scales))) as adv:
+    steps = compensation_steps(program, iterations, stiffness_scale, check_scale or ())
+    with progress("compensating", total=steps) as adv:
         info = run_compensation(program, resolve_robot(robot), pose, name, out_dir, iterations=iterations,
                                 stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
                                 spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
-                                friction=_friction(friction), advance=adv)
+                                friction=o.friction_refs(friction), advance=adv)
     if as_json:
         emit_json(info)
         return
     print_info(info)
 
 
-def register(app: typer.Typer) -> None:
-    from greybench.support import guarded
-
-    app.command("compensate")(guarded(compensate_cmd))
+COMMANDS = {"compensate": compensate_cmd}

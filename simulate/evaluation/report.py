@@ -117,7 +117,7 @@ def deviation_map(scan, piece: TestPiece, path: Path, title: str) -> str:
     lim = float(np.percentile(np.abs(D), 99)) or 1.0
     fig, ax = plt.subplots(figsize=(7, 6))
     sc = ax.scatter(P[:, 0] / MM, P[:, 1] / MM, c=D, s=4, cmap="coolwarm", vmin=-lim, vmax=lim)
-    fig.colorbar(sc, ax=ax, label="deviation from nominal [um] (+: material left)")
+    fig.colorbar(sc, ax=ax, label="deviation from nominal [µm] (+: material left)")
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm] (workpiece)")
     ax.set_ylabel("y [mm]")
@@ -135,9 +135,9 @@ def process_plot(steps, path: Path, title: str) -> str:
     axs[0].plot(t, f, lw=0.5)
     axs[0].set_ylabel("|F| [N]")
     axs[1].plot(t, d, lw=0.5, color="C1")
-    axs[1].set_ylabel("|deflection| [um]")
+    axs[1].set_ylabel("|deflection| [µm]")
     axs[2].plot(t, e, lw=0.5, color="C2")
-    axs[2].set_ylabel("|tracking error| [um]")
+    axs[2].set_ylabel("|tracking error| [µm]")
     axs[2].set_yscale("log")
     axs[2].set_xlabel("t [s]")
     axs[0].set_title(title)
@@ -268,7 +268,7 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
             md.append(f"`greybench trace --workpiece {Path(res.workpiece_file).parent} --point "
                       f"{','.join(f'{v / MM:.3f}' for v in point)}` gives {tr.n_ends} dexel ends from these lines:")
             md += [""] + markdown_table(
-                ("line", "program", "t [s]", "max deflection [um]", "max force [N]", "switching axes"),
+                ("line", "program", "t [s]", "max deflection [µm]", "max force [N]", "switching axes"),
                 [(ln.line, f"`{ln.text}`", f"{ln.t_first:.3f}..{ln.t_last:.3f}", f"{ln.max_deflection / 1e-6:.1f}",
                   f"{ln.max_force:.1f}", ",".join(f"A{a}" for a in axes_of(ln.switching)) or "-")
                  for ln in tr.lines[:8]])

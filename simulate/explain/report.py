@@ -40,7 +40,7 @@ def roundness_plot(ex, path: Path) -> str | None:
         ax.plot(phi[o], base + b.measured[m][o] * UM, "k.", ms=2, label="measured")
         ax.plot(ph[oo], base + sim[oo] * UM, "-", color="tab:red", lw=1, label="simulated")
         ax.plot(np.linspace(0, 2 * np.pi, 200), np.full(200, base), ":", color="grey", lw=0.8, label="nominal")
-        ax.set_title(f"circle wall, {title}\n(radius axis: {base:.0f} um + deviation [um])", fontsize=9)
+        ax.set_title(f"circle wall, {title}\n(radius axis: {base:.0f} µm + deviation [µm])", fontsize=9)
         ax.set_rlim(0, base + float(np.max(np.abs(allv))) * 1.1 + 1)
         ax.legend(fontsize=7, loc="lower left")
     return save_png(fig, path, dpi=110)
@@ -78,7 +78,7 @@ def straightness_plot(ex, path: Path) -> str | None:
         ax.plot(s[o] * 1e3, b.simulated[m][o] * UM, "-", color="tab:red", lw=1, label="simulated before")
         if ma.any():
             ax.plot(sa[oa] * 1e3, a.simulated[ma][oa] * UM, "-", color="tab:green", lw=1, label="simulated after")
-        ax.set_ylabel(f"{f}\n[um]", fontsize=7)
+        ax.set_ylabel(f"{f}\n[µm]", fontsize=7)
         ax.tick_params(labelsize=7)
     axs[0, 0].legend(fontsize=7, ncol=3)
     axs[-1, 0].set_xlabel("position along the feature [mm]")
@@ -100,7 +100,7 @@ def time_plot(ex, path: Path) -> str:
     for t in ts[(ts > tmin) & (ts < tmax)][:400]:
         ax.axvline(t, color="grey", lw=0.3, alpha=0.5)
     ax.set_xlabel("time of cut [s] (grey: axis stops / reversals)")
-    ax.set_ylabel("[um]")
+    ax.set_ylabel("[µm]")
     ax.legend(fontsize=7)
     return save_png(fig, path, dpi=110)
 
@@ -135,7 +135,7 @@ def write_report(ex, out_dir: str | Path, measured_source: str = "") -> Path:
     rms = [(f, int((ex.before.feature == f).sum()), f"{rb * UM:.2f}", f"{ra * UM:.2f}")
            for f, (rb, ra) in ex.rms_by_feature().items()]
     rms.append(("**all**", len(ex.before.residual), f"{ex.rms_before * UM:.2f}", f"{ex.rms_after * UM:.2f}"))
-    md += ["", "## RMS per feature [um]", ""] + markdown_table(("feature", "points", "before", "after"), rms)
+    md += ["", "## RMS per feature [µm]", ""] + markdown_table(("feature", "points", "before", "after"), rms)
     if ex.features_before is not None:
         table2 = []
         for k, (m, s) in ex.features_before.items():

@@ -40,15 +40,15 @@ class Signatures:
     def rows(self) -> list[tuple[str, str]]:
         """(name, value text in um / deg) for tables."""
         um = 1e6
-        out = [("size error [um]", f"{self.size * um:+.2f}"),
-               ("ovality [um] @ direction [deg]", f"{self.ovality * um:.2f} @ {self.ovality_direction:.0f}"),
-               ("lobing [um] (order)", f"{self.lobing * um:.2f} ({self.lobing_order})"),
-               ("trend [um/s] (change over cut [um])", f"{self.trend * um:+.3f} ({self.trend_change * um:+.2f})"),
-               ("height offset [um]", f"{self.height_offset * um:+.2f}")]
+        out = [("size error [µm]", f"{self.size * um:+.2f}"),
+               ("ovality [µm] @ direction [deg]", f"{self.ovality * um:.2f} @ {self.ovality_direction:.0f}"),
+               ("lobing [µm] (order)", f"{self.lobing * um:.2f} ({self.lobing_order})"),
+               ("trend [um/s] (change over cut [µm])", f"{self.trend * um:+.3f} ({self.trend_change * um:+.2f})"),
+               ("height offset [µm]", f"{self.height_offset * um:+.2f}")]
         if self.reversal_step:
-            out.append(("steps at reversals [um], by axis",
+            out.append(("steps at reversals [µm], by axis",
                         ", ".join(f"A{a} {v * um:.2f}" for a, v in self.reversal_step.items())))
-            out.append(("spikes at reversals [um], by axis",
+            out.append(("spikes at reversals [µm], by axis",
                         ", ".join(f"A{a} {v * um:.2f}" for a, v in self.reversal_spike.items())))
         return out
 

@@ -2,7 +2,6 @@
 map of ``greybench.cli`` must name every command each area registers, and nothing else."""
 from __future__ import annotations
 
-import importlib
 import subprocess
 import sys
 
@@ -13,7 +12,7 @@ from greybench import cli
 
 def _registered(area: str) -> set[str]:
     app = typer.Typer()
-    importlib.import_module(f"greybench.commands.{area}").register(app)
+    cli.register_area(app, area)
     return {c.name for c in app.registered_commands} | {g.name for g in app.registered_groups}
 
 

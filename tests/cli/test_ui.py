@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from greybench.support import wait_until_answers
+from identify.workflows import wait_until_answers
 
 ROOT = Path(__file__).resolve().parents[2]
 

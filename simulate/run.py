@@ -1,0 +1,553 @@
+"""The simulation workflows behind the ``greybench`` commands: checked inputs in, files written, typed
+results out; the caller parses the options and prints (SI inside, ``*_mm`` arguments in mm).
+
+Every workflow checks its inputs before any work (``InputError`` naming the file or the CLI option,
+so the command exits 2 and writes nothing), runs the one machining pipeline
+(:mod:`simulate.pipeline`, defaults from :mod:`simulate.defaults`) or the module that owns the
+step, and reports progress through a :data:`identify.progress.Progress` factory (quiet by default).
+Heavy modules are imported inside the functions: the CLI imports this module at start-up.
+"""
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypedDict
+
+from identify.errors import InputError, read_json
+from identify.progress import Advance, Progress, quiet
+from simulate import defaults
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from identify.models import FrictionModel
+    from simulate.evaluation.ranking import Components as RankComponents
+    from simulate.evaluation.ranking import Ranking, RankSettings
+    from simulate.evaluation.trace import Trace
+    from simulate.explain.pipeline import Explanation
+    from simulate.machining.simulation import MachiningResult
+    from simulate.machining.tools import Cutter
+    from simulate.pipeline import MachiningJob, MachiningOutcome
+    from simulate.robot.model import Robot
+    from simulate.toolpath.interpolation import PathLimits
+    from simulate.toolpath.placement import JointTrajectory, Placement
+
+MM = 1e-3
+#: Folder with the robot files, poses, programs and sample records shipped with the project.
+DATA_DIR = Path(__file__).resolve().parents[1] / "data"
+
+
+def resolve_robot(name_or_path: str) -> Path:
+    """A robot given by name (``max100`` -> ``data/robots/max100.toml``) or by path; ``InputError``
+    naming the file or ``robot`` (with the known names)."""
+    p = Path(name_or_path)
+    if p.suffix == ".toml" or p.exists():
+        if not p.exists():
+            raise InputError("robot file not found", source=str(p))
+        return p
+    candidate = DATA_DIR / "robots" / f"{name_or_path}.toml"
+    if not candidate.exists():
+        known = sorted(x.stem for x in (DATA_DIR / "robots").glob("*.toml"))
+        raise InputError(f"unknown robot '{name_or_path}' (known: {', '.join(known)})", field="robot")
+    return candidate
+
+
+def _folder(out_dir: Path | None, field: str = "out") -> None:
+    """Refuse an output path that exists and is not a folder."""
+    if out_dir is not None and out_dir.exists() and not out_dir.is_dir():
+        raise InputError("output path exists and is not a folder", source=str(out_dir), field=field)
+
+
+def _program(program: Path) -> None:
+    if not program.exists():
+        raise InputError("program not found", source=str(program))
+
+
+def check_cost(program: Path, stock: Path | None, spacing_mm: float, simulations: int = 1) -> None:
+    """Refuse a machining run before any work when its estimated cut time or memory exceeds the limits
+    of :class:`simulate.costs.CostLimits` (the service's defaults): ``InputError`` naming ``--program``
+    (and its line), ``--spacing`` [mm] or ``--stock``. Missing files are left to the workflow's own checks."""
+    from simulate.costs import CostFields, check_machining_cost
+
+    stock = stock if stock is not None else program.with_name(program.stem + ".stock.json")
+    if not (program.is_file() and stock.is_file()):
+        return
+    check_machining_cost(program.read_text(errors="replace"), stock.read_text(errors="replace"), spacing_mm * MM,
+                         simulations=simulations, source=str(program), stock_source=str(stock),
+                         fields=CostFields(program="--program", spacing="--spacing", stock="--stock"))
+
+
+# ---- one part: greybench machine --------------------------------------------------------------
+def cutter_from_robot(rob: Robot) -> Cutter:
+    """The cutter the robot carries: its file's ``[tool]`` table, via
+    :func:`simulate.evaluation.cutter.robot_cutter` (the one source for ``machine``, ``rank-poses`` and
+    ``explain``). Bad values raise ``InputError`` naming the robot file and the ``tool.*`` key."""
+    from simulate.evaluation.cutter import robot_cutter
+
+    try:
+        return robot_cutter(rob)
+    except InputError as exc:
+        key = {"kind": "type"}.get(exc.field or "", exc.field) or "type"
+        raise InputError(exc.message, source=rob.source or None, field=f"tool.{key}") from None
+
+
+def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, ideal: bool = False,
+                  spacing_mm: float | None = None, no_deflection: bool = False, no_friction: bool = False,
+                  no_switching: bool = False, no_tracking: bool = False, material: str | None = None,
+                  stock: Path | None = None, spindle_rpm: float | None = None, stiffness_scale: float = 1.0,
+                  size: int | None = None, probe_spacing_mm: float | None = None) -> MachiningJob:
+    """The :class:`simulate.pipeline.MachiningJob` of ``greybench machine``'s options (mm -> m).
+
+    ``ideal`` switches off deflection, tracking error and backlash; ``no_friction`` runs the servo
+    without joint friction (its tracking error stays); ``no_tracking`` drops the tracking error
+    altogether; ``no_switching`` drops the gear backlash (the switching-point effect) and its bits.
+    Defaults: :mod:`simulate.defaults`. A job whose cut time or memory exceeds the limits is refused
+    (:func:`check_cost`).
+    """
+    from simulate.pipeline import Components, MachiningJob, MachiningSettings
+    from simulate.robot.model import load_robot
+    from simulate.toolpath.placement import load_poses, select_pose
+
+    spacing_mm = defaults.DEXEL_SPACING / MM if spacing_mm is None else spacing_mm
+    probe_spacing_mm = defaults.PROBE_SPACING / MM if probe_spacing_mm is None else probe_spacing_mm
+    if not (spacing_mm > 0 and math.isfinite(spacing_mm)):
+        raise InputError(f"dexel spacing must be > 0 mm, got {spacing_mm}", field="spacing")
+    if not (probe_spacing_mm > 0 and math.isfinite(probe_spacing_mm)):
+        raise InputError(f"probe spacing must be > 0 mm, got {probe_spacing_mm}", field="probe-spacing")
+    check_cost(program, stock, spacing_mm)
+    placement = select_pose(load_poses(pose), name, source=str(pose))
+    rob = load_robot(robot)
+    cutter_from_robot(rob)  # tool errors name the robot file's key
+    comp = Components(deflection=not (ideal or no_deflection), friction=not no_friction,
+                      switching=not (ideal or no_switching), servo=not (ideal or no_tracking))
+    settings = MachiningSettings(spacing=spacing_mm * MM, probe_spacing=probe_spacing_mm * MM,
+                                 material=material or defaults.MATERIAL, spindle_rpm=spindle_rpm,
+                                 stiffness_scale=stiffness_scale, size=size)
+    return MachiningJob(program=program, robot=rob, placement=placement, components=comp, settings=settings,
+                        stock=stock)
+
+
+#: Files :func:`write_machining_outputs` writes besides the optional scan (its progress total).
+OUTPUT_STAGES = ("virtual workpiece (npz)", "surface meshes (PLY, GLB, legend)", "top view (PNG)",
+                 "oblique view (PNG)")
+
+
+class MachiningSummary(TypedDict):
+    """``greybench machine --json`` (SI)."""
+
+    steps: int
+    simulated_time: float   # [s]
+    wall_time: float        # [s]
+    removed_volume: float   # [m^3]
+    peak_force: float       # [N]
+    peak_deflection: float  # [m]
+
+
+def machine_part(job: MachiningJob, out_dir: Path, variable: str = "deflection",
+                 progress: Progress = quiet) -> MachiningSummary:
+    """Simulate one part and write its outputs (:func:`write_machining_outputs`) into ``out_dir``.
+
+    ``variable`` colours the surface (one of :data:`simulate.machining.virtual_workpiece.VARIABLES`).
+    Colour variable and output folder are checked before any work. Progress: the coupled loop in
+    2 ms steps ("machining"), then the files ("writing outputs").
+    """
+    from simulate.machining.virtual_workpiece import VARIABLES
+    from simulate.pipeline import prepare, run_job
+
+    if variable not in VARIABLES:
+        raise InputError(f"unknown variable '{variable}' (one of {', '.join(VARIABLES)})", field="color")
+    _folder(out_dir)
+    pj = prepare(job)
+    with progress("machining", pj.steps) as adv:
+        mo = run_job(job, prepared=pj, advance=adv)
+    with progress("writing outputs", len(OUTPUT_STAGES) + (mo.scan is not None)) as adv:
+        write_machining_outputs(mo, out_dir, variable, advance=adv)
+    return machining_summary(_result(mo))
+
+
+def write_machining_outputs(mo: MachiningOutcome, out_dir: Path, variable: str = "deflection",
+                            advance: Advance | None = None) -> list[Path]:
+    """Write ``virtual_workpiece.npz``, ``surface_<variable>.ply/.glb``, ``render_<variable>.png`` (top
+    view of the machined surface points), ``render3d_<variable>.png`` (oblique view of the mesh) and,
+    when the outcome has a scan, the virtual CMM's ``scan.csv`` (:func:`simulate.evaluation.cmm.write_scan`)
+    into ``out_dir``: all are written into a temporary folder next to it first and moved in only
+    when every one succeeded, so a failure leaves nothing half-written. ``advance`` counts the files of
+    :data:`OUTPUT_STAGES` (+ scan).
+
+    The npz is compressed in a second thread while the meshes and pictures are made (zlib releases
+    the GIL), so on two cores its time is hidden."""
+    import shutil
+    import tempfile
+    from concurrent.futures import ThreadPoolExecutor
+
+    from simulate.machining.dexel import TriDexel
+    from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes, render_mesh_png, render_png
+
+    adv = advance if advance is not None else Advance()
+    assert isinstance(mo.workpiece, TriDexel)  # the pipeline's stages are typed object
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".machine-"))
+    try:
+        vw = VirtualWorkpiece(mo.workpiece, _result(mo).steps)
+        with ThreadPoolExecutor(1, thread_name_prefix="greybench-npz") as pool:
+            saved = pool.submit(vw.save, tmp / "virtual_workpiece.npz")
+            adv.describe(OUTPUT_STAGES[1])
+            export_meshes(vw, tmp, variable)
+            adv(1)
+            adv.describe(OUTPUT_STAGES[2])
+            render_png(vw, tmp / f"render_{variable}.png", variable)
+            adv(1)
+            adv.describe(OUTPUT_STAGES[3])
+            render_mesh_png(vw, tmp / f"render3d_{variable}.png", variable)
+            adv(1)
+            if mo.scan is not None:
+                from simulate.evaluation.cmm import Scan, write_scan
+
+                assert isinstance(mo.scan, Scan)
+                adv.describe("scan.csv")
+                write_scan(mo.scan, tmp / "scan.csv")
+                adv(1)
+            adv.describe(OUTPUT_STAGES[0])
+            saved.result()
+            adv(1)
+        paths = []
+        for f in sorted(tmp.iterdir()):
+            dest = out_dir / f.name
+            os.replace(f, dest)
+            paths.append(dest)
+        return paths
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _result(mo: MachiningOutcome) -> MachiningResult:
+    """The outcome's per-step process values (the pipeline types its stages as object)."""
+    from simulate.machining.simulation import MachiningResult
+
+    assert isinstance(mo.result, MachiningResult)
+    return mo.result
+
+
+def machining_summary(res: MachiningResult) -> MachiningSummary:
+    """Steps, simulated and wall time [s], removed volume [m^3], peak force [N], peak deflection [m]."""
+    import numpy as np
+
+    n = len(res.steps.t)
+    return {"steps": int(n), "simulated_time": float(res.simulated_time), "wall_time": float(res.wall_time),
+            "removed_volume": float(res.removed_volume),
+            "peak_force": float(res.steps.peak_force.max()) if n else 0.0,
+            "peak_deflection": float(np.linalg.norm(res.steps.deflection, axis=1).max()) if n else 0.0}
+
+
+# ---- placements: greybench rank-poses, optimize-pose ---------------------------------------------
+def rank_program(program: Path, robot: Path, poses: Path, *, settings: RankSettings,
+                 components: RankComponents, shares: bool = False, out_dir: Path | None = None, workers: int = 2,
+                 friction: dict[int, str] | None = None, progress: Progress = quiet) -> Ranking:
+    """Simulate the program in every pose of the pose file, measure and rank the virtual parts
+    (:func:`simulate.evaluation.ranking.rank_poses`); with ``out_dir`` also the report
+    (:func:`simulate.evaluation.report.write_report`). ``friction``: joint -> model reference in place
+    of the robot file's (errors name ``--friction``). Ray tasks instead of processes when
+    ``RAY_ADDRESS`` is set. Progress in simulations ("simulating poses")."""
+    from simulate.evaluation.ranking import COMPONENTS, rank_poses
+    from simulate.robot.friction import joint_rows
+    from simulate.robot.model import load_robot
+    from simulate.toolpath.placement import load_poses
+
+    _program(program)
+    rob = load_robot(robot)  # validate before any worker starts
+    try:
+        joint_rows(rob, friction)   # every model reference resolves, for its axis, before any work
+    except InputError as exc:
+        field = "--friction" if friction and exc.field and exc.field.startswith("friction[") else exc.field
+        raise InputError(exc.message, source=exc.source, field=field) from None
+    placements = load_poses(poses)
+    # refused before anything is written: the poses, and with shares the component re-runs, run in turn
+    n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
+    check_cost(program, None, settings.spacing / MM, simulations=n_jobs)
+    _folder(out_dir)
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    with progress("simulating poses", n_jobs) as advance:
+        r = rank_poses(program, robot, placements, settings=settings, components=components, shares=shares,
+                       out_dir=out_dir, workers=workers, advance=advance, friction=friction,
+                       ray_address=os.environ.get("RAY_ADDRESS"))
+    if out_dir is not None:
+        from simulate.evaluation.report import write_report
+
+        write_report(r, out_dir, program=program, trajectories=r.trajectories)
+    return r
+
+
+@dataclass(frozen=True)
+class PlacementOutcome:
+    """What :func:`optimize_placement` gives: ``info`` (``summary.json``: best pose [m, rad], scores [-],
+    improvement [-], candidates, stop reason, wall time [s]; NaN where not scored) and the test-piece
+    ``size`` [mm] it scored."""
+
+    info: dict[str, Any]
+    size: int
+
+
+def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *, budget_s: float, workers: int = 2,
+                       seed: int = 0, spacing_mm: float = defaults.RANKING_DEXEL_SPACING / MM,
+                       size: int | None = None, xy_margin_mm: float = 400.0, z_margin_mm: float = 100.0,
+                       max_simulations: int | None = None, robot_name: str = "",
+                       progress: Progress = quiet) -> PlacementOutcome:
+    """Search x, y, z and yaw of the workpiece for the lowest ranking score within ``budget_s`` [s]
+    (:mod:`simulate.placement.search`) and write best.json, report.md, heatmap.png, history.csv and
+    summary.json into ``out_dir`` (:func:`simulate.placement.report.write_outputs`). ``size`` [mm]
+    defaults to the stock's ``size_mm``. Progress in seconds of the budget."""
+    from simulate.evaluation.ranking import RankSettings
+    from simulate.placement.report import write_outputs
+    from simulate.placement.search import SearchSettings, plan_search, run_search
+    from simulate.robot.model import load_robot
+    from simulate.toolpath.placement import parse_poses
+
+    _program(program)
+    _folder(out_dir)
+    load_robot(robot)
+    doc = read_json(poses, missing="pose file not found")
+    placements = parse_poses(doc, source=str(poses))
+    if size is None:
+        stock = read_json(program.with_name(program.stem + ".stock.json"),
+                          missing="stock description not found next to the program")
+        size = stock.get("size_mm") if isinstance(stock, dict) else None
+        if size not in (160, 320):
+            raise InputError("the stock names no test-piece size_mm: give --size 160 or 320", field="size")
+    assert size is not None
+    settings = SearchSettings(budget_s=budget_s, workers=workers, seed=seed,
+                              rank=RankSettings(spacing=spacing_mm * MM, size=int(size)),
+                              max_simulations=max_simulations, xy_margin=xy_margin_mm * MM,
+                              z_margin=z_margin_mm * MM)
+    check_cost(program, None, spacing_mm, simulations=1)
+    plan = plan_search(program, robot, placements, settings, poses_source=str(poses))  # every check first
+    with progress("placement search", round(budget_s)) as advance:
+        done = [0]
+
+        def report(elapsed: float, text: str) -> None:
+            step = int(min(elapsed, budget_s)) - done[0]   # whole seconds of the budget
+            if step > 0:
+                advance(step)
+                done[0] += step
+            advance.describe(text)
+
+        result = run_search(plan, progress=report, ray_address=os.environ.get("RAY_ADDRESS") or None)
+        advance.describe("writing the report and the heat map")
+        info = write_outputs(result, out_dir, given_doc=doc, robot=plan.robot, interp=plan.program.interp,
+                             program=str(program), robot_name=robot_name or robot.stem, poses=str(poses),
+                             size=int(size))
+    return PlacementOutcome(info=info, size=int(size))
+
+
+# ---- compensation, explain --------------------------------------------------------------------
+def compensation_steps(program: Path, iterations: int = 4, stiffness_scale: float = 1.0,
+                       check_scales: Sequence[float] = ()) -> int:
+    """The progress total of :func:`simulate.compensation_report.run_compensation` in simulated 2 ms
+    steps: the original, the iterations, two runs per stiffness multiplier [-] other than 1."""
+    from simulate.pipeline import load_program
+    from simulate.toolpath.interpolation import Interpolation
+
+    _program(program)
+    interp = load_program(program, require_spindle=True).interp
+    assert isinstance(interp, Interpolation)  # the pipeline's stages are typed object
+    n = len(interp)
+    scales = {float(stiffness_scale), *map(float, check_scales)} - {1.0}
+    return n * (iterations + 1 + 2 * len(scales))
+
+
+def write_explanation(ex: Explanation, out_dir: Path, measured_name: str) -> None:
+    """``explain``'s files: the calibrated robot file ``robot_calibrated.toml``, ``report.md`` with its
+    PNGs (:func:`simulate.explain.report.write_report`) and ``explain.json`` (SI)."""
+    import json
+
+    from identify.files import write_text_atomic
+    from simulate.explain.report import write_report
+    from simulate.robot.model import save_robot
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    save_robot(ex.calibrated_robot, out_dir / "robot_calibrated.toml")
+    write_report(ex, out_dir, measured_name)
+    write_text_atomic(out_dir / "explain.json", json.dumps(ex.as_json(), indent=1))
+
+
+def explain_measured(measured: Path, program: Path, robot: Path, pose: Path, name: str | None, *,
+                     out_dir: Path | None = None, spacing_mm: float = defaults.DEXEL_SPACING / MM,
+                     size: int | None = None, max_sims: int = 3, progress: Progress = quiet) -> Explanation:
+    """Compare a measured CMM scan with the simulated part, name the cause, calibrate it by
+    re-simulating (:func:`simulate.explain.pipeline.explain_part`) and, with ``out_dir``, write
+    :func:`write_explanation`'s files. Cost, scan and reachability are checked before the long part."""
+    from simulate.explain.measured import is_table, read_measured_scan
+    from simulate.explain.pipeline import explain_part, simulations_needed
+    from simulate.explain.simulation import load_setup
+    from simulate.robot.model import load_robot
+
+    if max_sims < 1:
+        raise InputError("must be >= 1", field="--max-sims")
+    _folder(out_dir, "--out")
+    # refused before any work: the nominal run, the re-machined sensitivities and the calibration
+    check_cost(program, None, spacing_mm, simulations=simulations_needed(max_sims))
+    rob = load_robot(robot)
+    setup = load_setup(program, pose, name, spacing=spacing_mm * MM, size=size)
+    if is_table(measured):
+        raise InputError("a feature deviation table (JSON) allows only a feature-by-feature comparison, which "
+                         "cannot separate the candidate causes; give the CMM scan (scan.csv)", source=str(measured))
+    meas = read_measured_scan(measured, setup.piece)
+    setup.trajectory(rob)  # reachability errors before the long part
+    with progress("explaining (simulate, compare, calibrate)", None):
+        ex = explain_part(meas, rob, setup, max_sims=max_sims)
+    if out_dir is not None:
+        write_explanation(ex, out_dir, str(measured))
+    return ex
+
+
+# ---- toolpath, robot ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Interpolated:
+    """What :func:`interpolate_program` gives: the robot's name, the placement, the joint trajectory and
+    its summary (samples, duration [s], path length [m], peak speed [m/s], switching steps per axis)."""
+
+    robot: str
+    placement: Placement
+    trajectory: JointTrajectory
+    summary: dict[str, Any]
+
+
+def trajectory_frame(jt: JointTrajectory) -> pd.DataFrame:
+    """Columns t [s], line, x, y, z (workpiece, m), q1..q6 (rad), qd1..qd6 (rad/s), switch."""
+    import pandas as pd
+
+    cols = {"t": jt.t, "line": jt.line, "x": jt.xyz[:, 0], "y": jt.xyz[:, 1], "z": jt.xyz[:, 2]}
+    cols.update({f"q{i + 1}": jt.q[:, i] for i in range(6)})
+    cols.update({f"qd{i + 1}": jt.qd[:, i] for i in range(6)})
+    cols["switch"] = jt.switch
+    return pd.DataFrame(cols)
+
+
+def interpolate_program(program: Path, robot: Path, pose: Path, name: str | None, limits: PathLimits,
+                        out_file: Path, progress: Progress = quiet) -> Interpolated:
+    """Interpolate a program at the NC cycle (jerk-limited, look-ahead), transform it to the robot's
+    joint angles and velocities for one placement, mark axis stops and reversals, and write the table
+    of :func:`trajectory_frame` (.csv or .parquet). Progress in 4 stages."""
+    from identify.records import write_table
+    from simulate.robot.model import load_robot
+    from simulate.toolpath.gcode import read_program
+    from simulate.toolpath.interpolation import interpolate
+    from simulate.toolpath.placement import joint_trajectory, load_poses, select_pose
+
+    if out_file.suffix.lower() not in (".csv", ".parquet"):
+        raise InputError("output must end in .csv or .parquet", source=str(out_file))
+    limits.validate()
+    with progress("interpolate", 4) as advance:
+        advance.describe("reading the program")
+        prog = read_program(program)
+        placement = select_pose(load_poses(pose), name, source=str(pose))
+        rob = load_robot(robot)
+        advance(1)
+        advance.describe("interpolating")
+        ip = interpolate(prog, limits)
+        advance(1)
+        advance.describe("inverse kinematics")
+        jt = joint_trajectory(rob, ip, placement, source=str(program))
+        advance(1)
+        advance.describe(f"writing {out_file}")
+        write_table(trajectory_frame(jt), out_file)
+        advance(1)
+    summary = {"out": str(out_file), "pose": placement.name, "samples": len(ip), "duration_s": ip.duration,
+               "path_length_m": prog.length, "max_speed_m_s": float(ip.v.max()),
+               "switching_steps": int((jt.switch > 0).sum()),
+               "switching_per_axis": [int(((jt.switch >> i) & 1).sum()) for i in range(6)]}
+    return Interpolated(rob.name, placement, jt, summary)
+
+
+def train_robot(log: Path, robot: Path, make: Callable[[], FrictionModel], axes: Sequence[int], *,
+                test: Path | None = None, experiment: str = "train-robot", register: bool = True,
+                model_name: str = "", progress: Progress = quiet) -> tuple[list[dict[str, Any]], str]:
+    """Fit one friction model (``make()``, called ``model_name``) per robot axis from a six-axis log,
+    split by the rigid-body model into axis records with tau_rb [Nm]
+    (:func:`simulate.robot.prepare.prepare_log`), one MLflow run per axis under a parent run
+    (:func:`identify.tracking.fit_axes`). Gives the per-axis rows and the parent run id."""
+    import tempfile
+
+    from identify.tracking import fit_axes
+    from simulate.robot.model import load_robot
+    from simulate.robot.prepare import prepare_log
+
+    for a in axes:
+        if a < 1:
+            raise InputError(f"axis must be >= 1, got {a}", field="--axis")
+    for a in axes:
+        if a > 6:
+            raise InputError(f"--axis {a}: the robot model and `prepare` handle joints 1..6", field="--axes")
+    rob = load_robot(robot)
+    with tempfile.TemporaryDirectory(prefix="greybench-train-robot-") as tmp:
+        with progress("train-robot: splitting the logs (rigid-body model)", None):
+            train_paths = prepare_log(rob, log, Path(tmp) / "train").paths
+            test_paths = prepare_log(rob, test, Path(tmp) / "test").paths if test else None
+        with progress(f"train-robot {model_name}", len(axes)) as advance:
+            return fit_axes(make, {a: train_paths[a - 1] for a in axes},
+                            {a: test_paths[a - 1] for a in axes} if test_paths else None,
+                            experiment=experiment, robot=robot.stem, register=register, advance=advance,
+                            params={"log": str(log), "test_log": str(test) if test else "",
+                                    "format": log.suffix.lower()})
+
+
+def _table_out(path: Path) -> None:
+    if path.suffix.lower() not in (".csv", ".parquet", ".pq"):
+        raise InputError("output must end in .csv or .parquet", source=str(path))
+    if not path.parent.exists():
+        raise InputError("output folder does not exist", source=str(path.parent))
+
+
+def forward_table(rob: Robot, in_file: Path, out_file: Path, *, flange: bool = False) -> int:
+    """Forward kinematics of a joint table (q1..q6 [rad]) into a pose table (x, y, z [m], qw, qx, qy,
+    qz) of the TCP, or of the flange; gives the number of poses."""
+    from simulate.robot.kinematics import fk
+    from simulate.robot.tables import JOINT_COLUMNS, frame_from_poses, numeric_columns, read_table, write_table
+
+    _table_out(out_file)
+    q = numeric_columns(read_table(in_file), JOINT_COLUMNS, str(in_file))
+    write_table(frame_from_poses(fk(rob, q, tool=not flange)), out_file)
+    return len(q)
+
+
+def inverse_table(rob: Robot, in_file: Path, out_file: Path, *, q_start: Sequence[float] | None = None,
+                  independent: bool = False) -> tuple[int, dict[str, int]]:
+    """Inverse kinematics (analytic) of a pose table (x, y, z [m], qw, qx, qy, qz) into a joint table
+    (q1..q6 [rad], ok, status; unreachable rows NaN), along a continuous path from ``q_start`` [rad]
+    (default: mid of the limits for axes 2, 3, 5, 0 for 1, 4, 6) or each pose nearest it
+    (``independent``); gives the number of poses with a valid solution and the number per
+    :class:`simulate.robot.kinematics.IKStatus`."""
+    import numpy as np
+    import pandas as pd
+
+    from simulate.robot.kinematics import IKStatus, ik_nearest, ik_path
+    from simulate.robot.tables import JOINT_COLUMNS, poses_from_frame, read_table, write_table
+
+    _table_out(out_file)
+    T = poses_from_frame(read_table(in_file), str(in_file))
+    mid = np.array([False, True, True, False, True, False])
+    q0 = np.asarray(q_start, float) if q_start is not None else np.where(mid, 0.5 * (rob.lower + rob.upper), 0.0)
+    res = ik_nearest(rob, T, q0) if independent else ik_path(rob, T, q0)
+    cols: dict[str, Any] = {c: res.q[:, i] for i, c in enumerate(JOINT_COLUMNS)}
+    cols["ok"] = res.ok
+    cols["status"] = [IKStatus(s).name for s in res.status]
+    write_table(pd.DataFrame(cols), out_file)
+    return int(res.ok.sum()), {s.name: int(np.sum(res.status == s)) for s in IKStatus}
+
+
+def trace_workpiece(workpiece: Path, point: Sequence[float], radius: float, program: Path | None = None) -> Trace:
+    """The program lines and times that machined the surface within ``radius`` [m] of ``point`` [m,
+    workpiece frame] (:func:`simulate.evaluation.trace.trace_point`) of a saved virtual workpiece (a
+    rank-poses pose folder or the .npz); line texts from ``program`` or the one recorded with it."""
+    import numpy as np
+
+    from simulate.evaluation.trace import resolve_workpiece, trace_point
+    from simulate.machining.virtual_workpiece import VirtualWorkpiece
+
+    f, meta = resolve_workpiece(workpiece)
+    prog = str(program) if program is not None else meta.get("program")
+    return trace_point(VirtualWorkpiece.load(f), np.asarray(point, float), radius, program=prog)
