@@ -1,0 +1,341 @@
+"""Loop friction (simulate.robot.loop_friction) against closed forms and independent oracles.
+
+Each form is built here from explicit parameters (no fitted model): the Stribeck curve, the LuGre
+steady state (= the Stribeck curve plus viscous friction), its exact bristle relaxation after a
+velocity step and its pre-sliding spring, the extended model's load, direction and position factors,
+the grey-box level network and the residual network against the same networks in torch.
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from identify.errors import InputError
+from simulate.robot import loop_friction as lf
+from simulate.robot.loop_friction import FrictionKind
+
+FC, FS, VS, DELTA, S0, S1, NU = 30.0, 45.0, 0.05, 2.0, 1e5, 300.0, 8.0
+
+
+def row(kind, **slots):
+    r = lf._empty()
+    r["kind"] = int(kind)
+    for k, v in slots.items():
+        r["scal"][getattr(lf, k)] = v
+    return r
+
+
+def lugre_row(kind=FrictionKind.LUGRE, **extra):
+    return row(kind, FC=FC, FS=FS, VS=VS, DELTA=DELTA, S0=S0, S1=S1, NU=NU, **extra)
+
+
+def series(p, j, v, q=None, load=None, dt=1e-3, st=None):
+    v = np.asarray(v, float)
+    n = v.size
+    q = np.zeros(n) if q is None else np.asarray(q, float)
+    load = np.zeros(n) if load is None else np.asarray(load, float)
+    return lf.friction_series(p, j, lf.new_state(p) if st is None else st, v, q, load,
+                              np.broadcast_to(np.asarray(dt, float), (n,)).copy())
+
+
+def stribeck(v, fc=FC, fs=FS, vs=VS, delta=DELTA):
+    return fc + (fs - fc) * math.exp(-abs(v / vs) ** delta)
+
+
+# --------------------------------------------------------------------------- static forms
+
+
+@pytest.mark.parametrize("v", [0.0, 1e-3, 0.05, -0.05, 0.12, -0.4])
+def test_stribeck_kernel_closed_form(v):
+    assert lf._stribeck(v, FC, FS, VS, DELTA) == pytest.approx(stribeck(v), rel=1e-13)
+    assert lf._stribeck(v, FC, FS, VS, 1.0) == pytest.approx(stribeck(v, delta=1.0), rel=1e-13)
+    assert lf._stribeck(v, FC, FS, 0.2, 0.5) == pytest.approx(stribeck(v, vs=0.2, delta=0.5), rel=1e-13)
+
+
+def test_sign_and_softplus():
+    assert (lf._sign(2.0), lf._sign(-1e-300), lf._sign(0.0)) == (1.0, -1.0, 0.0)
+    assert lf._softplus(0.0) == pytest.approx(math.log(2.0), rel=1e-15)
+    assert lf._softplus(-3.0) == pytest.approx(math.log1p(math.exp(-3.0)), rel=1e-15)
+    assert lf._softplus(19.0) == pytest.approx(math.log1p(math.exp(19.0)), rel=1e-15)
+    assert lf._softplus(25.0) == 25.0
+    assert lf._sigmoid(0.0) == 0.5 and lf._sigmoid(2.0) == pytest.approx(1 / (1 + math.exp(-2.0)))
+
+
+@pytest.mark.parametrize("v", [0.03, -0.2, 0.0])
+def test_coulomb_viscous_and_stribeck_forms(v):
+    p = lf.assemble([row(FrictionKind.COULOMB_VISCOUS, MU=25.0, NU=NU),
+                     row(FrictionKind.STRIBECK, FC=FC, FS=FS, VS=VS, DELTA=DELTA, NU=NU), None, None, None, None])
+    s = np.sign(v)
+    expect = [25.0 * s + NU * v, s * stribeck(v) + NU * v, 0.0]
+    for j, f in enumerate(expect):
+        st = lf.new_state(p)
+        assert lf.friction_torque(p, j, st, v, 0.3, 5.0, 1e-3) == pytest.approx(f, rel=1e-13, abs=1e-15)
+        assert lf.static_friction(p, j, v) == pytest.approx(f, rel=1e-13, abs=1e-15)
+
+
+# --------------------------------------------------------------------------- LuGre
+
+
+@pytest.mark.parametrize("v", [0.01, 0.05, -0.08, 0.3, -1.0])
+def test_lugre_steady_state_is_the_stribeck_curve(v):
+    """At a held velocity the bristles sit at z = g(v) sign(v) / s0 from the first call on, and the
+    friction is sign(v) g(v) + nu v (the s1 term vanishes): the Stribeck curve plus viscous friction."""
+    p = lf.assemble([lugre_row()] + [None] * 5)
+    f = series(p, 0, np.full(5, v))
+    expect = np.sign(v) * stribeck(v) + NU * v
+    np.testing.assert_allclose(f, expect, rtol=1e-12)
+    assert lf.static_friction(p, 0, v) == pytest.approx(expect, rel=1e-12)
+
+
+def test_lugre_exact_bristle_relaxation_after_a_velocity_step():
+    """Held at v1, then v2: the state relaxes from z1 towards z2 = g(v2) sign(v2) / s0 at the rate
+    s0 |v2| / g(v2) (the previous sample's velocity is held over each interval)."""
+    p = lf.assemble([None, lugre_row()] + [None] * 4)
+    v1, v2, dt = 0.02, -0.01, 2e-4
+    st = lf.new_state(p)
+    f = series(p, 1, [v1, v1, v2] + [v2] * 6, dt=dt, st=st)
+    z1 = stribeck(v1) / S0
+    g2 = stribeck(v2)
+    z2 = -g2 / S0
+    # sample 2: the interval before it was at v1 (steady): z still z1
+    zs = [z1, z1, z1] + [z2 + (z1 - z2) * math.exp(-S0 * abs(v2) * k * dt / g2) for k in range(1, 7)]
+    vs = [v1, v1, v2] + [v2] * 6
+    for k, (z, v) in enumerate(zip(zs, vs)):
+        g = stribeck(v)
+        assert f[k] == pytest.approx(S0 * z + S1 * (v - S0 * abs(v) * z / g) + NU * v, rel=1e-9), k
+    assert st[1, lf.ST_Z] == pytest.approx(zs[-1], rel=1e-12)
+    assert st[1, lf.ST_VPREV] == v2 and st[1, lf.ST_GPREV] == pytest.approx(g2, rel=1e-14)
+    assert st[1, lf.ST_INIT] == 1.0
+
+
+def test_lugre_presliding_spring_at_rest():
+    """From rest the bristles start unloaded and, with the velocity held at zero, stay: the torque
+    is s0 z + s1 v; after a short motion and a stop the bristle torque is held (a spring)."""
+    p = lf.assemble([lugre_row()] + [None] * 5)
+    f = series(p, 0, [0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(f, 0.0)
+    st = lf.new_state(p)
+    v = 1e-4
+    f = series(p, 0, [0.0, v, 0.0, 0.0], dt=1e-4, st=st)
+    # interval 1 at v = 0: z = 0; interval 2 at v: z relaxes towards g/s0 from 0; then held
+    g = stribeck(v)
+    z = g / S0 * (1 - math.exp(-S0 * v * 1e-4 / g))
+    assert f[1] == pytest.approx(S1 * v + NU * v, rel=1e-12)
+    assert f[2] == pytest.approx(S0 * z, rel=1e-9) and f[3] == pytest.approx(S0 * z, rel=1e-9)
+    assert 0 < f[3] < g
+
+
+def test_lugre_extended_factors_closed_form():
+    """Steady state of the extended LuGre: level g(v) max(1 + k (|load| - load_ref), 0.05), times
+    (1 + asym) for v < 0, plus the position ripple a sin(n q) + b cos(n q)."""
+    flags = float(lf.EXT_LOAD | lf.EXT_ASYMMETRY | lf.EXT_POSITION)
+    ext = lugre_row(FrictionKind.LUGRE_EXTENDED, K_LOAD=0.004, LOAD_REF=100.0, ASYM=0.2, RIP_SIN=0.7, RIP_COS=-0.3,
+                    RIP_ORDER=12.0, EXT_FLAGS=flags)
+    only_asym = lugre_row(FrictionKind.LUGRE_EXTENDED, ASYM=0.2, K_LOAD=0.004, LOAD_REF=100.0, RIP_SIN=0.7,
+                          EXT_FLAGS=float(lf.EXT_ASYMMETRY))
+    p = lf.assemble([ext, only_asym] + [None] * 4)
+    for v, q, load in ((0.1, 0.3, 250.0), (-0.1, -0.2, -40.0), (0.02, 1.0, 1000.0), (-0.3, 0.5, -10000.0)):
+        m = max(1 + 0.004 * (abs(load) - 100.0), lf.LEVEL_FLOOR) * (1.2 if v < 0 else 1.0)
+        ripple = 0.7 * math.sin(12 * q) - 0.3 * math.cos(12 * q)
+        f = series(p, 0, [v, v], [q, q], [load, load])
+        assert f[-1] == pytest.approx(np.sign(v) * stribeck(v) * m + NU * v + ripple, rel=1e-12)
+        f = series(p, 1, [v, v], [q, q], [load, load])
+        m1 = 1.2 if v < 0 else 1.0
+        assert f[-1] == pytest.approx(np.sign(v) * stribeck(v) * m1 + NU * v, rel=1e-12)
+        # the feed-forward curve: direction asymmetry only, at the reference load, no ripple
+        assert lf.static_friction(p, 0, v) == pytest.approx(np.sign(v) * stribeck(v) * m1 + NU * v, rel=1e-12)
+
+
+# --------------------------------------------------------------------------- networks
+
+
+def greybox_row(rng, h=10):
+    r = row(FrictionKind.GREYBOX, S0=S0, S1=S1, NU=NU, V_MAX=2.0, V_REF=0.01, TAU_SCALE=20.0)
+    r["dims"][lf.D_H1] = h
+    r.update(w1=rng.normal(0, 2, (h, 1)), b1=rng.normal(0, 1, h), w2=rng.normal(0, 1, (1, h)), b2=rng.normal(0, 1, 1))
+    return r
+
+
+def greybox_level(r, v):
+    import torch
+
+    sc = r["scal"]
+    net = torch.nn.Sequential(torch.nn.Linear(1, r["w1"].shape[0]), torch.nn.Sigmoid(),
+                              torch.nn.Linear(r["w1"].shape[0], 1), torch.nn.Softplus()).double()
+    with torch.no_grad():
+        net[0].weight[:], net[0].bias[:] = torch.tensor(r["w1"]), torch.tensor(r["b1"])
+        net[2].weight[:], net[2].bias[:] = torch.tensor(r["w2"]), torch.tensor(r["b2"])
+        x = math.log1p(abs(v) / sc[lf.V_REF]) / math.log1p(sc[lf.V_MAX] / sc[lf.V_REF])
+        return sc[lf.TAU_SCALE] * (float(net(torch.tensor([[x]], dtype=torch.float64))) + 1e-6)
+
+
+def test_greybox_level_steady_state_and_trapezoid_relaxation():
+    rng = np.random.default_rng(3)
+    r = greybox_row(rng)
+    p = lf.assemble([None, None, r, None, None, None])
+    for v in (0.0, 0.004, -0.05, 0.7, -2.0):
+        g = greybox_level(r, v)
+        assert lf._greybox_level(p, 2, v) == pytest.approx(g, rel=1e-10)
+        f = series(p, 2, [v, v, v])
+        np.testing.assert_allclose(f, np.sign(v) * g + NU * v, rtol=1e-10, atol=1e-12)
+        assert lf.static_friction(p, 2, v) == pytest.approx(np.sign(v) * g + NU * v, rel=1e-10, abs=1e-12)
+    v1, v2, dt = 0.05, -0.02, 1e-4
+    f = series(p, 2, [v1, v2], dt=dt)
+    w1 = greybox_level(r, v1)
+    vi = 0.5 * (v1 + v2)
+    gi = greybox_level(r, vi)
+    a = math.exp(-S0 * abs(vi) * dt / gi)
+    w = a * w1 + (1 - a) * gi * np.sign(vi)
+    g2 = greybox_level(r, v2)
+    assert f[1] == pytest.approx(w + S1 * (v2 - abs(v2) * w / g2) + NU * v2, rel=1e-9)
+    # a step through zero with a trapezoid velocity of zero: the state is held
+    f = series(p, 2, [v1, -v1], dt=dt)
+    assert f[1] == pytest.approx(w1 + S1 * (-v1 - v1 * w1 / w1) - NU * v1, rel=1e-9)
+
+
+def test_residual_network_against_torch():
+    """LuGre plus a 3-10-10-1 LeakyReLU(0.01) network on (signed log speed, s0 z / g, f / tau_scale)."""
+    import torch
+
+    rng = np.random.default_rng(5)
+    n1, n2 = 10, 7
+    r = lugre_row(FrictionKind.RESIDUAL, V_MAX=2.0, V_REF=0.002, TAU_SCALE=50.0, RES_SCALE=4.0)
+    r["dims"][[lf.D_IN, lf.D_H1, lf.D_H2]] = 3, n1, n2
+    r.update(w1=rng.normal(0, 1, (n1, 3)), b1=rng.normal(0, 1, n1), w2=rng.normal(0, 1, (n2, n1)),
+             b2=rng.normal(0, 1, n2), w3=rng.normal(0, 1, (1, n2)), b3=rng.normal(0, 1, 1))
+    p = lf.assemble([None, None, None, r, None, None])
+    net = torch.nn.Sequential(torch.nn.Linear(3, n1), torch.nn.LeakyReLU(0.01), torch.nn.Linear(n1, n2),
+                              torch.nn.LeakyReLU(0.01), torch.nn.Linear(n2, 1)).double()
+    with torch.no_grad():
+        for i, (w, b) in zip((0, 2, 4), (("w1", "b1"), ("w2", "b2"), ("w3", "b3"))):
+            net[i].weight[:], net[i].bias[:] = torch.tensor(r[w]), torch.tensor(r[b])
+    vs = [0.04, 0.04, -0.3, -0.3, 0.001, 1.5]
+    st = lf.new_state(p)
+    f = series(p, 3, vs, dt=1e-3, st=st)
+    lug = lf.assemble([lugre_row()] + [None] * 5)
+    sl = lf.new_state(lug)
+    base = series(lug, 0, vs, dt=1e-3, st=sl)
+    # the bristle state after each sample, replayed
+    zs = []
+    sz = lf.new_state(lug)
+    for v in vs:
+        lf.friction_torque(lug, 0, sz, v, 0.0, 0.0, 1e-3)
+        zs.append(sz[0, lf.ST_Z])
+    for k, v in enumerate(vs):
+        g = stribeck(v)
+        x = [np.sign(v) * math.log1p(abs(v) / 0.002) / math.log1p(2.0 / 0.002), S0 * zs[k] / g, base[k] / 50.0]
+        with torch.no_grad():
+            out = float(net(torch.tensor([x], dtype=torch.float64)))
+        assert f[k] == pytest.approx(base[k] + 4.0 * out, rel=1e-9), k
+    assert lf.static_friction(p, 3, 0.04) == pytest.approx(stribeck(0.04) + NU * 0.04, rel=1e-12)
+
+
+# --------------------------------------------------------------------------- parameters
+
+
+def test_state_size_and_bristle_rates():
+    r_res = lugre_row(FrictionKind.RESIDUAL)
+    r_res["dims"][lf.D_H1] = 9
+    p = lf.assemble([lugre_row(), r_res, row(FrictionKind.COULOMB_VISCOUS, MU=1.0, NU=2.0), None,
+                     row(FrictionKind.LSTM, NU=5.0, S1=7.0, S0=9.0), lugre_row(FrictionKind.LUGRE_EXTENDED)])
+    assert lf.state_size(p) == lf.ST_LSTM + 9
+    assert lf.new_state(p).shape == (6, lf.ST_LSTM + 9)
+    lstm = p.dims.copy()
+    lstm[4, [lf.D_IN, lf.D_H1, lf.D_H2, lf.D_PLAY, lf.D_SLOTS]] = 6, 4, 3, 2, 3
+    p2 = p._replace(dims=lstm)
+    assert lf.state_size(p2) == lf.ST_LSTM + 2 + 3 * 2 * 4 + 6 + 4 * 4 + 3
+    s0, damp = lf.bristle_rates(p)
+    np.testing.assert_array_equal(s0, [S0, S0, 0.0, 0.0, 0.0, S0])
+    np.testing.assert_array_equal(damp, [S1 + NU, S1 + NU, 2.0, 0.0, 0.0, S1 + NU])
+
+
+def test_scale_levels():
+    g = greybox_row(np.random.default_rng(1))
+    p = lf.assemble([lugre_row(), row(FrictionKind.COULOMB_VISCOUS, MU=3.0, NU=2.0), g, None, None, None])
+    assert lf.scale_levels(p, 1.0) is p
+    q = lf.scale_levels(p, 1.5)
+    np.testing.assert_allclose(q.scal[0, [lf.FC, lf.FS]], [1.5 * FC, 1.5 * FS])
+    assert q.scal[0, lf.NU] == NU and q.scal[0, lf.S0] == S0 and q.scal[0, lf.VS] == VS
+    assert q.scal[1, lf.MU] == 4.5 and q.scal[1, lf.NU] == 2.0
+    assert q.scal[2, lf.TAU_SCALE] == 30.0 and q.scal[0, lf.TAU_SCALE] == 0.0
+    assert p.scal[0, lf.FC] == FC                     # the original is untouched
+    with pytest.raises(ValueError, match="LSTM"):
+        lf.scale_levels(lf.assemble([row(FrictionKind.LSTM)] + [None] * 5), 2.0)
+
+
+def test_lugre_friction_and_assemble():
+    p = lf.lugre_friction([1, 2, 3, 4, 5, 6], 7.0, 0.1, 2.0, 1e4, 50.0, 0.5)
+    assert list(p.kind) == [FrictionKind.LUGRE] * 6
+    np.testing.assert_array_equal(p.scal[:, lf.FC], [1, 2, 3, 4, 5, 6])
+    np.testing.assert_array_equal(p.scal[0, [lf.FS, lf.VS, lf.DELTA, lf.S0, lf.S1, lf.NU]], [7, 0.1, 2, 1e4, 50, 0.5])
+    a = lf.assemble([None, {"kind": 1, "scal": np.zeros(24), "dims": np.zeros(7, np.int64), "w1": np.ones((3, 2))},
+                     {"kind": 1, "scal": np.zeros(24), "dims": np.zeros(7, np.int64), "w1": np.ones((2, 4))},
+                     None, None, None])
+    assert a.w1.shape == (6, 3, 4)
+    np.testing.assert_array_equal(a.w1[1], [[1, 1, 0, 0]] * 3)
+    np.testing.assert_array_equal(a.w1[2], [[1, 1, 1, 1], [1, 1, 1, 1], [0, 0, 0, 0]])
+    assert a.b1.shape == (6, 1) and a.wih.shape == (6, 1, 1)
+    assert list(a.kind) == [0, 1, 1, 0, 0, 0]
+    with pytest.raises(ValueError, match="six joints"):
+        lf.assemble([None] * 5)
+    assert lf.describe([lugre_row(FrictionKind.LUGRE_EXTENDED), None]) == ["lugre-extended", "none"]
+
+
+def _save(folder, model, params, **hyper):
+    folder.mkdir(parents=True, exist_ok=True)
+    doc = {"model": model, "params": {k: {"value": v} for k, v in params.items()}}
+    if hyper:
+        doc["hyperparameters"] = hyper
+    (folder / "params.json").write_text(json.dumps(doc))
+    return folder
+
+
+LUGRE = dict(s0=S0, s1=S1, nu=NU, fc=FC, fs=FS, vs=VS, delta=DELTA)
+
+
+def test_joint_from_folder_reads_every_static_form(tmp_path):
+    r = lf.joint_from_folder(_save(tmp_path / "cv", "coulomb-viscous", {"mu": 3.0, "nu": 2.0}))
+    assert r["kind"] == FrictionKind.COULOMB_VISCOUS and (r["scal"][lf.MU], r["scal"][lf.NU]) == (3.0, 2.0)
+    r = lf.joint_from_folder(_save(tmp_path / "st", "stribeck", {"fc": 1, "fs": 2, "vs": 3, "delta": 4, "nu": 5}))
+    np.testing.assert_array_equal(r["scal"][[lf.FC, lf.FS, lf.VS, lf.DELTA, lf.NU]], [1, 2, 3, 4, 5])
+    r = lf.joint_from_folder(_save(tmp_path / "lu", "lugre", LUGRE))
+    assert r["kind"] == FrictionKind.LUGRE
+    np.testing.assert_array_equal(r["scal"][[lf.S0, lf.S1, lf.NU, lf.FC, lf.FS, lf.VS, lf.DELTA]],
+                                  [S0, S1, NU, FC, FS, VS, DELTA])
+    ext = dict(LUGRE, k_load=0.01, load_ref=50.0, asym=0.3, ripple_sin=0.1, ripple_cos=0.2, ripple_order=6.0)
+    r = lf.joint_from_folder(_save(tmp_path / "ex", "lugre-extended", ext,
+                                   causes=["load", "asymmetry", "position", "temperature"]))
+    assert r["kind"] == FrictionKind.LUGRE_EXTENDED
+    assert int(r["scal"][lf.EXT_FLAGS]) == 15
+    np.testing.assert_array_equal(r["scal"][[lf.K_LOAD, lf.LOAD_REF, lf.ASYM, lf.RIP_SIN, lf.RIP_COS, lf.RIP_ORDER]],
+                                  [0.01, 50.0, 0.3, 0.1, 0.2, 6.0])
+    r = lf.joint_from_folder(_save(tmp_path / "ex2", "lugre-extended", dict(ext, asym=0.25), causes=["asymmetry"]))
+    assert int(r["scal"][lf.EXT_FLAGS]) == lf.EXT_ASYMMETRY == 2 and r["scal"][lf.ASYM] == 0.25
+    assert r["scal"][lf.K_LOAD] == 0.0 and r["scal"][lf.RIP_SIN] == 0.0      # causes not named are not read
+    with pytest.raises(InputError, match=r"lacks parameter\(s\) asym"):
+        lf.joint_from_folder(_save(tmp_path / "ex4", "lugre-extended", LUGRE, causes=["asymmetry"]))
+    r = lf.joint_from_folder(_save(tmp_path / "ex3", "lugre-extended", LUGRE))
+    assert r["scal"][lf.EXT_FLAGS] == 0.0
+    il = type("L", (), dict(s0=1.0, s1=2.0, nu=3.0, fc=4.0, fs=5.0, vs=6.0, delta=7.0))()
+    r = lf.joint_from_lugre(il)
+    assert r["kind"] == FrictionKind.LUGRE
+    np.testing.assert_array_equal(r["scal"][[lf.S0, lf.S1, lf.NU, lf.FC, lf.FS, lf.VS, lf.DELTA]], range(1, 8))
+
+
+def test_joint_from_folder_errors_name_the_file_and_field(tmp_path):
+    with pytest.raises(InputError, match="no params.json"):
+        lf.joint_from_folder(tmp_path / "none")
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "params.json").write_text(json.dumps({"model": "lugre"}))
+    with pytest.raises(InputError, match="needs 'model' and 'params'"):
+        lf.joint_from_folder(tmp_path / "bad")
+    with pytest.raises(InputError, match="unknown friction model 'magic'") as e:
+        lf.joint_from_folder(_save(tmp_path / "u", "magic", {}))
+    assert "params.json" in str(e.value)
+    with pytest.raises(InputError, match=r"lacks parameter\(s\) fs, delta"):
+        lf.joint_from_folder(_save(tmp_path / "m", "stribeck", {"fc": 1, "vs": 3, "nu": 5}))
+    with pytest.raises(InputError, match="network.pt"):
+        lf.joint_from_folder(_save(tmp_path / "g", "greybox", {}))
