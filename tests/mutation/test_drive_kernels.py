@@ -238,6 +238,28 @@ def test_steady_error_with_friction_on_either_side():
     np.testing.assert_allclose(res.tau_motor[-1], LOAD + F, rtol=1e-4)
 
 
+def test_windup_compensation_of_a_changing_load_with_gear_damping():
+    """A load that grows at L' [Nm/s] while the joint moves at constant speed, known to the NC (model
+    = load), full feed-forward: the gear carries c delta + d delta_d = L, so delta = L / c - d L' / c^2
+    and delta_d = L' / c; the windup compensation moves the motor by exactly that (position and
+    velocity), so only the play is left: e = b / 2."""
+    Ld = np.array([400.0, 300.0, -100.0, 50.0, 40.0, -10.0])      # Nm/s
+    L0 = np.array([100.0, 50.0, -20.0, 10.0, 8.0, -2.0])           # Nm (no sign change within the run)
+    p = params(ffv=np.ones(6), fft=np.ones(6), d=D * 40)
+    t = np.arange(0.0, 1.0 + T / 2, T)
+    q = t[:, None] * V
+    load = L0 + t[:, None] * Ld
+    flags = DriveFlags.BACKLASH | DriveFlags.FF_VEL | DriveFlags.FF_TAU | DriveFlags.WINDUP
+    res = simulate_drive(None, t, q, params=p, loop_friction=no_friction(), tau_load=load, tau_model=load,
+                         link_inertia=JL, flags=flags)
+    # within 2e-6 rad: the control torque is held over a substep (a lag of h / 2 on L' / c); the
+    # damping term d L' / c^2 is 1e-5 to 6e-4 rad, the velocity term (L' / c) / kv 1e-3 rad
+    np.testing.assert_allclose(res.error[-1], np.sign(L0) * B / 2, rtol=0, atol=2e-6)
+    np.testing.assert_allclose(res.theta[-1] - res.q[-1] - np.sign(L0) * B / 2,
+                               load[-1] / C - p.d * Ld / C ** 2, rtol=1e-3, atol=1e-10)
+    np.testing.assert_allclose(res.tau_gear[-1], load[-1], rtol=1e-4)   # damping at half-kicked velocities
+
+
 def test_acceleration_feed_forward_needs_no_integrator():
     """Constant acceleration A from rest, full velocity and torque feed-forward (model = the true
     load), no integral action and no play: the motor torque is (J_m + J_l) A + L from the feed-forward alone and

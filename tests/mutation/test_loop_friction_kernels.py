@@ -111,6 +111,25 @@ def test_lugre_exact_bristle_relaxation_after_a_velocity_step():
     assert st[1, lf.ST_INIT] == 1.0
 
 
+def test_lugre_update_on_a_varying_velocity_matches_the_held_velocity_rule():
+    """Seeded random velocities (sign changes, zeros): each interval relaxes z towards the previous
+    sample's steady state g(v_prev) sign(v_prev) / s0 at s0 |v_prev| / g(v_prev), z held where v_prev = 0."""
+    rng = np.random.default_rng(11)
+    v = rng.normal(0.0, 0.05, 40)
+    v[[5, 6, 20]] = 0.0
+    dt = rng.uniform(1e-4, 2e-3, 40)
+    p = lf.assemble([None, None, None, None, lugre_row(), None])
+    f = lf.friction_series(p, 4, lf.new_state(p), v, np.zeros(40), np.zeros(40), dt)
+    z = stribeck(v[0]) * np.sign(v[0]) / S0
+    for k in range(40):
+        if k > 0 and v[k - 1] != 0.0:
+            gp = stribeck(v[k - 1])
+            zss = gp * np.sign(v[k - 1]) / S0
+            z = zss + (z - zss) * math.exp(-S0 * abs(v[k - 1]) * dt[k] / gp)
+        g = stribeck(v[k])
+        assert f[k] == pytest.approx(S0 * z + S1 * (v[k] - S0 * abs(v[k]) * z / g) + NU * v[k], rel=1e-9, abs=1e-12), k
+
+
 def test_lugre_presliding_spring_at_rest():
     """From rest the bristles start unloaded and, with the velocity held at zero, stay: the torque
     is s0 z + s1 v; after a short motion and a stop the bristle torque is held (a spring)."""
