@@ -358,3 +358,86 @@ def test_joint_from_folder_errors_name_the_file_and_field(tmp_path):
         lf.joint_from_folder(_save(tmp_path / "m", "stribeck", {"fc": 1, "vs": 3, "nu": 5}))
     with pytest.raises(InputError, match="network.pt"):
         lf.joint_from_folder(_save(tmp_path / "g", "greybox", {}))
+
+
+# --------------------------------------------------------------------------- LSTM
+
+
+def lstm_row(rng, n_play=2, hid=5, head=4, window=4, warmup=6, period=1e-3):
+    n_in = 4 + n_play
+    r = row(FrictionKind.LSTM, V_MAX=2.0, A_SCALE=30.0, TAU_SCALE=12.0, TANH_V=0.05, LOG_V=0.01, PERIOD=period)
+    r["dims"][[lf.D_IN, lf.D_H1, lf.D_H2, lf.D_PLAY, lf.D_WINDOW, lf.D_WARMUP, lf.D_SLOTS]] = (
+        n_in, hid, head, n_play, window, warmup, warmup // window + 2)
+    r.update(wih=rng.normal(0, 0.6, (4 * hid, n_in)), whh=rng.normal(0, 0.6, (4 * hid, hid)),
+             bl=rng.normal(0, 0.3, 4 * hid), w1=rng.normal(0, 0.6, (head, hid + n_in)), b1=rng.normal(0, 0.3, head),
+             w2=rng.normal(0, 1.0, (1, head)), b2=rng.normal(0, 0.3, 1), widths=np.array([0.01, 0.05])[:n_play])
+    return r
+
+
+def lstm_oracle(r, v, q, qdd):
+    """The windowed LSTM read-out in torch: sample k is scored by window w = k // window, whose cell
+    ran from w window - warmup (before the record: the first sample's input repeated)."""
+    import torch
+
+    sc, dims = r["scal"], r["dims"]
+    n_in, hid, window, warmup = (int(dims[d]) for d in (lf.D_IN, lf.D_H1, lf.D_WINDOW, lf.D_WARMUP))
+    vn = np.asarray(v) / sc[lf.V_MAX]
+    feats = [vn, np.tanh(vn / sc[lf.TANH_V]),
+             np.sign(vn) * np.log1p(np.abs(vn) / sc[lf.LOG_V]) / math.log1p(1.0 / sc[lf.LOG_V]),
+             np.asarray(qdd) / sc[lf.A_SCALE]]
+    for w in r["widths"]:
+        y, col = q[0], []
+        for qk in q:
+            y = min(max(y, qk - w), qk + w)
+            col.append((qk - y) / w)
+        feats.append(np.array(col))
+    x = np.stack(feats, axis=1)
+    cell = torch.nn.LSTM(n_in, hid, batch_first=True).double()
+    with torch.no_grad():
+        cell.weight_ih_l0[:] = torch.tensor(r["wih"])
+        cell.weight_hh_l0[:] = torch.tensor(r["whh"])
+        cell.bias_ih_l0[:] = torch.tensor(r["bl"])
+        cell.bias_hh_l0[:] = 0.0
+    out = []
+    for k in range(len(v)):
+        start = (k // window) * window - warmup
+        seq = np.stack([x[max(i, 0)] for i in range(start, k + 1)])
+        with torch.no_grad():
+            h = cell(torch.tensor(seq[None]))[0][0, -1].numpy()
+        a = np.tanh(r["w1"] @ np.concatenate([h, x[k]]) + r["b1"])
+        out.append(sc[lf.TAU_SCALE] * (r["b2"][0] + r["w2"][0] @ a))
+    return np.array(out)
+
+
+def test_lstm_windows_and_features_against_torch():
+    rng = np.random.default_rng(21)
+    r = lstm_row(rng)
+    p = lf.assemble([None, r, None, None, None, None])
+    n = 23
+    v = 0.3 * np.sin(np.linspace(0, 6, n)) + rng.normal(0, 0.02, n)
+    q = np.cumsum(v) * 1e-3 + 0.1 * np.sin(np.linspace(0, 3, n))
+    st = lf.new_state(p)
+    assert st.shape[1] == lf.state_size(p)
+    f = lf.friction_series(p, 1, st, v, q, np.zeros(n), np.full(n, 1e-3))
+    qdd = np.concatenate([[0.0], np.diff(v) / 1e-3])     # backward difference over the LSTM's period
+    np.testing.assert_allclose(f, lstm_oracle(r, v, q, qdd), rtol=1e-9, atol=1e-12)
+    assert st[1, lf.ST_K] == n
+
+
+def test_lstm_is_stepped_at_its_own_period_and_held_between():
+    """Called every half period, the LSTM steps on every second call (with the acceleration over its
+    period) and its output is held in between."""
+    rng = np.random.default_rng(22)
+    period = 2e-3
+    r = lstm_row(rng, period=period)
+    p = lf.assemble([None, None, r, None, None, None])
+    n = 20
+    v = np.linspace(-0.2, 0.4, n) ** 2 - 0.05
+    q = np.linspace(0.0, 0.02, n)
+    f = lf.friction_series(p, 2, lf.new_state(p), v, q, np.zeros(n), np.full(n, period / 2))
+    vs, qs = v[::2], q[::2]
+    qdd = np.concatenate([[0.0], np.diff(vs) / period])
+    ref = lstm_oracle(r, vs, qs, qdd)
+    np.testing.assert_allclose(f[::2], ref, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(f[1::2], ref[: len(f[1::2])], rtol=1e-9, atol=1e-12)
+    assert lf.static_friction(p, 2, 0.1) == 0.0
