@@ -14,10 +14,23 @@ import pytest
 
 from identify.errors import InputError
 from simulate.robot import drive as dv
-from simulate.robot.drive import (Contact, CycleInput, DriveFlags, DriveParams, FrictionSide, as_substeps,
-                                  drive_flags, drive_init, drive_params, drive_step, gear_torque, new_state,
-                                  simulate_drive, substeps_for)
-from simulate.robot.loop_friction import FrictionKind, MU, NU, assemble, lugre_friction
+from simulate.robot.drive import (
+    Contact,
+    CycleInput,
+    DriveFlags,
+    DriveParams,
+    FrictionSide,
+    as_substeps,
+    drive_flags,
+    drive_init,
+    drive_params,
+    drive_step,
+    gear_torque,
+    new_state,
+    simulate_drive,
+    substeps_for,
+)
+from simulate.robot.loop_friction import MU, NU, FrictionKind, assemble, lugre_friction
 from simulate.robot.loop_friction import new_state as friction_state
 
 T = 0.002   # s
@@ -115,7 +128,7 @@ def test_init_is_an_exact_rest_equilibrium(flags):
     n_sub = np.array([3, 4, 5, 6, 7, 8], np.int64)
     for _ in range(5):
         drive_step(p, fp, st, fst, cy, T, n_sub, int(flags))
-    for name, a, b in zip(st._fields, before, st):
+    for name, a, b in zip(st._fields, before, st, strict=True):
         np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12, err_msg=name)
 
 

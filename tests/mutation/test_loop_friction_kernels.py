@@ -103,7 +103,7 @@ def test_lugre_exact_bristle_relaxation_after_a_velocity_step():
     # sample 2: the interval before it was at v1 (steady): z still z1
     zs = [z1, z1, z1] + [z2 + (z1 - z2) * math.exp(-S0 * abs(v2) * k * dt / g2) for k in range(1, 7)]
     vs = [v1, v1, v2] + [v2] * 6
-    for k, (z, v) in enumerate(zip(zs, vs)):
+    for k, (z, v) in enumerate(zip(zs, vs, strict=True)):
         g = stribeck(v)
         assert f[k] == pytest.approx(S0 * z + S1 * (v - S0 * abs(v) * z / g) + NU * v, rel=1e-9), k
     assert st[1, lf.ST_Z] == pytest.approx(zs[-1], rel=1e-12)
@@ -229,7 +229,7 @@ def test_residual_network_against_torch():
     net = torch.nn.Sequential(torch.nn.Linear(3, n1), torch.nn.LeakyReLU(0.01), torch.nn.Linear(n1, n2),
                               torch.nn.LeakyReLU(0.01), torch.nn.Linear(n2, 1)).double()
     with torch.no_grad():
-        for i, (w, b) in zip((0, 2, 4), (("w1", "b1"), ("w2", "b2"), ("w3", "b3"))):
+        for i, (w, b) in zip((0, 2, 4), (("w1", "b1"), ("w2", "b2"), ("w3", "b3")), strict=True):
             net[i].weight[:], net[i].bias[:] = torch.tensor(r[w]), torch.tensor(r[b])
     vs = [0.04, 0.04, -0.3, -0.3, 0.001, 1.5]
     st = lf.new_state(p)

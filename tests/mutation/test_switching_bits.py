@@ -6,8 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from simulate.toolpath.switching import (DEFAULT_THRESHOLD, SwitchEvent, SwitchingEvents, _switch_kernel, axes_of,
-                                         switching_events, switching_points)
+from simulate.toolpath.switching import (
+    DEFAULT_THRESHOLD,
+    SwitchEvent,
+    SwitchingEvents,
+    _switch_kernel,
+    axes_of,
+    switching_events,
+    switching_points,
+)
 
 THR = 1e-3   # rad/s
 
