@@ -14,6 +14,7 @@ import pytest
 
 from identify.errors import InputError
 from simulate.robot import drive as dv
+from simulate.robot import loop_friction as lf_slots
 from simulate.robot.drive import (
     Contact,
     CycleInput,
@@ -26,6 +27,7 @@ from simulate.robot.drive import (
     drive_params,
     drive_step,
     gear_torque,
+    load_torques,
     new_state,
     simulate_drive,
     substeps_for,
@@ -396,3 +398,111 @@ def test_drive_params_from_a_robot_and_its_errors():
         drive_params(SimpleNamespace(**{**vars(robot), "stiffness": [1, 1, math.inf, 1, 1, 1]}))
     with pytest.raises(InputError, match=r"joint\[1\]\.drive"):
         drive_params(SimpleNamespace(**{**vars(robot), "drive": None}))
+
+
+# ------------------------------------------------------------------ load torques (rigid-body data of a robot file)
+
+
+@pytest.fixture(scope="module")
+def robot():
+    from pathlib import Path
+
+    from simulate.robot.model import load_robot
+
+    return load_robot(Path(__file__).resolve().parents[2] / "data" / "robots" / "max100.toml")
+
+
+def test_load_torques_exclude_the_own_inertia_and_carry_the_wrench(robot):
+    """The load on link j is everything but its own inertia: an acceleration of joint j alone does not
+    change it, but loads the other joints by M_ij qdd_j; at rest it is the gravity torque (none on
+    the vertical A1); a TCP wrench w adds -J^T w; J_l = M_jj (rigid bodies, no rotor)."""
+    from simulate.robot.dynamics import Payload, rnea
+    from simulate.robot.kinematics import jacobian
+
+    q = np.radians([10.0, 40.0, 100.0, 20.0, 30.0, 60.0])
+    z = np.zeros(6)
+    tl0, jl0 = load_torques(robot, q, z, z)
+    np.testing.assert_allclose(tl0[0], rnea(robot, q, z, z, rotor=False), rtol=1e-12)
+    assert abs(tl0[0, 0]) < 1e-9 * np.abs(tl0[0]).max()
+    m = np.stack([rnea(robot, q, z, np.eye(6)[j], gravity=(0, 0, 0), rotor=False) for j in range(6)], axis=1)
+    np.testing.assert_allclose(jl0[0], np.diag(m), rtol=1e-10)
+    for j in (1, 4):
+        a = np.eye(6)[j] * 3.0
+        tl, jl = load_torques(robot, q, z, a)
+        assert tl[0, j] == pytest.approx(tl0[0, j], rel=1e-10, abs=1e-9)
+        np.testing.assert_allclose(np.delete(tl[0] - tl0[0], j), np.delete(3.0 * m[:, j], j), rtol=1e-9, atol=1e-9)
+    w = np.array([100.0, -50.0, 200.0, 5.0, -3.0, 8.0])
+    tl_w, _ = load_torques(robot, q, z, z, wrench_tcp=w)
+    np.testing.assert_allclose(tl_w[0] - tl0[0], -jacobian(robot, q).T @ w, rtol=1e-9, atol=1e-9)
+    pay = Payload(mass=20.0, com=(0.05, 0.0, 0.1))
+    tl_p, jl_p = load_torques(robot, q, z, z, payload=pay)
+    assert jl_p[0, 5] > jl0[0, 5] and not np.allclose(tl_p[0, 1:3], tl0[0, 1:3])
+    # several rows at once, qd included
+    qs = np.stack([q, q + 0.1])
+    qds = np.stack([z, np.full(6, 0.5)])
+    tl2, jl2 = load_torques(robot, qs, qds, np.stack([z, z]))
+    np.testing.assert_allclose(tl2[1], rnea(robot, q + 0.1, np.full(6, 0.5), z, rotor=False), rtol=1e-10)
+    assert tl2.shape == jl2.shape == (2, 6)
+
+
+def test_load_torque_step_equals_load_torques(robot):
+    """The compiled per-step load (eight Newton-Euler rows) against the vectorised one, with a process
+    torque -J^T w and a payload; the empty placeholder has the right shapes and is all zero."""
+    from simulate.robot.dynamics import Payload
+    from simulate.robot.kinematics import jacobian
+
+    rng = np.random.default_rng(17)
+    pay = Payload(mass=12.0, com=(0.02, 0.0, 0.08), inertia=np.diag([0.1, 0.2, 0.3]))
+    dyn = dv.dyn_params(robot, pay)
+    for _ in range(3):
+        q = np.radians([0.0, 50.0, 110.0, 0.0, 25.0, 90.0]) + rng.normal(0, 0.3, 6)
+        qd, qdd, w = rng.normal(0, 0.5, 6), rng.normal(0, 2.0, 6), rng.normal(0, 300.0, 6)
+        tl, jl = load_torques(robot, q[None], qd[None], qdd[None], wrench_tcp=w[None], payload=pay)
+        out_l, out_j = np.empty(6), np.empty(6)
+        dv.load_torque_step(dyn, q, qd, qdd, -jacobian(robot, q).T @ w, out_l, out_j)
+        np.testing.assert_allclose(out_j, jl[0], rtol=1e-10)
+        np.testing.assert_allclose(out_l, tl[0], rtol=1e-10, atol=1e-8)
+    e = dv.dyn_params_empty()
+    ref = dv.dyn_params(robot)
+    for name in e._fields:
+        assert np.shape(getattr(e, name)) == np.shape(getattr(ref, name)), name
+        assert not np.any(getattr(e, name)), name
+    assert e.q_rows is not e.qd_rows and e.out is not e.q_rows     # separate work arrays
+    np.testing.assert_array_equal(ref.g0, [0.0, 0.0, -9.81])
+    np.testing.assert_array_equal(ref.dh[:, 0], robot.a)
+    np.testing.assert_array_equal(ref.dh[:, 3], robot.theta_offset)
+
+
+def test_tcp_error_and_simulate_drive_default_loads(robot):
+    """With no load given, simulate_drive takes the command's own Newton-Euler load and M_jj; the
+    TCP error is p(q) - p(q_cmd)."""
+    from simulate.robot.kinematics import fk
+
+    t = np.arange(4) * T
+    q = np.tile(np.radians([0.0, 50.0, 110.0, 0.0, 25.0, 90.0]), (4, 1))
+    p = params()
+    res = simulate_drive(robot, t, q, params=p, loop_friction=no_friction(), flags=DriveFlags.NONE)
+    tl, jl = load_torques(robot, q, np.zeros_like(q), np.zeros_like(q))
+    np.testing.assert_allclose(res.tau_load, tl, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.tau_gear[0], tl[0], rtol=1e-9, atol=1e-9)   # at equilibrium from the start
+    res2 = simulate_drive(robot, t, q, params=p, loop_friction=no_friction(), flags=DriveFlags.NONE,
+                          tau_load=tl, link_inertia=jl[0])
+    np.testing.assert_allclose(res2.q, res.q, rtol=0, atol=1e-10)
+    shifted = dv.DriveResult(**{**res.__dict__, "q": res.q_cmd + 0.001})
+    np.testing.assert_allclose(shifted.tcp_error(robot),
+                               fk(robot, q + 0.001)[:, :3, 3] - fk(robot, q)[:, :3, 3], rtol=1e-12)
+    assert np.linalg.norm(shifted.tcp_error(robot)[0]) > 1e-4
+
+
+def test_drive_friction_scales_and_checks_the_feed_forward(robot):
+    fp = lugre_friction(10.0, 15.0, 0.01, 1.0, 1e5, 100.0, 2.0)
+    assert dv.drive_friction(robot, fp) is fp
+    np.testing.assert_allclose(dv.drive_friction(robot, fp, scale=2.0).scal[:, lf_slots.FC], 20.0)
+    lstm = fp._replace(kind=np.array([FrictionKind.LSTM] + [FrictionKind.LUGRE] * 5, np.int64))
+    with pytest.raises(InputError, match="friction-scale"):
+        dv.drive_friction(robot, lstm, scale=2.0)
+    assert dv.drive_friction(robot, lstm) is lstm                       # no feed-forward asked: fine
+    with pytest.raises(InputError, match="ff-friction"):
+        dv.drive_friction(robot, lstm, flags=DriveFlags.default() | DriveFlags.FF_FRICTION)
+    own = dv.drive_friction(robot)
+    assert own.kind.shape == (6,) and np.all(own.kind > 0)
