@@ -506,3 +506,47 @@ def test_drive_friction_scales_and_checks_the_feed_forward(robot):
         dv.drive_friction(robot, lstm, flags=DriveFlags.default() | DriveFlags.FF_FRICTION)
     own = dv.drive_friction(robot)
     assert own.kind.shape == (6,) and np.all(own.kind > 0)
+
+
+def test_simulate_drive_feeds_each_cycle_its_own_ends():
+    """simulate_drive against drive_init + drive_step driven by hand: cycle k gets the command, its
+    central-difference velocity and acceleration, the load and model torque at both ends and the mean
+    link inertia of the two ends; outputs per sample are the state after the cycle ending there."""
+    rng = np.random.default_rng(31)
+    m = 7
+    t = np.cumsum(np.r_[0.0, rng.uniform(0.8, 1.0, m - 1) * T])
+    q = np.cumsum(rng.normal(0, 1e-3, (m, 6)), axis=0)
+    load = rng.normal(0, 20.0, (m, 6))
+    model = rng.normal(0, 20.0, (m, 6))
+    jl = JL * rng.uniform(0.5, 1.5, (m, 6))
+    fp = coulomb_viscous(np.full(6, 3.0), np.full(6, 1.0))
+    p = params(ffv=np.full(6, 0.8), fft=np.full(6, 0.6), side=np.array([0, 1, 0, 1, 0, 1], np.int64))
+    flags = DriveFlags.default() | DriveFlags.FF_FRICTION
+    n_sub = np.array([3, 4, 5, 3, 4, 5], np.int64)
+    res = simulate_drive(None, t, q, params=p, loop_friction=fp, tau_load=load, tau_model=model, link_inertia=jl,
+                         flags=flags, substeps=n_sub)
+    v = np.gradient(q, t, axis=0, edge_order=2)
+    a = np.gradient(v, t, axis=0, edge_order=2)
+    st, fst = new_state(), friction_state(fp)
+    drive_init(p, st, fst, q[0], v[0], load[0], model[0], jl[0], int(flags))
+    for k in range(m):
+        if k:
+            cy = cycle(r0=q[k - 1], r1=q[k], v0=v[k - 1], v1=v[k], a0=a[k - 1], a1=a[k], load0=load[k - 1],
+                       load1=load[k], model0=model[k - 1], model1=model[k], jl=0.5 * (jl[k - 1] + jl[k]))
+            drive_step(p, fp, st, fst, cy, t[k] - t[k - 1], n_sub, int(flags))
+        for name, got in (("q", res.q), ("theta", res.theta), ("tau_s", res.tau_gear), ("tau_f", res.tau_friction),
+                          ("u", res.tau_motor)):
+            np.testing.assert_allclose(got[k], getattr(st, name), rtol=1e-12, atol=1e-15, err_msg=f"{name} {k}")
+        np.testing.assert_array_equal(res.contact[k], st.contact)
+    assert res.contact.dtype == np.int8
+    np.testing.assert_array_equal(res.t, t)
+    np.testing.assert_array_equal(res.tau_load, load)
+    # the default model torque is the load itself
+    r1 = simulate_drive(None, t, q, params=p, loop_friction=fp, tau_load=load, link_inertia=jl, flags=flags,
+                        substeps=n_sub)
+    r2 = simulate_drive(None, t, q, params=p, loop_friction=fp, tau_load=load, tau_model=load, link_inertia=jl,
+                        flags=flags, substeps=n_sub)
+    np.testing.assert_array_equal(r1.q, r2.q)
+    # the substeps follow the largest cycle time and the smallest link inertia by default
+    r3 = simulate_drive(None, t, q, params=p, loop_friction=fp, tau_load=load, link_inertia=jl, flags=flags)
+    np.testing.assert_array_equal(r3.substeps, substeps_for(p, jl, float(np.max(np.diff(t))), int(flags), fp))
