@@ -441,3 +441,96 @@ def test_lstm_is_stepped_at_its_own_period_and_held_between():
     np.testing.assert_allclose(f[::2], ref, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(f[1::2], ref[: len(f[1::2])], rtol=1e-9, atol=1e-12)
     assert lf.static_friction(p, 2, 0.1) == 0.0
+
+
+# --------------------------------------------------------------------------- learned models read from their folders
+
+
+def _net(folder, blob):
+    import torch
+
+    torch.save(blob, folder / "network.pt")
+    return folder
+
+
+def _t(a):
+    import torch
+
+    return torch.tensor(np.asarray(a, float))
+
+
+def test_joint_from_folder_reads_a_greybox_network(tmp_path):
+    """Bristle parameters through their positive maps (exp, softplus times scale), the level network's
+    weights and scales as saved."""
+    rng = np.random.default_rng(41)
+    w1, b1, w2, b2 = rng.normal(size=(7, 1)), rng.normal(size=7), rng.normal(size=(1, 7)), rng.normal(size=1)
+    state = {"log_s0": _t(9.0), "s1_scale": _t(100.0), "raw_s1": _t(0.3), "nu_scale": _t(10.0), "raw_nu": _t(-1.0),
+             "level.v_max": _t(2.5), "level.v_ref": _t(0.02), "level.tau_scale": _t(40.0),
+             "level.hidden.weight": _t(w1), "level.hidden.bias": _t(b1), "level.out.weight": _t(w2),
+             "level.out.bias": _t(b2)}
+    folder = _net(_save(tmp_path / "g", "greybox", {}), {"state": state})
+    r = lf.joint_from_folder(folder)
+    sc = r["scal"]
+    assert r["kind"] == FrictionKind.GREYBOX and r["dims"][lf.D_H1] == 7
+    assert sc[lf.S0] == pytest.approx(math.exp(9.0), rel=1e-12)
+    assert sc[lf.S1] == pytest.approx(100.0 * math.log1p(math.exp(0.3)), rel=1e-12)
+    assert sc[lf.NU] == pytest.approx(10.0 * math.log1p(math.exp(-1.0)), rel=1e-12)
+    assert (sc[lf.V_MAX], sc[lf.V_REF], sc[lf.TAU_SCALE]) == (2.5, 0.02, 40.0)
+    for k, a in (("w1", w1), ("b1", b1), ("w2", w2), ("b2", b2)):
+        np.testing.assert_array_equal(r[k], a)
+    assert lf._softplus_np(25.0) == 25.0 and lf._softplus_np(1.0) == pytest.approx(math.log1p(math.e))
+    np.testing.assert_array_equal(lf._np([1, 2]), [1.0, 2.0])
+
+
+def test_joint_from_folder_reads_a_residual_network(tmp_path):
+    rng = np.random.default_rng(42)
+    folder = _save(tmp_path / "r", "residual", {})
+    _save(folder / "lugre", "lugre", LUGRE)
+    w = {f"mlp.{i}.weight": rng.normal(size=s) for i, s in ((0, (10, 3)), (2, (8, 10)), (4, (1, 8)))}
+    b = {f"mlp.{i}.bias": rng.normal(size=n) for i, n in ((0, 10), (2, 8), (4, 1))}
+    state = {"v_max": _t(3.0), "tau_scale": _t(60.0), "res_scale": _t(5.0), **{k: _t(v) for k, v in {**w, **b}.items()}}
+    r = lf.joint_from_folder(_net(folder, {"state": state}))
+    sc = r["scal"]
+    assert r["kind"] == FrictionKind.RESIDUAL
+    np.testing.assert_array_equal(sc[[lf.S0, lf.S1, lf.NU, lf.FC, lf.FS, lf.VS, lf.DELTA]],
+                                  [S0, S1, NU, FC, FS, VS, DELTA])
+    assert (sc[lf.V_MAX], sc[lf.V_REF], sc[lf.TAU_SCALE], sc[lf.RES_SCALE]) == (3.0, 0.003, 60.0, 5.0)
+    assert list(r["dims"][[lf.D_IN, lf.D_H1, lf.D_H2]]) == [3, 10, 8]
+    np.testing.assert_array_equal(r["w2"], w["mlp.2.weight"])
+    np.testing.assert_array_equal(r["b3"], b["mlp.4.bias"])
+    np.testing.assert_array_equal(r["w3"], w["mlp.4.weight"])
+
+
+def test_joint_from_folder_reads_an_lstm_network(tmp_path):
+    from identify.models.sequence_features import LOG_VELOCITY, TANH_VELOCITY
+
+    rng = np.random.default_rng(43)
+    hid, n_in, head = 4, 6, 3
+    state = {"v_scale": _t(2.0), "a_scale": _t(30.0), "tau_scale": _t(12.0), "play_widths": _t([0.01, 0.05]),
+             "lstm.weight_ih_l0": _t(rng.normal(size=(4 * hid, n_in))),
+             "lstm.weight_hh_l0": _t(rng.normal(size=(4 * hid, hid))),
+             "lstm.bias_ih_l0": _t(np.arange(4 * hid)), "lstm.bias_hh_l0": _t(np.full(4 * hid, 0.5)),
+             "head.0.weight": _t(rng.normal(size=(head, hid + n_in))), "head.0.bias": _t(rng.normal(size=head)),
+             "head.2.weight": _t(rng.normal(size=(1, head))), "head.2.bias": _t([0.25])}
+    folder = _net(_save(tmp_path / "l", "lstm", {}, window=40, warmup=100), {"format": 2, "state": state})
+    r = lf.joint_from_folder(folder, sample_period=2e-3)
+    sc, dims = r["scal"], r["dims"]
+    assert r["kind"] == FrictionKind.LSTM
+    assert (sc[lf.V_MAX], sc[lf.A_SCALE], sc[lf.TAU_SCALE], sc[lf.PERIOD]) == (2.0, 30.0, 12.0, 2e-3)
+    assert (sc[lf.TANH_V], sc[lf.LOG_V]) == (TANH_VELOCITY, LOG_VELOCITY)
+    assert list(dims[[lf.D_IN, lf.D_H1, lf.D_H2, lf.D_PLAY, lf.D_WINDOW, lf.D_WARMUP, lf.D_SLOTS]]) == [
+        n_in, hid, head, 2, 40, 100, 100 // 40 + 2]
+    np.testing.assert_array_equal(r["bl"], np.arange(4 * hid) + 0.5)
+    np.testing.assert_array_equal(r["widths"], [0.01, 0.05])
+    np.testing.assert_array_equal(r["b2"], [0.25])
+    assert r["w1"].shape == (head, hid + n_in) and r["whh"].shape == (4 * hid, hid)
+    # defaults: the model's window and warmup of 150 samples, the learned sample period
+    folder2 = _net(_save(tmp_path / "l2", "lstm", {}), {"format": 2, "state": state})
+    r2 = lf.joint_from_folder(folder2)
+    assert r2["scal"][lf.PERIOD] == 1e-3 and list(r2["dims"][[lf.D_WINDOW, lf.D_WARMUP, lf.D_SLOTS]]) == [150, 150, 3]
+    for bad in (0.0, -1e-3, float("inf"), float("nan")):
+        with pytest.raises(InputError, match="sample period must be > 0 s"):
+            lf.joint_from_folder(folder, sample_period=bad)
+    old = _net(_save(tmp_path / "l3", "lstm", {}), {"state": state})
+    with pytest.raises(InputError, match=r"network format 1, expected 2"):
+        lf.joint_from_folder(old)
