@@ -275,6 +275,26 @@ def test_windup_compensation_of_a_changing_load_with_gear_damping():
     np.testing.assert_allclose(res.tau_gear[-1], load[-1], rtol=1e-4)   # damping at half-kicked velocities
 
 
+def test_friction_feed_forward_alone_supplies_the_friction_torque():
+    """No integral action, full velocity and torque feed-forward, the model = the load, friction
+    feed-forward from the NC's curve: the motor torque L + F comes from the feed-forward alone, so
+    the velocity error is zero and only the play is left, e = b / 2, on either side. Without the
+    friction feed-forward the P velocity loop must supply F: e grows by F / (kp kv)."""
+    mu = np.array([30.0, 20.0, 5.0, 2.0, 4.0, 1.0])
+    nu = np.array([100.0, 50.0, 20.0, 5.0, 10.0, 2.0])
+    fp = coulomb_viscous(mu, nu)
+    F = mu * np.sign(V) + nu * V
+    p = params(ki=Z6, ffv=np.ones(6), fft=np.ones(6), side=np.array([0, 1, 0, 1, 0, 1], np.int64))
+    base = DriveFlags.BACKLASH | DriveFlags.FRICTION | DriveFlags.FF_VEL | DriveFlags.FF_TAU | DriveFlags.WINDUP
+    tg = LOAD + np.where(p.side == 0, F, 0.0)
+    res = ramp_run(p, base | DriveFlags.FF_FRICTION, V, LOAD, LOAD, fp)
+    np.testing.assert_allclose(res.error[-1], np.sign(tg) * B / 2, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(res.tau_motor[-1], LOAD + F, rtol=1e-6)
+    res = ramp_run(p, base, V, LOAD, LOAD, fp)
+    e = F / (p.kp * KV) + np.where(p.side == 0, F, 0.0) / C + np.sign(tg) * B / 2
+    np.testing.assert_allclose(res.error[-1], e, rtol=1e-4)
+
+
 def test_acceleration_feed_forward_needs_no_integrator():
     """Constant acceleration A from rest, full velocity and torque feed-forward (model = the true
     load), no integral action and no play: the motor torque is (J_m + J_l) A + L from the feed-forward alone and
