@@ -295,6 +295,30 @@ def test_friction_feed_forward_alone_supplies_the_friction_torque():
     np.testing.assert_allclose(res.error[-1], e, rtol=1e-4)
 
 
+def test_cubic_command_with_exact_cycle_inputs_is_followed_exactly():
+    """r = k t^3 with its exact velocity and acceleration at the cycle ends (the Hermite reference
+    and the linear acceleration are then exact), full feed-forward and windup compensation, no play,
+    no gear damping, no integral action: the motor setpoint r + J_l r_dd / c and its rate are the
+    ideal ones, so the link follows to the substeps' zero-order hold (below 4e-8 rad here). Without
+    the jerk inside a cycle (the windup's J_l r_dd / c, by 1.5 to 7 um per rad) the error is 1e-6."""
+    k = np.array([1.0, -2.0, 3.0, 5.0, -4.0, 8.0])      # rad/s^3
+    p = params(ki=Z6, ffv=np.ones(6), fft=np.ones(6), b=Z6, d=Z6)
+    fp, st = no_friction(), new_state()
+    fst = friction_state(fp)
+    flags = int(DriveFlags.FF_VEL | DriveFlags.FF_TAU | DriveFlags.WINDUP)
+    n_sub = 4 * substeps_for(p, JL, T)
+
+    def r(t):
+        return k * t ** 3, 3 * k * t ** 2, 6 * k * t
+
+    drive_init(p, st, fst, *r(0.0)[:2], Z6, Z6, JL, flags)
+    for i in range(1, 301):
+        (r0, v0, a0), (r1, v1, a1) = r((i - 1) * T), r(i * T)
+        drive_step(p, fp, st, fst, cycle(r0=r0, r1=r1, v0=v0, v1=v1, a0=a0, a1=a1), T, n_sub, flags)
+    np.testing.assert_allclose(st.q, r(300 * T)[0], rtol=0, atol=1e-7)
+    np.testing.assert_allclose(st.theta - st.q, JL * r(300 * T)[2] / C, rtol=1e-3)
+
+
 def test_acceleration_feed_forward_needs_no_integrator():
     """Constant acceleration A from rest, full velocity and torque feed-forward (model = the true
     load), no integral action and no play: the motor torque is (J_m + J_l) A + L from the feed-forward alone and
