@@ -436,6 +436,8 @@ def test_drive_params_from_a_robot_and_its_errors():
     np.testing.assert_array_equal(p.d, [1, 2, 3, 4, 5, 6])
     assert (p.kv[0], p.kp[0], p.ki[0], p.ffv[0], p.fft[0]) == (7, 8, 9, 0.5, 0.25)
     assert p.side.dtype == np.int64 and list(p.side) == [0, 1, 0, 1, 0, 1]
+    for name in ("jm", "c", "d", "b", "kv", "kp", "ki", "ffv", "fft"):      # integers in the file become floats
+        assert getattr(p, name).dtype == np.float64, name
     gains = SimpleNamespace(kv=[1] * 6, kp_vel=[2] * 6, ki_vel=[3] * 6, ff_vel=[0] * 6, ff_tau=[1] * 6)
     assert drive_params(robot, gains=gains).kp[0] == 2
     with pytest.raises(InputError, match=r"joint\[3\]\.stiffness"):

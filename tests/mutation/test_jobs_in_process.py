@@ -298,3 +298,19 @@ def test_pass_records_how_a_worker_died(manager):
     assert manager.store.get(recs[1].id).message == jobs.WORKER_DIED_REASON.format(how="exit code 2")
     assert manager.store.get(recs[1].id).error == {"message": jobs.WORKER_DIED_REASON.format(how="exit code 2")}
     assert manager.store.get(recs[2].id).state is JobState.running     # exit 0: the worker recorded its end
+
+
+def test_data_dir_lock_creates_its_folder_and_a_private_pid_file(tmp_path):
+    """The lock creates a nested data folder and its pid file with mode 0644 (umask 022)."""
+    import os
+
+    old = os.umask(0o022)
+    try:
+        lock = jobs.DataDirLock(tmp_path / "a" / "b").acquire()
+        try:
+            assert (lock.path.stat().st_mode & 0o777) == 0o644
+            assert lock.path.read_text() == f"{os.getpid()}\n"
+        finally:
+            lock.release()
+    finally:
+        os.umask(old)

@@ -154,7 +154,7 @@ def test_lugre_extended_factors_closed_form():
     ext = lugre_row(FrictionKind.LUGRE_EXTENDED, K_LOAD=0.004, LOAD_REF=100.0, ASYM=0.2, RIP_SIN=0.7, RIP_COS=-0.3,
                     RIP_ORDER=12.0, EXT_FLAGS=flags)
     only_asym = lugre_row(FrictionKind.LUGRE_EXTENDED, ASYM=0.2, K_LOAD=0.004, LOAD_REF=100.0, RIP_SIN=0.7,
-                          EXT_FLAGS=float(lf.EXT_ASYMMETRY))
+                          RIP_COS=-0.3, RIP_ORDER=12.0, EXT_FLAGS=float(lf.EXT_ASYMMETRY))   # the rest not switched on
     p = lf.assemble([ext, only_asym] + [None] * 4)
     for v, q, load in ((0.1, 0.3, 250.0), (-0.1, -0.2, -40.0), (0.02, 1.0, 1000.0), (-0.3, 0.5, -10000.0)):
         m = max(1 + 0.004 * (abs(load) - 100.0), lf.LEVEL_FLOOR) * (1.2 if v < 0 else 1.0)
