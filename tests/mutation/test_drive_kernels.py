@@ -98,6 +98,20 @@ def test_contact_state():
     assert dv._contact(0.01, 0.01) == 0 and dv._contact(-0.01, 0.01) == 0 and dv._contact(0.0, 0.01) == 0
 
 
+def test_contact_without_play_follows_the_torque_not_the_deflection():
+    """No play: the flank is the sign of the transmitted torque c delta + d delta_d, which the damping
+    can reverse while the deflection keeps its sign (here delta = +1e-4 rad closing at 1 rad/s)."""
+    p = params(kv=Z6, kp=Z6, ki=Z6, b=Z6, c=np.full(6, 1000.0), d=np.full(6, 10.0))
+    st, fp = new_state(), no_friction()
+    fst = friction_state(fp)
+    st.theta[:] = 1e-4
+    st.omega[:] = np.array([-1.0, -1.0, -1.0, 1.0, 1.0, 0.0])
+    drive_step(p, fp, st, fst, cycle(), 1e-7, np.ones(6, np.int64), int(DriveFlags.BACKLASH))
+    assert np.all(st.theta - st.q > 0)
+    np.testing.assert_array_equal(st.contact, [-1, -1, -1, 1, 1, 1])
+    np.testing.assert_array_equal(np.sign(st.tau_s), st.contact)
+
+
 # --------------------------------------------------------------------------- equilibrium
 
 
