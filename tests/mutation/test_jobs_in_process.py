@@ -314,3 +314,43 @@ def test_data_dir_lock_creates_its_folder_and_a_private_pid_file(tmp_path):
             lock.release()
     finally:
         os.umask(old)
+
+
+def test_a_long_internal_error_is_cut_to_500_characters_in_the_message(tmp_path, monkeypatch):
+    from service import pipeline
+
+    def fake(kind, request, job_dir, progress, ray_address=None):
+        raise RuntimeError("x" * 1000)
+
+    monkeypatch.setattr(pipeline, "run_job", fake)
+    store = JobStore(tmp_path / "s.sqlite")
+    rec = store.create(JobKind.simulation, {}, "b")
+    assert jobs.run_in_worker(str(store.path), "b", rec.id, "simulation", {}, str(tmp_path / "d"), None) == "failed"
+    r = store.get(rec.id)
+    assert len(r.message) == 500 and r.message.startswith("internal error: RuntimeError: xxx")
+    assert r.error["message"] == "internal error: RuntimeError: " + "x" * 1000       # the whole text kept
+    store.close()
+
+
+def test_a_new_manager_recovers_the_jobs_of_an_earlier_boot(tmp_path):
+    store = JobStore(tmp_path / "s.sqlite")
+    old = store.create(JobKind.simulation, {}, "earlier-boot")
+    m = JobManager(store, tmp_path / "jobs", workers=0, capacity=2, retry_after=1)
+    try:
+        assert m.recovered == 1
+        r = store.get(old.id)
+        assert r.state is JobState.failed and r.message == jobs.RESTART_REASON.format(state="queued")
+    finally:
+        m.shutdown()
+        store.close()
+
+
+def test_inputs_that_cannot_be_stored_fail_the_job_with_the_reason(manager):
+    def broken(_d):
+        raise OSError("disk full")
+
+    with pytest.raises(OSError):
+        manager.submit(JobKind.simulation, {}, prepare=broken)
+    (row,) = manager.store._conn().execute("SELECT id FROM jobs").fetchall()
+    r = manager.store.get(row[0])
+    assert r.state is JobState.failed and r.error == {"message": "could not store the inputs"}

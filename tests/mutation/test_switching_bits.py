@@ -92,8 +92,9 @@ def test_dead_band_edges_are_at_rest():
 
 
 def test_direction_of_the_first_row_counts():
-    qd = np.array([[-0.5, 0.5], [0.0, 0.0], [0.5, 0.5]])
+    qd = np.array([[-0.5, 0.5, -0.5, -0.5], [0.0, 0.0, -0.4, -0.5], [0.5, 0.5, -0.3, -0.5]])
     ev = switching_events(qd, THR)
+    # axes 3 and 4 keep moving backwards from the first row on: never a reversal
     assert ev.reversal.tolist() == [0, 0, 1] and ev.stop.tolist() == [0, 3, 0]
 
 
