@@ -424,6 +424,8 @@ def test_simulate_drive_rejects_bad_input():
         simulate_drive(None, t[:1], q[:1], **kw)
     with pytest.raises(ValueError, match="link inertia"):
         simulate_drive(None, t, q, **{**kw, "link_inertia": np.array([1, 1, 1, 1, 0.0, 1])})
+    two = simulate_drive(None, t[:2], q[:2], substeps=2, **{**kw, "tau_load": Z6})   # the shortest: one cycle
+    assert two.q.shape == (2, 6)
     res = simulate_drive(None, t, q, substeps=2, **kw)
     np.testing.assert_array_equal(res.substeps, np.full(6, 2))
     assert res.flags == DriveFlags.default()

@@ -271,6 +271,7 @@ def test_pass_starts_queued_jobs_up_to_the_worker_count(manager, monkeypatch):
     for jid, state in ((b.id, "running"), (c.id, "running"), (d.id, "queued")):
         rec = manager.store.get(jid)
         assert rec.state is JobState.failed and rec.message == jobs.RESTART_REASON.format(state=state)
+        assert rec.error == {"message": jobs.RESTART_REASON.format(state=state)}
     assert manager.active() == 0
 
 

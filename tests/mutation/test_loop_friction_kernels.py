@@ -496,6 +496,9 @@ def test_joint_from_folder_reads_a_residual_network(tmp_path):
                                   [S0, S1, NU, FC, FS, VS, DELTA])
     assert (sc[lf.V_MAX], sc[lf.V_REF], sc[lf.TAU_SCALE], sc[lf.RES_SCALE]) == (3.0, 0.003, 60.0, 5.0)
     assert list(r["dims"][[lf.D_IN, lf.D_H1, lf.D_H2]]) == [3, 10, 8]
+    np.testing.assert_array_equal(r["w1"], w["mlp.0.weight"])
+    np.testing.assert_array_equal(r["b1"], b["mlp.0.bias"])
+    np.testing.assert_array_equal(r["b2"], b["mlp.2.bias"])
     np.testing.assert_array_equal(r["w2"], w["mlp.2.weight"])
     np.testing.assert_array_equal(r["b3"], b["mlp.4.bias"])
     np.testing.assert_array_equal(r["w3"], w["mlp.4.weight"])
@@ -529,8 +532,32 @@ def test_joint_from_folder_reads_an_lstm_network(tmp_path):
     r2 = lf.joint_from_folder(folder2)
     assert r2["scal"][lf.PERIOD] == 1e-3 and list(r2["dims"][[lf.D_WINDOW, lf.D_WARMUP, lf.D_SLOTS]]) == [150, 150, 3]
     for bad in (0.0, -1e-3, float("inf"), float("nan")):
-        with pytest.raises(InputError, match="sample period must be > 0 s"):
+        with pytest.raises(InputError, match="sample period must be > 0 s") as e:
             lf.joint_from_folder(folder, sample_period=bad)
+        assert e.value.field == "sample_period"
     old = _net(_save(tmp_path / "l3", "lstm", {}), {"state": state})
     with pytest.raises(InputError, match=r"network format 1, expected 2"):
         lf.joint_from_folder(old)
+
+
+def test_missing_parameters_name_the_file_they_were_read_from(tmp_path):
+    ext = _save(tmp_path / "ex", "lugre-extended", dict(LUGRE, ripple_sin=0.1), causes=["position"])
+    with pytest.raises(InputError, match=r"lacks parameter\(s\) ripple_cos, ripple_order") as e:
+        lf.joint_from_folder(ext)
+    assert e.value.source == str(ext / "params.json") and e.value.field == "params"
+    lu = _save(tmp_path / "lu", "lugre", {k: v for k, v in LUGRE.items() if k != "s1"})
+    with pytest.raises(InputError, match=r"lacks parameter\(s\) s1") as e:
+        lf.joint_from_folder(lu)
+    assert e.value.source == str(lu / "params.json")
+    res = _save(tmp_path / "res", "residual", {})
+    _save(res / "lugre", "lugre", {k: v for k, v in LUGRE.items() if k != "nu"})
+    with pytest.raises(InputError, match=r"lacks parameter\(s\) nu") as e:
+        lf.joint_from_folder(res)
+    assert e.value.source == str(res / "lugre" / "params.json")
+
+
+def test_static_curve_of_an_extended_model_without_its_asymmetry():
+    r = lugre_row(FrictionKind.LUGRE_EXTENDED, ASYM=0.2, K_LOAD=0.01, LOAD_REF=10.0, EXT_FLAGS=float(lf.EXT_LOAD))
+    p = lf.assemble([r] + [None] * 5)
+    for v in (0.1, -0.1):
+        assert lf.static_friction(p, 0, v) == pytest.approx(np.sign(v) * stribeck(v) + NU * v, rel=1e-12)
