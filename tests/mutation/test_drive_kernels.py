@@ -213,7 +213,8 @@ def test_steady_following_error_without_feed_forward():
     """Constant speed v under a constant load L, no feed-forward: e = v / kv + L / c + sign(L) b / 2,
     the motor torque is L, the integrator holds it all."""
     p = params()
-    res = ramp_run(p, DriveFlags.BACKLASH, V, LOAD, MODEL)
+    # a friction model is given but friction is switched off: none acts
+    res = ramp_run(p, DriveFlags.BACKLASH, V, LOAD, MODEL, coulomb_viscous(np.full(6, 30.0), np.full(6, 100.0)))
     e = V / KV + LOAD / C + np.sign(LOAD) * B / 2
     np.testing.assert_allclose(res.error[-1], e, rtol=1e-4)
     np.testing.assert_allclose(res.tau_motor[-1], LOAD, rtol=1e-4)
@@ -287,6 +288,33 @@ def test_windup_compensation_of_a_changing_load_with_gear_damping():
     np.testing.assert_allclose(res.theta[-1] - res.q[-1] - np.sign(L0) * B / 2,
                                load[-1] / C - p.d * Ld / C ** 2, rtol=1e-3, atol=1e-10)
     np.testing.assert_allclose(res.tau_gear[-1], load[-1], rtol=1e-4)   # damping at half-kicked velocities
+
+
+def test_steady_error_with_lugre_and_load_dependent_friction():
+    """LuGre friction (steady: sign(v) g(v) + nu v) on the link of joints 1, 3, 5 and an extended
+    LuGre whose level grows with the gearbox load, max(1 + k (|tau_gear| - ref), 0.05), on the motor
+    of joints 2, 4, 6 (the gear carries L there): the following error of the friction-free case plus
+    the windup of the joint-side friction."""
+    from simulate.robot import loop_friction as lf
+
+    # fs = fc: no Stribeck dip, whose negative damping would make the link stick and slip
+    fc, fs, vs, s0, s1, nu, k, ref = 20.0, 20.0, 0.02, 1e5, 50.0, 10.0, 0.01, 20.0
+    rows = []
+    for j in range(6):
+        r = lf._empty()
+        r["kind"] = int(FrictionKind.LUGRE if j % 2 == 0 else FrictionKind.LUGRE_EXTENDED)
+        r["scal"][[lf.FC, lf.FS, lf.VS, lf.DELTA, lf.S0, lf.S1, lf.NU]] = fc, fs, vs, 2.0, s0, s1, nu
+        r["scal"][[lf.K_LOAD, lf.LOAD_REF, lf.EXT_FLAGS]] = k, ref, float(lf.EXT_LOAD)
+        rows.append(r)
+    fp = assemble(rows)
+    side = np.array([0, 1, 0, 1, 0, 1], np.int64)
+    g = fc + (fs - fc) * np.exp(-(V / vs) ** 2)
+    mult = np.where(side == 1, np.maximum(1 + k * (np.abs(LOAD) - ref), 0.05), 1.0)
+    F = np.sign(V) * g * mult + nu * V
+    res = ramp_run(params(side=side), DriveFlags.BACKLASH | DriveFlags.FRICTION, V, LOAD, MODEL, fp)
+    tg = LOAD + np.where(side == 0, F, 0.0)
+    np.testing.assert_allclose(res.tau_friction[-1], F, rtol=2e-4)      # the last of a decaying ringing
+    np.testing.assert_allclose(res.error[-1], V / KV + tg / C + np.sign(tg) * B / 2, rtol=1e-3)
 
 
 def test_friction_feed_forward_alone_supplies_the_friction_torque():

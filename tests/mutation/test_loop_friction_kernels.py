@@ -296,7 +296,8 @@ def test_lugre_friction_and_assemble():
     assert a.w1.shape == (6, 3, 4)
     np.testing.assert_array_equal(a.w1[1], [[1, 1, 0, 0]] * 3)
     np.testing.assert_array_equal(a.w1[2], [[1, 1, 1, 1], [1, 1, 1, 1], [0, 0, 0, 0]])
-    assert a.b1.shape == (6, 1) and a.wih.shape == (6, 1, 1)
+    assert a.b1.shape == (6, 1) and a.wih.shape == (6, 1, 1) and a.whh.shape == (6, 1, 1)
+    assert a.w2.shape == (6, 1, 1) and a.w3.shape == (6, 1, 1) and a.bl.shape == (6, 1)
     assert list(a.kind) == [0, 1, 1, 0, 0, 0]
     with pytest.raises(ValueError, match="six joints"):
         lf.assemble([None] * 5)
