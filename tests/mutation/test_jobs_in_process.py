@@ -355,3 +355,13 @@ def test_inputs_that_cannot_be_stored_fail_the_job_with_the_reason(manager):
     (row,) = manager.store._conn().execute("SELECT id FROM jobs").fetchall()
     r = manager.store.get(row[0])
     assert r.state is JobState.failed and r.error == {"message": "could not store the inputs"}
+
+
+def test_close_drops_the_thread_connection_and_the_default_owner_is_empty(manager):
+    rec = manager.submit(JobKind.simulation, {})
+    assert rec.owner == "" and manager.store.get(rec.id).owner == ""
+    conn = manager.store._conn()
+    manager.store.close()
+    assert manager.store._local.conn is None
+    with pytest.raises(Exception, match="closed"):
+        conn.execute("SELECT 1")
