@@ -38,7 +38,7 @@ bench: $(STAMP)
 MUTATION_JOBS ?= 1
 MUTANTS ?=
 mutation: $(STAMP)
-	nice -n 10 $(BIN)/mutmut run --max-children $(MUTATION_JOBS) $(MUTANTS)
+	nice -n 10 $(BIN)/python scripts/mutmut_kernels.py run --max-children $(MUTATION_JOBS) $(MUTANTS)
 	$(BIN)/python scripts/mutation_report.py
 
 clean:
