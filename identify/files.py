@@ -79,6 +79,24 @@ def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
             shutil.rmtree(tmp)
 
 
+@contextmanager
+def atomic_files(folder: str | os.PathLike) -> Iterator[Path]:
+    """Write several files into ``folder`` all or none: yields an empty staging folder inside it;
+    when the block ends without an error every file written there gets the mode of a new file and
+    is renamed into ``folder`` (replacing a file of the same name, other files stay), otherwise
+    nothing in ``folder`` changes. The renames are atomic one by one, not as a set."""
+    target = Path(folder)
+    target.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=".staging.", dir=target))
+    try:
+        yield staging
+        for f in sorted(staging.iterdir()):
+            as_created(f)
+            os.replace(f, target / f.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
 def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` to ``path`` atomically (:func:`atomic_file`); returns the path."""
     with atomic_file(path) as tmp:

@@ -477,7 +477,7 @@ def _params(doc: dict, folder: Path, *names) -> list[float]:
 
 
 def _network(folder: Path) -> dict:
-    import torch   # a learned model is used: only now
+    import torch  # a learned model is used: only now
 
     path = folder / "network.pt"
     if not path.exists():

@@ -14,8 +14,6 @@ stay where they are and the friction hysteresis is not biased by a filter lag.
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +22,7 @@ import pandas as pd
 from scipy.signal import savgol_filter
 
 from identify.errors import InputError
+from identify.files import atomic_files
 from identify.records import IRREGULAR_TOLERANCE, SAVGOL_ORDER, SAVGOL_WINDOW_S
 from simulate.robot.dynamics import Payload, gravity_torque, rnea
 from simulate.robot.model import Robot
@@ -107,22 +106,14 @@ def prepare_log(robot: Robot, log: str | os.PathLike, out_dir: str | os.PathLike
     tau_load = gravity_torque(robot, q, payload=payload)
     ext = ".parquet" if Path(log).suffix.lower() in (".parquet", ".pq") else ".csv"
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(dir=out, prefix=".prepare."))
-    try:
-        staged = []
-        for j in range(6):
+    names = [f"axis{j + 1}{ext}" for j in range(6)]
+    with atomic_files(out) as staging:
+        for j, name in enumerate(names):
             cols = {"t": t, "q": q[:, j], "qd": qd[:, j], "qdd": qdd[:, j], "tau": tau[:, j]}
             if temp is not None:
                 cols["temp"] = temp[:, j]
             cols["tau_rb"] = tau_rb[:, j]
             cols["tau_load"] = tau_load[:, j]
-            staged.append(write_table(pd.DataFrame(cols), staging / f"axis{j + 1}{ext}"))
-        paths = []
-        for j, p in enumerate(staged):
-            dest = out / p.name
-            os.replace(p, dest)
-            paths.append(dest)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+            write_table(pd.DataFrame(cols), staging / name)
+    paths = [out / name for name in names]
     return PreparedLog(paths=tuple(paths), n_samples=len(t), dt=dt, window=window)

@@ -46,3 +46,22 @@ def test_markdown_table_lines():
     assert lines == ["| model | RMSE [Nm] |", "|---|---|", "| lugre | 0.0213 |", "| a\\|b | 2 |"]
     with pytest.raises(ValueError, match="2 columns"):
         markdown_table(("a", "b"), [("only one",)])
+
+
+def test_atomic_files_write_all_or_none_and_keep_other_files(tmp_path):
+    from identify.files import atomic_files
+
+    (tmp_path / "keep.txt").write_text("mine")
+    (tmp_path / "a.txt").write_text("old a")
+    with pytest.raises(RuntimeError):
+        with atomic_files(tmp_path) as staging:
+            (staging / "a.txt").write_text("new a")
+            (staging / "b.txt").write_text("new b")
+            raise RuntimeError("fails half-way")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "keep.txt"]
+    assert (tmp_path / "a.txt").read_text() == "old a"
+    with atomic_files(tmp_path) as staging:
+        (staging / "a.txt").write_text("new a")
+        (staging / "b.txt").write_text("new b")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt", "keep.txt"]
+    assert (tmp_path / "a.txt").read_text() == "new a" and (tmp_path / "keep.txt").read_text() == "mine"

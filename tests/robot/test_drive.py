@@ -10,8 +10,16 @@ import math
 import numpy as np
 import pytest
 
-from simulate.robot.drive import (Contact, DriveFlags, DriveParams, FrictionSide, drive_params, load_torques,
-                                  simulate_drive, substeps_for)
+from simulate.robot.drive import (
+    Contact,
+    DriveFlags,
+    DriveParams,
+    FrictionSide,
+    drive_params,
+    load_torques,
+    simulate_drive,
+    substeps_for,
+)
 from simulate.robot.kinematics import fk
 from simulate.robot.loop_friction import lugre_friction
 from simulate.toolpath.placement import HOME_Q

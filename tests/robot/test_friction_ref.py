@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from identify.errors import InputError
+from simulate.robot.drive import CYCLE, simulate_drive
 from simulate.robot.friction import joint_rows, loop_friction
 from simulate.robot.model import FrictionSpec, load_robot, save_robot
-from simulate.robot.drive import CYCLE, simulate_drive
 
 models = pytest.importorskip("identify.models")
 

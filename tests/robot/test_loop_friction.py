@@ -16,7 +16,7 @@ from identify.axis_limits import AxisLimits
 from identify.plant import PlantConfig, synthesize
 from identify.records import validate_frame
 from identify.trajectories import universal_trajectory
-from simulate.robot.loop_friction import (FrictionKind, assemble, friction_series, joint_from_folder, new_state)
+from simulate.robot.loop_friction import FrictionKind, assemble, friction_series, joint_from_folder, new_state
 
 models = pytest.importorskip("identify.models")
 LIMITS = AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0)
