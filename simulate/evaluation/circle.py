@@ -144,10 +144,10 @@ def circle_gcode(spec: CircleSpec) -> str:
 
 def circle_program(spec: CircleSpec):
     """The parsed program, starting at rest on the circle (the positioning move dropped)."""
-    from simulate.toolpath.gcode import Arc, parse_program
+    from simulate.toolpath.gcode import Arc, Linear, parse_program
 
     prog = parse_program(circle_gcode(spec), source="<circle>")
-    arcs = [s for s in prog.segments if isinstance(s, Arc)]
+    arcs: list[Linear | Arc] = [s for s in prog.segments if isinstance(s, Arc)]
     return dataclasses.replace(prog, segments=arcs, start=arcs[0].start.copy())
 
 
@@ -240,6 +240,7 @@ def simulate_circle(robot, placement, spec: CircleSpec, *, friction: bool = True
                          ff_friction=ff_friction, friction_models=friction_models, limits=limits)
     out = run_job(job, prepared=pj, advance=advance)
     jt, res = out.trajectory, out.result
+    assert res.joint_contact is not None  # the drives run in every circle, so every step has its flank
     q = jt.q - res.joint_error
     T_wb = np.linalg.inv(placement.T)
     p_base = fk(out.robot, q)[:, :3, 3]

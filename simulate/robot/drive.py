@@ -323,8 +323,7 @@ def _run_kernel(p, fp, st, fst, ref, load, model, jl, t, n_sub, flags, out_f, ou
 
 def new_state() -> DriveState:
     """A zeroed :class:`DriveState` (use :func:`drive_init` to put it at equilibrium)."""
-    z = [np.zeros(N_AXES) for _ in range(8)]
-    return DriveState(*z, np.zeros(N_AXES, dtype=np.int64))
+    return DriveState._make([np.zeros(N_AXES) for _ in range(8)] + [np.zeros(N_AXES, dtype=np.int64)])
 
 
 def substeps_for(p: DriveParams, jl, T: float = CYCLE, flags: int = int(DriveFlags.default()),

@@ -65,7 +65,7 @@ def model_row(ref: str, joint: int, *, sample_period: float = defaults.LEARNED_S
     if m and int(m.group(1)) != joint:
         raise InputError(f"'{ref}' is registered for axis {m.group(1)}, not joint {joint}")
     if ref.startswith(("runs:/", "models:/")):
-        key = (ref, sample_period)
+        key: tuple = (ref, sample_period)
         if key not in _CACHE:
             _CACHE[key] = joint_from_folder(_download(ref), sample_period=sample_period)
         return _CACHE[key]
@@ -112,6 +112,7 @@ def joint_rows(robot: Robot, overrides: dict | None = None, *,
             sources.append({"joint": j, "source": "inline"})
             continue
         else:
+            assert spec.model is not None  # the robot loader requires lugre or model
             ref, field, src = _resolve(spec.model, robot), f"joint[{j}].friction.model", robot.source or None
         try:
             rows.append(model_row(ref, j, sample_period=sample_period))
@@ -119,7 +120,7 @@ def joint_rows(robot: Robot, overrides: dict | None = None, *,
             shown = overrides.get(j, spec.model)
             raise InputError(f"friction model '{shown}': {exc.message}", source=src, field=field) from None
         sources.append({"joint": j, "source": str(overrides.get(j, spec.model))})
-    for s, kind in zip(sources, describe(rows)):
+    for s, kind in zip(sources, describe(rows), strict=True):
         s["kind"] = kind
     return rows, sources
 

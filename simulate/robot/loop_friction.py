@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
+from collections.abc import Sequence
 from enum import IntEnum, IntFlag
 from pathlib import Path
 
@@ -594,29 +595,29 @@ def joint_from_lugre(lugre) -> dict:
 _FIELDS = ("w1", "b1", "w2", "b2", "w3", "b3", "wih", "whh", "bl", "widths")
 
 
-def assemble(rows: list[dict]) -> LoopFriction:
+def assemble(rows: Sequence[dict | None]) -> LoopFriction:
     """Six joint rows (:func:`joint_from_folder`, :func:`joint_from_lugre`, or ``None`` for no friction)
     as one :data:`LoopFriction`, weight arrays zero-padded to the largest joint's shape."""
-    rows = [r if r is not None else _empty() for r in rows]
-    if len(rows) != 6:
+    full: list[dict] = [r if r is not None else _empty() for r in rows]
+    if len(full) != 6:
         raise ValueError("six joints expected")
     arrays = {}
     for f in _FIELDS:
-        shapes = [np.shape(r[f]) for r in rows if f in r]
+        shapes = [np.shape(r[f]) for r in full if f in r]
         nd = max((len(s) for s in shapes), default={"w1": 2, "w2": 2, "w3": 2, "wih": 2, "whh": 2}.get(f, 1))
         shape = tuple(max((s[i] for s in shapes if len(s) == nd), default=1) for i in range(nd))
         a = np.zeros((6,) + shape)
-        for j, r in enumerate(rows):
+        for j, r in enumerate(full):
             if f in r:
-                v = np.asarray(r[f], float)
+                v = np.asarray(r[f], dtype=float)
                 a[(j,) + tuple(slice(0, n) for n in v.shape)] = v
         arrays[f] = a
-    return LoopFriction(kind=np.array([r["kind"] for r in rows], np.int64),
-                        scal=np.stack([r["scal"] for r in rows]), dims=np.stack([r["dims"] for r in rows]),
+    return LoopFriction(kind=np.array([r["kind"] for r in full], np.int64),
+                        scal=np.stack([r["scal"] for r in full]), dims=np.stack([r["dims"] for r in full]),
                         **arrays)
 
 
-def describe(rows: list[dict]) -> list[str]:
+def describe(rows: Sequence[dict | None]) -> list[str]:
     """The kind name per joint (for reports)."""
     return [FrictionKind(r["kind"]).name.lower().replace("_", "-") if r is not None else "none" for r in rows]
 

@@ -53,11 +53,10 @@ def test_atomic_files_write_all_or_none_and_keep_other_files(tmp_path):
 
     (tmp_path / "keep.txt").write_text("mine")
     (tmp_path / "a.txt").write_text("old a")
-    with pytest.raises(RuntimeError):
-        with atomic_files(tmp_path) as staging:
-            (staging / "a.txt").write_text("new a")
-            (staging / "b.txt").write_text("new b")
-            raise RuntimeError("fails half-way")
+    with pytest.raises(RuntimeError), atomic_files(tmp_path) as staging:
+        (staging / "a.txt").write_text("new a")
+        (staging / "b.txt").write_text("new b")
+        raise RuntimeError("fails half-way")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "keep.txt"]
     assert (tmp_path / "a.txt").read_text() == "old a"
     with atomic_files(tmp_path) as staging:

@@ -72,8 +72,10 @@ def test_lost_motion_is_backlash_plus_friction_windup_times_lever(robot, params)
     expect = p.b[0] + 2 * fc / p.c[0]
     assert lost == pytest.approx(expect, rel=0.01)
     # at the TCP, at the same commanded angle: only A1 differs
-    qa = HOME_Q.copy(); qa[0] -= e_back[0]
-    qb = HOME_Q.copy(); qb[0] -= e_fwd[0]
+    qa = HOME_Q.copy()
+    qa[0] -= e_back[0]
+    qb = HOME_Q.copy()
+    qb[0] -= e_fwd[0]
     pa, pb = fk(robot, qa)[:3, 3], fk(robot, qb)[:3, 3]
     lever = math.hypot(*fk(robot, HOME_Q)[:2, 3])
     assert np.linalg.norm(pa - pb) == pytest.approx(expect * lever, rel=0.01)
@@ -136,7 +138,8 @@ def test_steady_following_error_without_feed_forward(robot, params):
 def _spike_closed_form(a, fc, fs, kv, kp, ki):
     """Position error at breakaway after a reversal with acceleration a [rad/s^2] (motor stuck):
     the PI output must swing by fc + fs, kp (a t + kv a t^2/2) + ki (a t^2/2 + kv a t^3/6) = fc + fs."""
-    f = lambda tt: kp * (a * tt + kv * a * tt ** 2 / 2) + ki * (a * tt ** 2 / 2 + kv * a * tt ** 3 / 6) - (fc + fs)
+    def f(tt):
+        return kp * (a * tt + kv * a * tt ** 2 / 2) + ki * (a * tt ** 2 / 2 + kv * a * tt ** 3 / 6) - (fc + fs)
     lo, hi = 0.0, 10.0
     for _ in range(200):
         mid = 0.5 * (lo + hi)
@@ -220,7 +223,8 @@ def test_friction_feed_forward_reduces_the_spike(robot, params):
     p, fp = coulomb(params, 80.0, side=FrictionSide.MOTOR, vs=1e-3)
     t, q = cosine(0.05, 2 * math.pi * 0.1, 6.0)
     win = (t > 4.8) & (t < 5.8)
-    off = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL, flags=FF | DriveFlags.FRICTION)
+    off = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL,
+                         flags=FF | DriveFlags.FRICTION)
     on = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL,
                         flags=FF | DriveFlags.FRICTION | DriveFlags.FF_FRICTION)
     assert np.abs(on.error[win, 0]).max() < 0.5 * np.abs(off.error[win, 0]).max()
@@ -314,7 +318,8 @@ def test_drive_table_side_and_presence(robot_path, tmp_path):
     assert ei.value.field == "joint[2].stiffness"
     # round trip keeps the drive data, motor side included
     r = load_robot(robot_path)
-    side = np.array(r.drive.friction_side); side[4] = int(FrictionSide.MOTOR)
+    side = np.array(r.drive.friction_side)
+    side[4] = int(FrictionSide.MOTOR)
     from simulate.robot.model import DriveSpec
     r2 = r.with_changes(drive=DriveSpec(damping=r.drive.damping, rated_torque=r.drive.rated_torque, friction_side=side))
     back = load_robot(save_robot(r2, tmp_path / "r2.toml"))
@@ -355,7 +360,8 @@ def test_friction_feed_forward_compensates_the_joint_side_windup(robot, params):
     p, fp = coulomb(params, 60.0)
     base = FF | DriveFlags.FRICTION
     off = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL, flags=base)
-    on = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL, flags=base | DriveFlags.FF_FRICTION)
+    on = simulate_drive(robot, t, q, params=p, loop_friction=fp, tau_load=np.zeros(6), link_inertia=JL,
+                        flags=base | DriveFlags.FF_FRICTION)
     assert abs(around(t, off.error, 3.0)[0]) == pytest.approx(60.0 / p.c[0], rel=0.01)
     assert abs(around(t, on.error, 3.0)[0]) < 0.01 * 60.0 / p.c[0]
 

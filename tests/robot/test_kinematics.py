@@ -144,7 +144,10 @@ def test_ik_path_is_continuous(robot):
     T[:, 0, 3] -= 0.3 * s
     ang = 1.5 * np.pi * s
     Rz = np.zeros((n, 3, 3))
-    Rz[:, 0, 0] = np.cos(ang); Rz[:, 0, 1] = -np.sin(ang); Rz[:, 1, 0] = np.sin(ang); Rz[:, 1, 1] = np.cos(ang)
+    Rz[:, 0, 0] = np.cos(ang)
+    Rz[:, 0, 1] = -np.sin(ang)
+    Rz[:, 1, 0] = np.sin(ang)
+    Rz[:, 1, 1] = np.cos(ang)
     Rz[:, 2, 2] = 1
     T[:, :3, :3] = T0[:3, :3] @ Rz
     res = ik_path(robot, T, q_a)
