@@ -29,6 +29,7 @@ import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -37,6 +38,7 @@ from identify.errors import InputError
 
 from .engagement import nearest_engaged, sort_layers
 from .removal import radius_at
+from .tools import CutterShape
 
 MATERIALS_FILE = Path(__file__).resolve().parents[2] / "data" / "materials.toml"
 _KEYS = ("Ktc", "Krc", "Kac", "Kte", "Kre", "Kae")
@@ -155,15 +157,50 @@ def _cell_force(l, r, theta, alpha, A, B, Cc, b, sk, ck, T, kc, ke, acc):
             _arc_force(a_ + theta, b_ + theta, A, B, Cc, b, sk, ck, T, kc, ke, acc)
 
 
+class ForceModel(NamedTuple):
+    """What the force kernels need of the cutter, spindle and material (:func:`force_model`)."""
+
+    tool: CutterShape   # radius, corner radius, fluted length [m]
+    flutes: int         # teeth N [-]
+    tan_helix: float    # tan of the helix angle [-]
+    omega: float        # spindle speed [rad/s]
+    phase: float        # angle of tooth 0 at the tip at t = 0 [rad]
+    kc: np.ndarray      # (3,) cutting coefficients Ktc, Krc, Kac [N/m^2]
+    ke: np.ndarray      # (3,) edge coefficients Kte, Kre, Kae [N/m]
+    n_sub: int          # instants per step for the peak force [-]
+
+
+def force_model(cutter, material: Material, spindle: Spindle, n_sub: int) -> ForceModel:
+    """The :class:`ForceModel` of a :class:`~simulate.machining.tools.Cutter`, material and spindle,
+    the peak force taken at ``n_sub`` instants per step (:func:`substeps`)."""
+    return ForceModel(cutter.shape, int(cutter.flutes), float(math.tan(cutter.helix)), float(spindle.omega),
+                      float(spindle.phase), np.ascontiguousarray(material.kc, dtype=float),
+                      np.ascontiguousarray(material.ke, dtype=float), int(n_sub))
+
+
+class ForceScratch(NamedTuple):
+    """Work arrays of :func:`step_forces_sorted` (:meth:`sized`): nothing is allocated per step."""
+
+    acc: np.ndarray    # (3,) revolution integral [N rad]
+    inst: np.ndarray   # (>= n_sub, 3) instantaneous force per instant [N]
+    trig: np.ndarray   # (>= n_sub * N, 2) cos, sin of the tooth angles per instant [-]
+
+    @classmethod
+    def sized(cls, model: ForceModel) -> "ForceScratch":
+        n = max(model.n_sub, 1)
+        return cls(np.zeros(3), np.zeros((n, 3)), np.zeros((n * model.flutes, 2)))
+
+
 @njit(cache=True)
-def step_forces(samp_ang, samp_eng, samp_cnt, k0, n_layers, lower_z, s, p0, p1, dt, t_end,
-                R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, out):
-    """Revolution-mean and peak cutting force of one step (on the cutter, workpiece frame).
+def step_forces(buf, k0, n_layers, grid, p0, p1, dt, t_end, model, out):
+    """Revolution-mean and peak cutting force of one step of ``dt`` [s] ending at ``t_end`` [s] (on
+    the cutter, workpiece frame); tool tip from ``p0`` to ``p1`` [m].
 
     Writes ``out[0:3]`` = mean force over a spindle revolution [N] at this step's engagement and
     chip thickness (closed-form integral over the engaged arcs), ``out[3]`` = peak |F| of the
-    instantaneous force over ``n_sub`` instants of the step [N]. Samples of layer ``k0 + kk`` are
-    in row ``kk`` (sorted here in place).
+    instantaneous force over ``model.n_sub`` instants of the step [N]. Samples of layer ``k0 + kk``
+    are in row ``kk`` of the :class:`~simulate.machining.removal.RemovalBuffers` ``buf`` (sorted here
+    in place).
     """
     vx = (p1[0] - p0[0]) / dt
     vy = (p1[1] - p0[1]) / dt
@@ -174,25 +211,28 @@ def step_forces(samp_ang, samp_eng, samp_cnt, k0, n_layers, lower_z, s, p0, p1, 
     out[3] = 0.0
     if n_layers <= 0 or vx * vx + vy * vy + vz * vz == 0.0:
         return
-    klow = sort_layers(samp_ang, samp_eng, samp_cnt, n_layers)
+    klow = sort_layers(buf.samp_ang, buf.samp_eng, buf.samp_cnt, n_layers)
     if klow < 0:
         return
     vel = np.array([vx, vy, vz])
-    step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z, s, p1, vel, dt, t_end,
-                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, np.zeros(3), np.zeros((n_sub, 3)),
-                       np.zeros((n_sub * N, 2)), out)
+    scratch = ForceScratch(np.zeros(3), np.zeros((model.n_sub, 3)), np.zeros((model.n_sub * model.flutes, 2)))
+    step_forces_sorted(buf, k0, n_layers, klow, grid, p1, vel, dt, t_end, model, scratch, out)
 
 
 @njit(cache=True)
-def step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z, s, p1, vel, dt, t_end,
-                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, acc, inst, trig, out):
+def step_forces_sorted(buf, k0, n_layers, klow, grid, p1, vel, dt, t_end, model, scratch, out):
     """The force part of :func:`step_forces` on already sorted samples (``klow``: first layer
-    with samples), with scratch ``acc`` (3,), ``inst`` (>= n_sub, 3) and ``trig`` (>= n_sub * N, 2):
-    no allocation.
+    with samples), with the work arrays ``scratch`` (:class:`ForceScratch`): no allocation.
 
     ``p1`` [m] places the disks (tool tip at the end of the step), ``vel`` [m/s] is the tool
     velocity that sets the chip thickness ``h = T_tooth (vel . n)``.
     """
+    R, rc, L = model.tool
+    N, tan_helix, omega, phase, kc, ke, n_sub = (model.flutes, model.tan_helix, model.omega, model.phase,
+                                                 model.kc, model.ke, model.n_sub)
+    acc, inst, trig = scratch
+    samp_ang, samp_eng, samp_cnt = buf.samp_ang, buf.samp_eng, buf.samp_cnt
+    lower_z, s = grid.lower[2], grid.spacing
     vx = vel[0]
     vy = vel[1]
     vz = vel[2]

@@ -24,6 +24,7 @@ import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -33,6 +34,34 @@ from identify.errors import InputError, read_json
 #: Default interval capacity per ray family (x, y, z). A 2.5-D part seen along z is one interval
 #: per ray; along x and y a ray can cross several bosses and pockets.
 DEFAULT_CAPACITY = (8, 8, 4)
+
+
+class Rays(NamedTuple):
+    """One ray family's arrays as the compiled kernels take them (see :class:`RayFamily`)."""
+
+    lo: np.ndarray        # (n_rays, capacity) float64, interval entries [m]
+    hi: np.ndarray        # (n_rays, capacity) float64, interval exits [m]
+    lo_step: np.ndarray   # (n_rays, capacity) int32, step that made each entry (-1: stock)
+    hi_step: np.ndarray   # (n_rays, capacity) int32, step that made each exit (-1: stock)
+    count: np.ndarray     # (n_rays,) int32, intervals per ray
+
+
+class Dexels(NamedTuple):
+    """The three ray families (along x, y, z) for the compiled kernels."""
+
+    x: Rays
+    y: Rays
+    z: Rays
+
+
+class Grid(NamedTuple):
+    """The dexel grid for the compiled kernels: ray centres at ``lower + (i + 0.5) * spacing``."""
+
+    lower: np.ndarray   # (3,) float64, grid box corner [m]
+    spacing: float      # ray pitch [m]
+    nx: int             # cells along x [-]
+    ny: int             # cells along y [-]
+    nz: int             # cells along z [-]
 
 
 @dataclass
@@ -61,6 +90,12 @@ class RayFamily:
     @property
     def capacity(self) -> int:
         return self.lo.shape[1]
+
+    @property
+    def rays(self) -> Rays:
+        """The arrays as one named tuple for the kernels (a view: replaced arrays after :meth:`grow`
+        need a new one)."""
+        return Rays(self.lo, self.hi, self.lo_step, self.hi_step, self.count)
 
     @property
     def nbytes(self) -> int:
@@ -194,6 +229,18 @@ class TriDexel:
             if isinstance(doc, dict) and "base" in doc:
                 return cls.from_solids(read_stock_solids(p), spacing, capacity)
         return cls.from_boxes(read_stock_boxes(path), spacing, capacity)
+
+    # ---- views for the compiled kernels ---------------------------------------------------
+    @property
+    def grid(self) -> Grid:
+        nx, ny, nz = self.shape
+        return Grid(self.lower, float(self.spacing), int(nx), int(ny), int(nz))
+
+    @property
+    def rays(self) -> Dexels:
+        """The three families' arrays (a view: take it again after a family grows)."""
+        fx, fy, fz = self.families
+        return Dexels(fx.rays, fy.rays, fz.rays)
 
     # ---- geometry helpers ---------------------------------------------------------------
     def ray_coords(self, axis: int) -> tuple[np.ndarray, np.ndarray]:

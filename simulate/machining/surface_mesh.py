@@ -22,6 +22,7 @@ surface), so any step variable (deflection, force, ...) can colour the mesh.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -35,6 +36,15 @@ MAX_NODES = 40_000_000
 #: a quarter of the triangles), which keeps the deviation pattern of features 10 mm and more wide
 #: and the GLB under 5 MiB.
 EXPORT_MAX_NODES = 10_000_000
+
+
+class MeshBuffers(NamedTuple):
+    """Output arrays of the mesh kernel, sized by the cell and edge counts."""
+
+    verts: np.ndarray   # (V, 3) float64, sum of each vertex's crossings [m]
+    nsum: np.ndarray    # (V,) int32, crossings per vertex
+    vstep: np.ndarray   # (V,) int32, newest step behind each vertex (-1: stock)
+    faces: np.ndarray   # (F, 3) int64, triangles
 
 
 @dataclass
@@ -95,18 +105,16 @@ def surface_mesh(workpiece: TriDexel, stride: int | None = None, max_nodes: int 
     nx, ny, nz = workpiece.shape
     # lattice node n (1..m) sits on ray index (n - 1) * stride; nodes 0 and m + 1 are empty padding
     mx, my, mz = (len(range(0, n, stride)) for n in (nx, ny, nz))
-    fx, fy, fz = workpiece.families
     occ = np.zeros((mx + 2, my + 2, mz + 2), np.uint8)
-    _occupancy(fz.lo, fz.hi, fz.count, workpiece.lower, workpiece.spacing, nx, stride, mx, my, mz, occ)
+    dex, grid = workpiece.rays, workpiece.grid
+    _occupancy(dex.z, grid, stride, occ)
     cell_vertex = np.full((mx + 1, my + 1, mz + 1), -1, np.int32)
     nv, nf = _count(occ, cell_vertex)
     verts = np.zeros((nv, 3))
     nsum = np.zeros(nv, np.int32)
     vstep = np.full(nv, -1, np.int32)
     faces = np.zeros((2 * nf, 3), np.int64)
-    _build(occ, cell_vertex, fx.lo, fx.hi, fx.hi_step, fx.lo_step, fx.count,
-           fy.lo, fy.hi, fy.hi_step, fy.lo_step, fy.count, fz.lo, fz.hi, fz.hi_step, fz.lo_step, fz.count,
-           workpiece.lower, workpiece.spacing, nx, ny, stride, verts, nsum, vstep, faces)
+    _build(occ, cell_vertex, dex, grid, stride, MeshBuffers(verts, nsum, vstep, faces))
     verts /= np.maximum(nsum, 1)[:, None]
     return SurfaceMesh(verts, faces, vstep, stride, stride * workpiece.spacing)
 
@@ -118,7 +126,11 @@ def _node_coord(lower_a, s, stride, n):
 
 
 @njit(cache=True)
-def _occupancy(zlo, zhi, zcnt, lower, s, nx, stride, mx, my, mz, occ):
+def _occupancy(rays, grid, stride, occ):
+    """Mark the lattice nodes inside the material of the z-rays ``rays`` (padding layers stay 0)."""
+    zlo, zhi, zcnt = rays.lo, rays.hi, rays.count
+    lower, s, nx = grid.lower, grid.spacing, grid.nx
+    mx, my, mz = occ.shape[0] - 2, occ.shape[1] - 2, occ.shape[2] - 2
     for I in range(1, mx + 1):
         i = (I - 1) * stride
         for J in range(1, my + 1):
@@ -169,10 +181,11 @@ def _count(occ, cell_vertex):
 
 
 @njit(cache=True)
-def _crossing(lo, hi, hi_step, lo_step, cnt, r, a, b, exiting):
-    """Dexel end of ray r in [a, b]: the last exit (``exiting``) or the first entry; returns
-    (position, step), NaN if the ray has none there."""
-    n = cnt[r]
+def _crossing(rays, r, a, b, exiting):
+    """Dexel end of ray r of ``rays`` in [a, b] [m]: the last exit (``exiting``) or the first entry;
+    returns (position [m], step), NaN if the ray has none there."""
+    lo, hi, lo_step, hi_step = rays.lo, rays.hi, rays.lo_step, rays.hi_step
+    n = rays.count[r]
     pos = np.nan
     st = -1
     for q in range(n):
@@ -198,8 +211,11 @@ def _add(verts, nsum, vstep, cell_vertex, I, J, K, x, y, z, st):
 
 
 @njit(cache=True)
-def _build(occ, cell_vertex, xlo, xhi, xhs, xls, xcnt, ylo, yhi, yhs, yls, ycnt, zlo, zhi, zhs, zls, zcnt,
-           lower, s, nx, ny, stride, verts, nsum, vstep, faces):
+def _build(occ, cell_vertex, dex, grid, stride, mesh):
+    """Vertices (sums of crossings, ``mesh.nsum`` per vertex), their newest step and the faces
+    into ``mesh`` (:class:`MeshBuffers`) from the occupancy and the exact dexel ends of ``dex``."""
+    lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
+    verts, nsum, vstep, faces = mesh
     X, Y, Z = occ.shape
     f = 0
     for I in range(X):
@@ -223,19 +239,19 @@ def _build(occ, cell_vertex, xlo, xhi, xhs, xls, xcnt, ylo, yhi, yhs, yls, ycnt,
                         a, b = x0, _node_coord(lower[0], s, stride, I1)
                         if 1 <= J < Y - 1 and 1 <= K < Z - 1:
                             r = ((K - 1) * stride) * ny + (J - 1) * stride
-                            pos, st = _crossing(xlo, xhi, xhs, xls, xcnt, r, a, b, exiting)
+                            pos, st = _crossing(dex.x, r, a, b, exiting)
                         x = pos if pos == pos else 0.5 * (a + b)
                     elif axis == 1:
                         a, b = y0, _node_coord(lower[1], s, stride, J1)
                         if 1 <= I < X - 1 and 1 <= K < Z - 1:
                             r = ((K - 1) * stride) * nx + (I - 1) * stride
-                            pos, st = _crossing(ylo, yhi, yhs, yls, ycnt, r, a, b, exiting)
+                            pos, st = _crossing(dex.y, r, a, b, exiting)
                         y = pos if pos == pos else 0.5 * (a + b)
                     else:
                         a, b = z0, _node_coord(lower[2], s, stride, K1)
                         if 1 <= I < X - 1 and 1 <= J < Y - 1:
                             r = ((J - 1) * stride) * nx + (I - 1) * stride
-                            pos, st = _crossing(zlo, zhi, zhs, zls, zcnt, r, a, b, exiting)
+                            pos, st = _crossing(dex.z, r, a, b, exiting)
                         z = pos if pos == pos else 0.5 * (a + b)
                     # the four cells around the edge, counter-clockwise seen from +axis
                     if axis == 0:
