@@ -103,7 +103,7 @@ def bench_machining(
             p0, p1 = jt.xyz[k - 1], jt.xyz[k]
             _, _, ztop = remove_vertical(dex.z, grid, p0, p1, tool, k)
             k0, nl, _ = remove_horizontal(dex, grid, p0, p1, tool, k, True, buf, ztop)
-            step_forces(buf, k0, nl, grid, p0, p1, 0.002, jt.t[k], model, out4)
+            step_forces(buf.samples, k0, nl, grid, p0, p1, 0.002, jt.t[k], model, out4)
         ref = (start, m - 1, time.perf_counter() - w0, time.process_time() - c0)
         del wref
         w0, c0 = time.perf_counter(), time.process_time()

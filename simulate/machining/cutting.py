@@ -179,28 +179,23 @@ def force_model(cutter, material: Material, spindle: Spindle, n_sub: int) -> For
 
 
 class ForceScratch(NamedTuple):
-    """Work arrays of :func:`step_forces_sorted` (:meth:`sized`): nothing is allocated per step."""
+    """Work arrays of :func:`step_forces_sorted`: nothing is allocated per step."""
 
     acc: np.ndarray    # (3,) revolution integral [N rad]
     inst: np.ndarray   # (>= n_sub, 3) instantaneous force per instant [N]
     trig: np.ndarray   # (>= n_sub * N, 2) cos, sin of the tooth angles per instant [-]
 
-    @classmethod
-    def sized(cls, model: ForceModel) -> "ForceScratch":
-        n = max(model.n_sub, 1)
-        return cls(np.zeros(3), np.zeros((n, 3)), np.zeros((n * model.flutes, 2)))
-
 
 @njit(cache=True)
-def step_forces(buf, k0, n_layers, grid, p0, p1, dt, t_end, model, out):
+def step_forces(samples, k0, n_layers, grid, p0, p1, dt, t_end, model, out):
     """Revolution-mean and peak cutting force of one step of ``dt`` [s] ending at ``t_end`` [s] (on
     the cutter, workpiece frame); tool tip from ``p0`` to ``p1`` [m].
 
     Writes ``out[0:3]`` = mean force over a spindle revolution [N] at this step's engagement and
     chip thickness (closed-form integral over the engaged arcs), ``out[3]`` = peak |F| of the
     instantaneous force over ``model.n_sub`` instants of the step [N]. Samples of layer ``k0 + kk``
-    are in row ``kk`` of the :class:`~simulate.machining.removal.RemovalBuffers` ``buf`` (sorted here
-    in place).
+    are in row ``kk`` of ``samples`` (:class:`~simulate.machining.removal.Samples`, sorted here in
+    place).
     """
     vx = (p1[0] - p0[0]) / dt
     vy = (p1[1] - p0[1]) / dt
@@ -211,16 +206,16 @@ def step_forces(buf, k0, n_layers, grid, p0, p1, dt, t_end, model, out):
     out[3] = 0.0
     if n_layers <= 0 or vx * vx + vy * vy + vz * vz == 0.0:
         return
-    klow = sort_layers(buf.samp_ang, buf.samp_eng, buf.samp_cnt, n_layers)
+    klow = sort_layers(samples.ang, samples.eng, samples.cnt, n_layers)
     if klow < 0:
         return
     vel = np.array([vx, vy, vz])
     scratch = ForceScratch(np.zeros(3), np.zeros((model.n_sub, 3)), np.zeros((model.n_sub * model.flutes, 2)))
-    step_forces_sorted(buf, k0, n_layers, klow, grid, p1, vel, dt, t_end, model, scratch, out)
+    step_forces_sorted(samples, k0, n_layers, klow, grid, p1, vel, dt, t_end, model, scratch, out)
 
 
 @njit(cache=True)
-def step_forces_sorted(buf, k0, n_layers, klow, grid, p1, vel, dt, t_end, model, scratch, out):
+def step_forces_sorted(samples, k0, n_layers, klow, grid, p1, vel, dt, t_end, model, scratch, out):
     """The force part of :func:`step_forces` on already sorted samples (``klow``: first layer
     with samples), with the work arrays ``scratch`` (:class:`ForceScratch`): no allocation.
 
@@ -231,7 +226,7 @@ def step_forces_sorted(buf, k0, n_layers, klow, grid, p1, vel, dt, t_end, model,
     N, tan_helix, omega, phase, kc, ke, n_sub = (model.flutes, model.tan_helix, model.omega, model.phase,
                                                  model.kc, model.ke, model.n_sub)
     acc, inst, trig = scratch
-    samp_ang, samp_eng, samp_cnt = buf.samp_ang, buf.samp_eng, buf.samp_cnt
+    samp_ang, samp_eng, samp_cnt = samples
     lower_z, s = grid.lower[2], grid.spacing
     vx = vel[0]
     vy = vel[1]

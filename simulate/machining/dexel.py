@@ -57,7 +57,7 @@ class Dexels(NamedTuple):
 class Grid(NamedTuple):
     """The dexel grid for the compiled kernels: ray centres at ``lower + (i + 0.5) * spacing``."""
 
-    lower: np.ndarray   # (3,) float64, grid box corner [m]
+    lower: tuple        # (x, y, z) grid box corner [m] (floats, not an array: nothing to reference-count)
     spacing: float      # ray pitch [m]
     nx: int             # cells along x [-]
     ny: int             # cells along y [-]
@@ -234,7 +234,8 @@ class TriDexel:
     @property
     def grid(self) -> Grid:
         nx, ny, nz = self.shape
-        return Grid(self.lower, float(self.spacing), int(nx), int(ny), int(nz))
+        lx, ly, lz = (float(v) for v in self.lower)
+        return Grid((lx, ly, lz), float(self.spacing), int(nx), int(ny), int(nz))
 
     @property
     def rays(self) -> Dexels:

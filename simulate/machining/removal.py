@@ -32,7 +32,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
-from .dexel import Dexels, Rays
+from .dexel import Grid, Rays
 
 #: Inward offset [m] for testing material just inside the cutter boundary (1 nm, far below any
 #: geometric feature but far above float64 rounding at metre-scale coordinates).
@@ -425,14 +425,15 @@ def _grid_range(vmin, vmax, lower, s, n):
 
 
 @njit(cache=True)
-def sample_layer(dex, grid, span, kk, p1, tool, buf):
-    """Engagement samples of z-layer ``span.k0 + kk`` into row ``kk`` of ``buf``: where the x- and
-    y-rays cross the cutter circle at ``p1``, the angle [rad] and whether material is there (read
-    *before* the cut). Rays beyond the grid or without material still give (non-engaged) samples,
-    so the engaged arcs end where the material ends."""
-    xr, yr = dex.x, dex.y
+def sample_layer(xr, yr, grid, span, kk, p1, tool, samples):
+    """Engagement samples of z-layer ``span.k0 + kk`` into row ``kk`` of ``samples``: where the x-
+    and y-rays (``xr``, ``yr``) cross the cutter circle at ``p1``, the angle [rad] and whether
+    material is there (read *before* the cut). Rays beyond the grid or without material still give
+    (non-engaged) samples, so the engaged arcs end where the material ends."""
+    xlo, xhi, xcnt = xr.lo, xr.hi, xr.count
+    ylo, yhi, ycnt = yr.lo, yr.hi, yr.count
     lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
-    samp_ang, samp_eng = buf.samp_ang, buf.samp_eng
+    samp_ang, samp_eng = samples.ang, samples.eng
     k = span.k0 + kk
     zc = lower[2] + (k + 0.5) * s
     m = 0
@@ -448,8 +449,8 @@ def sample_layer(dex, grid, span, kk, p1, tool, buf):
                 samp_ang[kk, m + 1] = math.atan2(de, w)
                 if 0 <= j < ny:
                     ridx = k * ny + j
-                    samp_eng[kk, m] = 1 if material_at(xr.lo, xr.hi, xr.count, ridx, p1[0] - w + _ETA) else 0
-                    samp_eng[kk, m + 1] = 1 if material_at(xr.lo, xr.hi, xr.count, ridx, p1[0] + w - _ETA) else 0
+                    samp_eng[kk, m] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] - w + _ETA) else 0
+                    samp_eng[kk, m + 1] = 1 if material_at(xlo, xhi, xcnt, ridx, p1[0] + w - _ETA) else 0
                 else:
                     samp_eng[kk, m] = 0
                     samp_eng[kk, m + 1] = 0
@@ -463,28 +464,27 @@ def sample_layer(dex, grid, span, kk, p1, tool, buf):
                 samp_ang[kk, m + 1] = math.atan2(w, de)
                 if 0 <= i < nx:
                     ridx = k * nx + i
-                    samp_eng[kk, m] = 1 if material_at(yr.lo, yr.hi, yr.count, ridx, p1[1] - w + _ETA) else 0
-                    samp_eng[kk, m + 1] = 1 if material_at(yr.lo, yr.hi, yr.count, ridx, p1[1] + w - _ETA) else 0
+                    samp_eng[kk, m] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] - w + _ETA) else 0
+                    samp_eng[kk, m + 1] = 1 if material_at(ylo, yhi, ycnt, ridx, p1[1] + w - _ETA) else 0
                 else:
                     samp_eng[kk, m] = 0
                     samp_eng[kk, m + 1] = 0
                 m += 2
-    buf.samp_cnt[kk] = m
+    samples.cnt[kk] = m
 
 
 @njit(cache=True)
-def circle_samples(p1, R, grid, span, buf):
+def circle_samples(p1, R, grid, span, mcap, circle):
     """The engagement sample layout of a layer where the cutter has its full radius R [m] at ``p1``.
 
     The same on every such layer (only the material flags differ), so it is computed once per
-    step, in the order and with the arithmetic of :func:`sample_layer`: pair q is x-ray row
-    ``buf.pair_ray[q, 1]`` (``buf.pair_ray[q, 0] == 0``) or y-ray column (``== 1``), possibly outside
-    the grid, with half-chord ``buf.pair_w[q]``. ``buf.sorted_ang`` gets the sample angles sorted,
-    ``buf.perm`` the sample index of each sorted position. Returns the number of samples m.
+    step, in the order and with the arithmetic of :func:`sample_layer` (at most ``mcap`` samples):
+    pair q is x-ray row ``circle.ray[q, 1]`` (``circle.ray[q, 0] == 0``) or y-ray column (``== 1``),
+    possibly outside the grid, with half-chord ``circle.w[q]``. ``circle.ang`` gets the sample angles
+    sorted, ``circle.perm`` the sample index of each sorted position. Returns the number of samples m.
     """
     lower, s = grid.lower, grid.spacing
-    pair_ray, pair_w, sorted_ang, perm = buf.pair_ray, buf.pair_w, buf.sorted_ang, buf.perm
-    mcap = buf.samp_ang.shape[1]
+    pair_ray, pair_w, sorted_ang, perm = circle
     m = 0
     r1 = R
     for j in range(span.ju0, span.ju1 + 1):
@@ -530,15 +530,17 @@ def circle_samples(p1, R, grid, span, buf):
 
 
 @njit(cache=True)
-def sample_layer_full(dex, grid, span, kk, p1, m, buf):
+def sample_layer_full(xr, yr, grid, span, kk, p1, m, circle, samples):
     """:func:`sample_layer` for a full-radius layer from the step's :func:`circle_samples` (``m``
-    samples in ``buf``): the same samples, written already sorted by angle."""
-    xr, yr = dex.x, dex.y
+    samples laid out in ``circle``): the same samples, written already sorted by angle."""
+    xlo, xhi, xcnt = xr.lo, xr.hi, xr.count
+    ylo, yhi, ycnt = yr.lo, yr.hi, yr.count
     nx, ny = grid.nx, grid.ny
-    pair_ray, pair_w = buf.pair_ray, buf.pair_w
+    pair_ray, pair_w, sorted_ang, perm = circle
+    samp_ang, samp_eng = samples.ang, samples.eng
     k = span.k0 + kk
     for q in range(m):
-        src = buf.perm[q]
+        src = perm[q]
         pr = src // 2
         ray = pair_ray[pr, 1]
         w = pair_w[pr]
@@ -547,31 +549,31 @@ def sample_layer_full(dex, grid, span, kk, p1, m, buf):
         if pair_ray[pr, 0] == 0:
             if 0 <= ray < ny:
                 t = p1[0] - w + _ETA if side == 0 else p1[0] + w - _ETA
-                e = 1 if material_at(xr.lo, xr.hi, xr.count, k * ny + ray, t) else 0
+                e = 1 if material_at(xlo, xhi, xcnt, k * ny + ray, t) else 0
         else:
             i = ray
             if 0 <= i < nx:
                 t = p1[1] - w + _ETA if side == 0 else p1[1] + w - _ETA
-                e = 1 if material_at(yr.lo, yr.hi, yr.count, k * nx + i, t) else 0
-        buf.samp_ang[kk, q] = buf.sorted_ang[q]
-        buf.samp_eng[kk, q] = e
-    buf.samp_cnt[kk] = m
+                e = 1 if material_at(ylo, yhi, ycnt, k * nx + i, t) else 0
+        samp_ang[kk, q] = sorted_ang[q]
+        samp_eng[kk, q] = e
+    samples.cnt[kk] = m
 
 
 @njit(cache=True)
-def column_intervals(p0, p1, R, grid, span, buf):
+def column_intervals(p0, p1, R, grid, span, cols):
     """Swept intervals of the x- and y-ray columns for a horizontal move, shared by all layers.
 
     For a horizontal move every layer at a height where the cutter has its full radius R [m] sees
     the same stadium, so :func:`swept_interval` gives the same interval on every layer: computed
-    here once per step (the same call, so the same numbers). ``buf.colx[j] = (lo, hi)`` [m] for the
-    x-rays of row j, ``buf.coly[i]`` for the y-rays of column i. Returns False (nothing written) for
+    here once per step (the same call, so the same numbers). ``cols.x[j] = (lo, hi)`` [m] for the
+    x-rays of row j, ``cols.y[i]`` for the y-rays of column i. Returns False (nothing written) for
     other moves.
     """
     if abs(p1[2] - p0[2]) >= 1e-15:
         return False
     lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
-    colx, coly = buf.colx, buf.coly
+    colx, coly = cols
     for j in range(max(span.ju0, 0), min(span.ju1, ny - 1) + 1):
         yc = lower[1] + (j + 0.5) * s
         colx[j, 0], colx[j, 1] = stadium_interval(p0[0], p0[1], p1[0], p1[1], R, yc)
@@ -582,21 +584,22 @@ def column_intervals(p0, p1, R, grid, span, buf):
 
 
 @njit(cache=True)
-def cut_layer(dex, grid, span, kk, p0, p1, tool, step, buf, use_cols):
-    """Subtract the swept cutter from the x- and y-rays of z-layer ``span.k0 + kk``;
-    ``buf.layer_removed[kk]`` gets the volume seen by the x-rays [m^3]. Returns :class:`CutFlags`
+def cut_layer(xr, yr, grid, span, kk, p0, p1, tool, step, layer_removed, cols, use_cols):
+    """Subtract the swept cutter from the x- and y-rays (``xr``, ``yr``) of z-layer ``span.k0 + kk``;
+    ``layer_removed[kk]`` gets the volume seen by the x-rays [m^3]. Returns :class:`CutFlags`
     (as an int): OVERFLOW a ray overflowed its capacity (nothing changed on it), X_FULL / Y_FULL an
     x- / y-ray is now at its capacity (the next split would overflow).
 
     A ray whose material lies entirely outside the swept box along its axis is rejected before
     the swept interval is computed (it could not lose anything). With ``use_cols`` (a horizontal
     move, see :func:`column_intervals`) layers where the cutter has its full radius take the
-    column intervals in ``buf`` instead of recomputing them.
+    column intervals ``cols`` instead of recomputing them.
     """
-    xr, yr = dex.x, dex.y
+    xlo, xhi, xls, xhs, xcnt = xr
+    ylo, yhi, yls, yhs, ycnt = yr
     lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
     R, rc, L = tool.R, tool.rc, tool.L
-    colx, coly = buf.colx, buf.coly
+    colx, coly = cols
     k = span.k0 + kk
     zc = lower[2] + (k + 0.5) * s
     xa = min(p0[0], p1[0]) - R
@@ -610,8 +613,8 @@ def cut_layer(dex, grid, span, kk, p0, p1, tool, step, buf, use_cols):
     rem = 0.0
     for j in range(max(span.ju0, 0), min(span.ju1, ny - 1) + 1):
         ridx = k * ny + j
-        n = xr.count[ridx]
-        if n == 0 or xr.lo[ridx, 0] >= xb or xr.hi[ridx, n - 1] <= xa:
+        n = xcnt[ridx]
+        if n == 0 or xlo[ridx, 0] >= xb or xhi[ridx, n - 1] <= xa:
             continue
         if cols:
             a = colx[j, 0]
@@ -620,17 +623,17 @@ def cut_layer(dex, grid, span, kk, p0, p1, tool, step, buf, use_cols):
             yc = lower[1] + (j + 0.5) * s
             a, b = swept_interval(0, yc, zc, p0, p1, R, rc, L)
         if a < b:
-            got = subtract_interval(xr.lo, xr.hi, xr.lo_step, xr.hi_step, xr.count, ridx, a, b, step)
+            got = subtract_interval(xlo, xhi, xls, xhs, xcnt, ridx, a, b, step)
             if got < 0.0:
                 flags |= CUT_OVERFLOW
             else:
                 rem += got
-                if xr.count[ridx] == xr.lo.shape[1]:
+                if xcnt[ridx] == xlo.shape[1]:
                     flags |= CUT_X_FULL
     for i in range(max(span.iu0, 0), min(span.iu1, nx - 1) + 1):
         ridx = k * nx + i
-        n = yr.count[ridx]
-        if n == 0 or yr.lo[ridx, 0] >= yb or yr.hi[ridx, n - 1] <= ya:
+        n = ycnt[ridx]
+        if n == 0 or ylo[ridx, 0] >= yb or yhi[ridx, n - 1] <= ya:
             continue
         if cols:
             a = coly[i, 0]
@@ -639,26 +642,26 @@ def cut_layer(dex, grid, span, kk, p0, p1, tool, step, buf, use_cols):
             xc = lower[0] + (i + 0.5) * s
             a, b = swept_interval(1, xc, zc, p0, p1, R, rc, L)
         if a < b:
-            got = subtract_interval(yr.lo, yr.hi, yr.lo_step, yr.hi_step, yr.count, ridx, a, b, step)
+            got = subtract_interval(ylo, yhi, yls, yhs, ycnt, ridx, a, b, step)
             if got < 0.0:
                 flags |= CUT_OVERFLOW
-            elif yr.count[ridx] == yr.lo.shape[1]:
+            elif ycnt[ridx] == ylo.shape[1]:
                 flags |= CUT_Y_FULL
-    buf.layer_removed[kk] = rem * s * s
+    layer_removed[kk] = rem * s * s
     return flags
 
 
 @njit(cache=True)
-def horizontal_layer(dex, grid, span, kk, p0, p1, tool, step, sample, buf, use_cols):
+def horizontal_layer(xr, yr, grid, span, kk, p0, p1, tool, step, sample, buf, use_cols):
     """Engagement samples (if ``sample``) then removal on the x- and y-rays of z-layer
     ``span.k0 + kk`` (row ``kk`` of the buffers). Each sample reads only its own ray, so sampling
     the whole layer first equals sampling each ray just before cutting it. Returns the flags of
     :func:`cut_layer`."""
     if sample:
-        sample_layer(dex, grid, span, kk, p1, tool, buf)
+        sample_layer(xr, yr, grid, span, kk, p1, tool, buf.samples)
     else:
-        buf.samp_cnt[kk] = 0
-    return cut_layer(dex, grid, span, kk, p0, p1, tool, step, buf, use_cols)
+        buf.samples.cnt[kk] = 0
+    return cut_layer(xr, yr, grid, span, kk, p0, p1, tool, step, buf.layer_removed, buf.cols, use_cols)
 
 
 @njit(cache=True)
@@ -684,10 +687,11 @@ def horizontal_range(grid, p0, p1, tool, ztop):
 
 
 @njit(cache=True)
-def layer_has_material(dex, grid, k, span, p0, p1, R):
-    """True if an x- or y-ray of z-layer ``k`` (rays of ``span``) holds material inside the step's
-    swept box (cutter radius ``R`` [m])."""
-    xr, yr = dex.x, dex.y
+def layer_has_material(xr, yr, grid, k, span, p0, p1, R):
+    """True if an x- or y-ray (``xr``, ``yr``) of z-layer ``k`` (rays of ``span``) holds material
+    inside the step's swept box (cutter radius ``R`` [m])."""
+    xlo, xhi, xcnt = xr.lo, xr.hi, xr.count
+    ylo, yhi, ycnt = yr.lo, yr.hi, yr.count
     nx, ny = grid.nx, grid.ny
     xa = min(p0[0], p1[0]) - R
     xb = max(p0[0], p1[0]) + R
@@ -695,13 +699,13 @@ def layer_has_material(dex, grid, k, span, p0, p1, R):
     yb = max(p0[1], p1[1]) + R
     for j in range(max(span.ju0, 0), min(span.ju1, ny - 1) + 1):
         r = k * ny + j
-        for q in range(xr.count[r]):
-            if xr.lo[r, q] < xb and xr.hi[r, q] > xa:
+        for q in range(xcnt[r]):
+            if xlo[r, q] < xb and xhi[r, q] > xa:
                 return True
     for i in range(max(span.iu0, 0), min(span.iu1, nx - 1) + 1):
         r = k * nx + i
-        for q in range(yr.count[r]):
-            if yr.lo[r, q] < yb and yr.hi[r, q] > ya:
+        for q in range(ycnt[r]):
+            if ylo[r, q] < yb and yhi[r, q] > ya:
                 return True
     return False
 
@@ -720,9 +724,10 @@ def layer_range(dex, grid, p0, p1, tool, ztop):
     k0, k1, ju0, ju1, iu0, iu1 = horizontal_range(grid, p0, p1, tool, 1e300)
     k1z = horizontal_range(grid, p0, p1, tool, ztop)[1]
     span = LayerSpan(k0, 0, ju0, ju1, iu0, iu1)
+    xr, yr = dex.x, dex.y
     k = k0
     while k <= k1:
-        if k > k1z and not layer_has_material(dex, grid, k, span, p0, p1, tool.R):
+        if k > k1z and not layer_has_material(xr, yr, grid, k, span, p0, p1, tool.R):
             break
         k += 1
     return LayerSpan(k0, k - k0, ju0, ju1, iu0, iu1)
@@ -732,18 +737,24 @@ def layer_range(dex, grid, p0, p1, tool, ztop):
 def _horizontal_layers_parallel(dex, grid, span, p0, p1, tool, step, sample, buf, use_cols):
     """:func:`horizontal_layer` on every layer of ``span``, one layer per parallel task; returns
     the flags of :func:`cut_layer` of all layers."""
-    # a parallel loop cannot take a tuple of arrays from outside (numba's gufunc arguments are
-    # arrays and scalars): unpack here, rebuild the named tuples inside the loop
+    # a parallel loop cannot take tuples of arrays or the grid's corner tuple from outside (numba's
+    # gufunc arguments are arrays and scalars): unpack here, rebuild the named tuples inside the loop
     xlo, xhi, xls, xhs, xcnt = dex.x
     ylo, yhi, yls, yhs, ycnt = dex.y
-    zlo, zhi, zls, zhs, zcnt = dex.z
-    b0, b1, b2, b3, b4, b5, b6, b7, b8, b9 = buf
+    s_ang, s_eng, s_cnt = buf.samples
+    colx, coly = buf.cols
+    c_ray, c_w, c_ang, c_perm = buf.circle
+    layer_removed = buf.layer_removed
+    lx, ly, lz = grid.lower
+    s, nx, ny, nz = grid.spacing, grid.nx, grid.ny, grid.nz
     nl = span.n_layers
     overflow = np.zeros(nl, np.int32)
     for kk in prange(nl):
-        d = Dexels(Rays(xlo, xhi, xls, xhs, xcnt), Rays(ylo, yhi, yls, yhs, ycnt), Rays(zlo, zhi, zls, zhs, zcnt))
-        bb = RemovalBuffers(b0, b1, b2, b3, b4, b5, b6, b7, b8, b9)
-        overflow[kk] = horizontal_layer(d, grid, span, kk, p0, p1, tool, step, sample, bb, use_cols)
+        g = Grid((lx, ly, lz), s, nx, ny, nz)
+        bb = RemovalBuffers(Samples(s_ang, s_eng, s_cnt), layer_removed, Columns(colx, coly),
+                            CircleLayout(c_ray, c_w, c_ang, c_perm))
+        overflow[kk] = horizontal_layer(Rays(xlo, xhi, xls, xhs, xcnt), Rays(ylo, yhi, yls, yhs, ycnt), g, span, kk,
+                                        p0, p1, tool, step, sample, bb, use_cols)
     flags = 0
     for kk in range(nl):
         flags |= overflow[kk]
@@ -754,8 +765,8 @@ def _horizontal_layers_parallel(dex, grid, span, p0, p1, tool, step, sample, buf
 def remove_horizontal(dex, grid, p0, p1, tool, step, sample, buf, ztop=1e300):
     """Remove the swept cutter from x- and y-rays, one z-layer per parallel task.
 
-    Engagement samples of layer ``k0 + kk`` go to row ``kk`` of ``buf.samp_ang`` (angle [rad] about
-    the cutter axis at ``p1``, from +x counter-clockwise) and ``buf.samp_eng`` (1 if material was
+    Engagement samples of layer ``k0 + kk`` go to row ``kk`` of ``buf.samples.ang`` (angle [rad] about
+    the cutter axis at ``p1``, from +x counter-clockwise) and ``buf.samples.eng`` (1 if material was
     there before the cut). ``ztop`` [m]: highest material in the cutter's footprint (from the
     z-rays); empty layers above it are skipped (:func:`layer_range`). Returns ``(k0, n_layers,
     status)``, status a :class:`StepStatus`: OK, OVERFLOW (a ray overflowed its capacity) or LAYERS
@@ -765,9 +776,9 @@ def remove_horizontal(dex, grid, p0, p1, tool, step, sample, buf, ztop=1e300):
     k0, nl = span.k0, span.n_layers
     if nl <= 0:
         return k0, 0, STEP_OK
-    if nl > buf.samp_cnt.shape[0]:
+    if nl > buf.samples.cnt.shape[0]:
         return k0, 0, STEP_LAYERS
-    use_cols = column_intervals(p0, p1, tool.R, grid, span, buf)
+    use_cols = column_intervals(p0, p1, tool.R, grid, span, buf.cols)
     flags = _horizontal_layers_parallel(dex, grid, span, p0, p1, tool, step, sample, buf, use_cols)
     return k0, nl, STEP_OVERFLOW if flags & CUT_OVERFLOW else STEP_OK
 
@@ -784,7 +795,7 @@ def vertical_row(rays, grid, j, i0, i1, p0, p1, tool, step, out):
     """
     lower, s, nx = grid.lower, grid.spacing, grid.nx
     R, rc, L = tool.R, tool.rc, tool.L
-    zhi, zcnt = rays.hi, rays.count
+    zlo, zhi, zls, zhs, zcnt = rays
     yc = lower[1] + (j + 0.5) * s
     zfloor = min(p0[2], p1[2])
     # the footprint (stadium of radius R, slightly enlarged so rounding cannot drop a ray) along
@@ -808,12 +819,12 @@ def vertical_row(rays, grid, j, i0, i1, p0, p1, tool, step, out):
             continue
         a, b = swept_interval(2, xc, yc, p0, p1, R, rc, L)
         if a < b:
-            got = subtract_interval(rays.lo, zhi, rays.lo_step, rays.hi_step, zcnt, ridx, a, b, step)
+            got = subtract_interval(zlo, zhi, zls, zhs, zcnt, ridx, a, b, step)
             if got < 0.0:
                 flags |= CUT_OVERFLOW
             else:
                 acc += got
-                if zcnt[ridx] == rays.lo.shape[1]:
+                if zcnt[ridx] == zlo.shape[1]:
                     flags |= CUT_Z_FULL
     out[0] = acc
     out[1] = top
@@ -857,28 +868,49 @@ def remove_vertical(rays, grid, p0, p1, tool, step):
         return 0.0, 0, -1e300
     # unpacked for the parallel loop (module note in _horizontal_layers_parallel)
     zlo, zhi, zls, zhs, zcnt = rays
+    lx, ly, lz = grid.lower
+    nx, ny, nz = grid.nx, grid.ny, grid.nz
     rows = np.zeros((nj, 3))
     for jj in prange(nj):
-        vertical_row(Rays(zlo, zhi, zls, zhs, zcnt), grid, j0 + jj, i0, i1, p0, p1, tool, step, rows[jj])
+        g = Grid((lx, ly, lz), s, nx, ny, nz)
+        vertical_row(Rays(zlo, zhi, zls, zhs, zcnt), g, j0 + jj, i0, i1, p0, p1, tool, step, rows[jj])
     flags = 0
     for jj in range(nj):
         flags |= int(rows[jj, 2])
     return rows[:, 0].sum() * s * s, flags, rows[:, 1].max()
 
 
+class Samples(NamedTuple):
+    """Engagement samples of a step, one row per z-layer from the step's first layer."""
+
+    ang: np.ndarray   # (nz, M) float64, angle about the cutter axis from +x counter-clockwise [rad]
+    eng: np.ndarray   # (nz, M) int8, 1: material at the sample before the cut
+    cnt: np.ndarray   # (nz,) int64, samples per row
+
+
+class Columns(NamedTuple):
+    """Swept intervals of the x-ray rows and y-ray columns of a horizontal move (:func:`column_intervals`)."""
+
+    x: np.ndarray   # (ny, 2) float64, (lo, hi) of the x-rays of row j [m]
+    y: np.ndarray   # (nx, 2) float64, (lo, hi) of the y-rays of column i [m]
+
+
+class CircleLayout(NamedTuple):
+    """The full-radius sample layout of a step (:func:`circle_samples`)."""
+
+    ray: np.ndarray    # (M / 2 + 1, 2) int64, family (0: x, 1: y) and row / column of each sample pair
+    w: np.ndarray      # (M / 2 + 1,) float64, half-chord of each pair [m]
+    ang: np.ndarray    # (M,) float64, sample angles sorted [rad]
+    perm: np.ndarray   # (M,) int64, sample index of each sorted position
+
+
 class RemovalBuffers(NamedTuple):
     """Scratch arrays of one step's removal and engagement samples (:meth:`sized` for a grid and cutter)."""
 
-    samp_ang: np.ndarray       # (nz, M) float64, sample angle per layer row [rad]
-    samp_eng: np.ndarray       # (nz, M) int8, 1: material at the sample before the cut
-    samp_cnt: np.ndarray       # (nz,) int64, samples per layer row
-    layer_removed: np.ndarray  # (nz,) float64, volume the x-rays of each layer row lost [m^3]
-    colx: np.ndarray           # (ny, 2) float64, per-step column intervals of horizontal moves [m]
-    coly: np.ndarray           # (nx, 2) float64
-    pair_ray: np.ndarray       # (M / 2 + 1, 2) int64, full-radius sample layout of a step (circle_samples)
-    pair_w: np.ndarray         # (M / 2 + 1,) float64, half-chords [m]
-    sorted_ang: np.ndarray     # (M,) float64, sorted sample angles [rad]
-    perm: np.ndarray           # (M,) int64, sample index of each sorted position
+    samples: Samples
+    layer_removed: np.ndarray   # (nz,) float64, volume the x-rays of each layer row lost [m^3]
+    cols: Columns
+    circle: CircleLayout
 
     @classmethod
     def sized(cls, workpiece, R: float, max_move: float) -> "RemovalBuffers":
@@ -887,9 +919,10 @@ class RemovalBuffers(NamedTuple):
         nx, ny, nz = workpiece.shape
         across = int(math.ceil((2 * R + max_move) / s)) + 3
         m = 4 * across
-        return cls(np.zeros((nz, m)), np.zeros((nz, m), np.int8), np.zeros(nz, np.int64), np.zeros(nz),
-                   np.zeros((ny, 2)), np.zeros((nx, 2)), np.zeros((m // 2 + 1, 2), np.int64), np.zeros(m // 2 + 1),
-                   np.zeros(m), np.zeros(m, np.int64))
+        return cls(Samples(np.zeros((nz, m)), np.zeros((nz, m), np.int8), np.zeros(nz, np.int64)), np.zeros(nz),
+                   Columns(np.zeros((ny, 2)), np.zeros((nx, 2))),
+                   CircleLayout(np.zeros((m // 2 + 1, 2), np.int64), np.zeros(m // 2 + 1), np.zeros(m),
+                                np.zeros(m, np.int64)))
 
 
 def remove_step(workpiece, cutter, p0, p1, step: int, buffers: RemovalBuffers | None = None,

@@ -286,6 +286,9 @@ def coupled_steps(k_from, k_to, dex, grid, path, model, opts, buf, out, drive):
     lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
     t, xyz, err, C = path
     force, peak, deflection, state, ticks = out
+    xr, yr, zr = dex
+    samples, layer_removed, cols, circle = buf
+    mcap = samples.ang.shape[1]
     forces = (opts.flags & LOOP_FORCES) != 0
     use_compliance = (opts.flags & LOOP_COMPLIANCE) != 0
     time_constant, parallel_work = opts.time_constant, opts.parallel_work
@@ -321,9 +324,9 @@ def coupled_steps(k_from, k_to, dex, grid, path, model, opts, buf, out, drive):
         i1 = min(nx - 1, int(math.floor((max(p0[0], p1[0]) + R - lower[0]) / s - 0.5)))
         zwork = max(0, j1 - j0 + 1) * max(0, i1 - i0 + 1)
         if par_ok and zwork > parallel_work:
-            vz, st2, ztop = remove_vertical(dex.z, grid, p0, p1, tool, k)
+            vz, st2, ztop = remove_vertical(zr, grid, p0, p1, tool, k)
         else:
-            vz, st2, ztop = remove_vertical_serial(dex.z, grid, p0, p1, tool, k, row)
+            vz, st2, ztop = remove_vertical_serial(zr, grid, p0, p1, tool, k, row)
         if st2 & CUT_OVERFLOW:
             return STEP_OVERFLOW, k, 0
         full = st2 & CUT_Z_FULL
@@ -331,12 +334,12 @@ def coupled_steps(k_from, k_to, dex, grid, path, model, opts, buf, out, drive):
         # ---- x/y-rays: engagement samples, then removal
         span = layer_range(dex, grid, p0, p1, tool, ztop)
         k0, nl = span.k0, span.n_layers
-        if nl > buf.samp_cnt.shape[0]:
+        if nl > samples.cnt.shape[0]:
             return STEP_LAYERS, k, 0
         c1 = _clock()
         c2 = c1
         if nl > 0:
-            use_cols = column_intervals(p0, p1, R, grid, span, buf)
+            use_cols = column_intervals(p0, p1, R, grid, span, cols)
             hwork = nl * (span.ju1 - span.ju0 + span.iu1 - span.iu0 + 2)
             if par_ok and hwork > parallel_work:
                 st1 = _horizontal_layers_parallel(dex, grid, span, p0, p1, tool, k, forces, buf, use_cols)
@@ -345,17 +348,17 @@ def coupled_steps(k_from, k_to, dex, grid, path, model, opts, buf, out, drive):
                 m_full = -1
                 for kk in range(nl):
                     if not forces:
-                        buf.samp_cnt[kk] = 0
+                        samples.cnt[kk] = 0
                     elif radius_at(lower[2] + (k0 + kk + 0.5) * s - p1[2], R, rc, L) == R:
                         if m_full < 0:
-                            m_full = circle_samples(p1, R, grid, span, buf)
-                        sample_layer_full(dex, grid, span, kk, p1, m_full, buf)
+                            m_full = circle_samples(p1, R, grid, span, mcap, circle)
+                        sample_layer_full(xr, yr, grid, span, kk, p1, m_full, circle, samples)
                     else:
-                        sample_layer(dex, grid, span, kk, p1, tool, buf)
+                        sample_layer(xr, yr, grid, span, kk, p1, tool, samples)
                 c2 = _clock()
                 st1 = 0
                 for kk in range(nl):
-                    st1 |= cut_layer(dex, grid, span, kk, p0, p1, tool, k, buf, use_cols)
+                    st1 |= cut_layer(xr, yr, grid, span, kk, p0, p1, tool, k, layer_removed, cols, use_cols)
             if st1 & CUT_OVERFLOW:
                 return STEP_OVERFLOW, k, 0
             full |= st1 & (CUT_X_FULL | CUT_Y_FULL)
@@ -372,10 +375,10 @@ def coupled_steps(k_from, k_to, dex, grid, path, model, opts, buf, out, drive):
                 vel[a] = (xyz[k, a] + err[k, a] - xyz[k - 1, a] - err[k - 1, a]) / dt
             klow = -1
             if nl > 0 and vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2] != 0.0:
-                klow = sort_layers(buf.samp_ang, buf.samp_eng, buf.samp_cnt, nl)
+                klow = sort_layers(samples.ang, samples.eng, samples.cnt, nl)
             c4 = _clock()
             ticks[1] += c4 - c3
-            step_forces_sorted(buf, k0, nl, klow, grid, p1, vel, dt, t[k], model, scratch, fout)
+            step_forces_sorted(samples, k0, nl, klow, grid, p1, vel, dt, t[k], model, scratch, fout)
             for a in range(3):
                 force[k, a] = fout[a]
             peak[k] = fout[3]

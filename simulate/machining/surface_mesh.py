@@ -184,8 +184,8 @@ def _count(occ, cell_vertex):
 def _crossing(rays, r, a, b, exiting):
     """Dexel end of ray r of ``rays`` in [a, b] [m]: the last exit (``exiting``) or the first entry;
     returns (position [m], step), NaN if the ray has none there."""
-    lo, hi, lo_step, hi_step = rays.lo, rays.hi, rays.lo_step, rays.hi_step
-    n = rays.count[r]
+    lo, hi, lo_step, hi_step, cnt = rays
+    n = cnt[r]
     pos = np.nan
     st = -1
     for q in range(n):
@@ -216,6 +216,7 @@ def _build(occ, cell_vertex, dex, grid, stride, mesh):
     into ``mesh`` (:class:`MeshBuffers`) from the occupancy and the exact dexel ends of ``dex``."""
     lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
     verts, nsum, vstep, faces = mesh
+    xr, yr, zr = dex
     X, Y, Z = occ.shape
     f = 0
     for I in range(X):
@@ -239,19 +240,19 @@ def _build(occ, cell_vertex, dex, grid, stride, mesh):
                         a, b = x0, _node_coord(lower[0], s, stride, I1)
                         if 1 <= J < Y - 1 and 1 <= K < Z - 1:
                             r = ((K - 1) * stride) * ny + (J - 1) * stride
-                            pos, st = _crossing(dex.x, r, a, b, exiting)
+                            pos, st = _crossing(xr, r, a, b, exiting)
                         x = pos if pos == pos else 0.5 * (a + b)
                     elif axis == 1:
                         a, b = y0, _node_coord(lower[1], s, stride, J1)
                         if 1 <= I < X - 1 and 1 <= K < Z - 1:
                             r = ((K - 1) * stride) * nx + (I - 1) * stride
-                            pos, st = _crossing(dex.y, r, a, b, exiting)
+                            pos, st = _crossing(yr, r, a, b, exiting)
                         y = pos if pos == pos else 0.5 * (a + b)
                     else:
                         a, b = z0, _node_coord(lower[2], s, stride, K1)
                         if 1 <= I < X - 1 and 1 <= J < Y - 1:
                             r = ((J - 1) * stride) * nx + (I - 1) * stride
-                            pos, st = _crossing(dex.z, r, a, b, exiting)
+                            pos, st = _crossing(zr, r, a, b, exiting)
                         z = pos if pos == pos else 0.5 * (a + b)
                     # the four cells around the edge, counter-clockwise seen from +axis
                     if axis == 0:

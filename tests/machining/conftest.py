@@ -22,7 +22,7 @@ def run_path(wp, cutter, points, dt=0.002, rpm=10000.0, material="Al7075", force
     for k in range(1, len(points)):
         k0, nl, _ = remove_step(wp, cutter, points[k - 1], points[k], k, buf, sample=forces)
         if forces:
-            step_forces(buf, k0, nl, wp.grid, points[k - 1], points[k], dt, k * dt, model, out)
+            step_forces(buf.samples, k0, nl, wp.grid, points[k - 1], points[k], dt, k * dt, model, out)
             F[k - 1] = out
     return F
 
