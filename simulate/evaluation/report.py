@@ -113,7 +113,8 @@ def table2_image(ranking: Ranking, path: Path) -> str:
         colours.append(["white"] * 3 + _rank_colours(vals))
     fig, ax = plt.subplots(figsize=(3 + 1.6 * len(poses) + 3, 0.45 * len(rows) + 1))
     ax.axis("off")
-    t = ax.table(cellText=cell, cellColours=colours, colLabels=["feature", "nominal [mm]", "tolerance [mm]"] + [f"{p} [mm]" for p in poses],
+    t = ax.table(cellText=cell, cellColours=colours,
+                 colLabels=["feature", "nominal [mm]", "tolerance [mm]"] + [f"{p} [mm]" for p in poses],
                  loc="center")
     t.auto_set_font_size(False)
     t.set_fontsize(9)
@@ -215,7 +216,8 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
     md += ["", "| rank | pose | score | rows in tolerance |", "|---|---|---|---|"]
     for e in ranking.entries:
         md.append(f"| {e.rank} | {e.pose} | {e.score:.2f} | {e.in_tolerance}/10 |")
-    md += ["", "## Table 2: feature deviations [mm]", "", f"![table 2]({img.name}/{table2_image(ranking, img / 'table2.png')})", ""]
+    md += ["", "## Table 2: feature deviations [mm]", "",
+           f"![table 2]({img.name}/{table2_image(ranking, img / 'table2.png')})", ""]
     md.append("| feature | nominal [mm] | tolerance [mm] | " + " | ".join(f"{p} [mm]" for p in poses) + " |")
     md.append("|---|---|---|" + "---|" * len(poses))
     rows = ranking.results[poses[0]].table.rows
@@ -269,8 +271,8 @@ def write_report(ranking: Ranking, out_dir: str | Path, program: str | Path | No
         md.append(f"![deviations {p}]({img.name}/"
                   f"{deviation_map(res.scan, piece, img / f'{p}_deviation.png', f'{p}: probe deviations')})")
         if res.steps is not None:
-            md.append(f"![process {p}]({img.name}/"
-                      f"{process_plot(res.steps, img / f'{p}_process.png', f'{p}: force, deflection, tracking error')})")
+            fig_name = process_plot(res.steps, img / f"{p}_process.png", f"{p}: force, deflection, tracking error")
+            md.append(f"![process {p}]({img.name}/{fig_name})")
         if trajectories and p in trajectories:
             xyz, sw = trajectories[p]
             md.append(f"![switching {p}]({img.name}/"

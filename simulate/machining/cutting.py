@@ -96,7 +96,7 @@ class Spindle:
     phase: float = 0.0
 
     @classmethod
-    def from_rpm(cls, rpm: float, phase: float = 0.0) -> "Spindle":
+    def from_rpm(cls, rpm: float, phase: float = 0.0) -> Spindle:
         if not (rpm > 0 and math.isfinite(rpm)):
             raise InputError(f"spindle speed must be > 0 rpm, got {rpm}", field="spindle")
         return cls(rpm * 2 * math.pi / 60.0, phase)
@@ -141,15 +141,15 @@ def _arc_force(p1_, p2_, A, B, Cc, b, sk, ck, T, kc, ke, acc):
 
 
 @njit(cache=True)
-def _cell_force(l, r, theta, alpha, A, B, Cc, b, sk, ck, T, kc, ke, acc):
-    """Integrate over the angular cell [l, r] (r >= l, width < 2 pi) intersected with the arc where
+def _cell_force(left, r, theta, alpha, A, B, Cc, b, sk, ck, T, kc, ke, acc):
+    """Integrate over the angular cell [left, r] (r >= left, width < 2 pi) intersected with the arc where
     the chip thickness is positive, [theta - alpha, theta + alpha] (alpha >= pi: everywhere)."""
     if alpha >= math.pi:
-        _arc_force(l, r, A, B, Cc, b, sk, ck, T, kc, ke, acc)
+        _arc_force(left, r, A, B, Cc, b, sk, ck, T, kc, ke, acc)
         return
     # shift so that the h > 0 arc is [-alpha, alpha]; the cell may then straddle +-pi
-    lo = _wrap(l - theta)
-    hi = lo + (r - l)
+    lo = _wrap(left - theta)
+    hi = lo + (r - left)
     for shift in (0.0, -2.0 * math.pi):
         a_ = max(lo + shift, -alpha)
         b_ = min(hi + shift, alpha)
@@ -276,17 +276,17 @@ def step_forces_sorted(samples, k0, n_layers, klow, grid, p1, vel, dt, t_end, mo
         if sk < 1e-3:
             continue
         b = dzk / sk
-        # chip thickness h = T * g(psi), g = A cos + B sin + Cc = S cos(psi - theta) + Cc
+        # chip thickness h = T * g(psi), g = A cos + B sin + Cc = amp cos(psi - theta) + Cc
         A = sk * vx
         B = sk * vy
         Cc = -ck * vz
-        S = sk * vxy
-        if S <= abs(Cc):
+        amp = sk * vxy
+        if amp <= abs(Cc):
             if Cc <= 0.0:
                 continue
             alpha = 4.0
         else:
-            alpha = math.acos(min(1.0, max(-1.0, -Cc / S)))
+            alpha = math.acos(min(1.0, max(-1.0, -Cc / amp)))
         ang = samp_ang[kk]
         eng = samp_eng[kk]
         engaged = False
@@ -302,12 +302,12 @@ def step_forces_sorted(samples, k0, n_layers, klow, grid, p1, vel, dt, t_end, mo
             prev = ang[i - 1] if i > 0 else ang[cnt - 1] - 2.0 * math.pi
             nxt = ang[i + 1] if i + 1 < cnt else ang[0] + 2.0 * math.pi
             if cnt == 1:
-                l = ang[i] - math.pi
+                left = ang[i] - math.pi
                 rr = ang[i] + math.pi
             else:
-                l = 0.5 * (prev + ang[i])
+                left = 0.5 * (prev + ang[i])
                 rr = 0.5 * (ang[i] + nxt)
-            _cell_force(l, rr, theta, alpha, A, B, Cc, b, sk, ck, t_tooth, kc, ke, acc)
+            _cell_force(left, rr, theta, alpha, A, B, Cc, b, sk, ck, t_tooth, kc, ke, acc)
         # instantaneous force at n_sub instants, for the peak
         lag = zp * tan_helix / R
         cl = math.cos(lag)

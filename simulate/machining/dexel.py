@@ -138,7 +138,7 @@ class TriDexel:
 
     # ---- construction -------------------------------------------------------------------
     @classmethod
-    def empty(cls, lower, upper, spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
+    def empty(cls, lower, upper, spacing: float, capacity=DEFAULT_CAPACITY) -> TriDexel:
         """An empty grid (no material) covering ``[lower, upper]`` at ``spacing`` [m]."""
         if not (isinstance(spacing, (int, float)) and math.isfinite(spacing) and spacing > 0):
             raise InputError(f"dexel spacing must be a positive length in metres, got {spacing!r}",
@@ -164,7 +164,7 @@ class TriDexel:
         return cls(lower, upper, float(spacing), (nx, ny, nz), fams)
 
     @classmethod
-    def from_boxes(cls, boxes, spacing: float, capacity=DEFAULT_CAPACITY, bounds=None) -> "TriDexel":
+    def from_boxes(cls, boxes, spacing: float, capacity=DEFAULT_CAPACITY, bounds=None) -> TriDexel:
         """Workpiece as the union of axis-aligned boxes ``[(min3, max3), ...]`` [m].
 
         The grid box is the union's bounding box (or ``bounds``). For the test piece: the base
@@ -187,7 +187,7 @@ class TriDexel:
         return wp
 
     @classmethod
-    def from_solids(cls, solids: list["ConvexSolid"], spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
+    def from_solids(cls, solids: list[ConvexSolid], spacing: float, capacity=DEFAULT_CAPACITY) -> TriDexel:
         """Workpiece as the union of convex solids (prisms with planar tops, cylinders) [m]."""
         if not solids:
             raise InputError("stock has no solids", field="stock")
@@ -211,12 +211,12 @@ class TriDexel:
         return wp
 
     @classmethod
-    def box(cls, lower, upper, spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
+    def box(cls, lower, upper, spacing: float, capacity=DEFAULT_CAPACITY) -> TriDexel:
         """A rectangular block ``[lower, upper]`` [m]."""
         return cls.from_boxes([(lower, upper)], spacing, capacity)
 
     @classmethod
-    def from_stock_file(cls, path, spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
+    def from_stock_file(cls, path, spacing: float, capacity=DEFAULT_CAPACITY) -> TriDexel:
         """Workpiece from a stock description JSON: the toolpath's test-piece stock (``base`` +
         ``blanks`` of kind polygon / circle with planar tops, see :func:`read_stock_solids`) or the
         simple box form of :func:`read_stock_boxes`."""
@@ -287,7 +287,7 @@ class TriDexel:
             if ok != -1:
                 raise AssertionError(f"dexel family {f.axis}: ray {ok} has unordered or empty intervals")
 
-    def copy(self) -> "TriDexel":
+    def copy(self) -> TriDexel:
         fams = [RayFamily(f.axis, f.lo.copy(), f.hi.copy(), f.lo_step.copy(), f.hi_step.copy(), f.count.copy())
                 for f in self.families]
         return TriDexel(self.lower.copy(), self.upper.copy(), self.spacing, self.shape, fams)
@@ -453,7 +453,7 @@ def read_stock_solids(path) -> list[ConvexSolid]:
                 area = 0.5 * np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1])
                 if area < 0:
                     v = v[::-1]
-                for a, b in zip(v, np.roll(v, -1, axis=0)):
+                for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
                     d = b - a
                     n = np.array([d[1], -d[0]])  # outward for counter-clockwise vertices
                     n /= np.linalg.norm(n)

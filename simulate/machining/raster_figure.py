@@ -121,7 +121,7 @@ def colour_bar_image(bar: ColourBar, height: int, size: int = 13):
     d = ImageDraw.Draw(im)
     d.rectangle([pad, top, pad + bw, bottom], outline=INK)
     span = bar.hi - bar.lo if bar.hi > bar.lo else 1.0
-    for v, s in zip(ticks, labels):
+    for v, s in zip(ticks, labels, strict=True):
         y = bottom - (v - bar.lo) / span * (bottom - top)
         d.line([pad + bw, y, pad + bw + 4, y], fill=INK)
         d.text((pad + bw + 6, y), s, font=fnt, fill=INK, anchor="lm")

@@ -381,24 +381,24 @@ def subtract_interval(lo, hi, lo_step, hi_step, count, r, a, b, step):
     removed = 0.0
     w = i
     for q in range(i, n):
-        l = lo[r, q]
+        lv = lo[r, q]
         h = hi[r, q]
         ls = lo_step[r, q]
         hs = hi_step[r, q]
-        if l >= b:
+        if lv >= b:
             pass
-        elif l < a:
+        elif lv < a:
             removed += h - a
             h = a
             hs = step
         elif h > b:
-            removed += b - l
-            l = b
+            removed += b - lv
+            lv = b
             ls = step
         else:
-            removed += h - l
+            removed += h - lv
             continue
-        lo[r, w] = l
+        lo[r, w] = lv
         hi[r, w] = h
         lo_step[r, w] = ls
         hi_step[r, w] = hs
@@ -913,7 +913,7 @@ class RemovalBuffers(NamedTuple):
     circle: CircleLayout
 
     @classmethod
-    def sized(cls, workpiece, R: float, max_move: float) -> "RemovalBuffers":
+    def sized(cls, workpiece, R: float, max_move: float) -> RemovalBuffers:
         """Buffers for ``workpiece``, a cutter of radius ``R`` [m] and moves up to ``max_move`` [m]."""
         s = workpiece.spacing
         nx, ny, nz = workpiece.shape

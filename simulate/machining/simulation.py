@@ -38,9 +38,8 @@ from dataclasses import dataclass, field
 from enum import IntFlag
 from typing import NamedTuple
 
-import numpy as np
-
 import numba
+import numpy as np
 from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
@@ -49,10 +48,29 @@ from simulate.robot.drive import CycleInput, drive_step, load_torque_step
 
 from .cutting import ForceScratch, Material, Spindle, force_model, step_forces_sorted, substeps
 from .engagement import sort_layers
-from .removal import (CUT_OVERFLOW, CUT_X_FULL, CUT_Y_FULL, CUT_Z_FULL, STEP_FULL, STEP_LAYERS, STEP_OK,
-                      STEP_OVERFLOW, CutFlags, RemovalBuffers, StepStatus, _horizontal_layers_parallel,
-                      circle_samples, column_intervals, cut_layer, layer_range, radius_at, remove_vertical,
-                      remove_vertical_serial, sample_layer, sample_layer_full)
+from .removal import (
+    CUT_OVERFLOW,
+    CUT_X_FULL,
+    CUT_Y_FULL,
+    CUT_Z_FULL,
+    STEP_FULL,
+    STEP_LAYERS,
+    STEP_OK,
+    STEP_OVERFLOW,
+    CutFlags,
+    RemovalBuffers,
+    StepStatus,
+    _horizontal_layers_parallel,
+    circle_samples,
+    column_intervals,
+    cut_layer,
+    layer_range,
+    radius_at,
+    remove_vertical,
+    remove_vertical_serial,
+    sample_layer,
+    sample_layer_full,
+)
 from .tools import Cutter
 
 
@@ -75,7 +93,7 @@ class StepTable:
     switch: np.ndarray
 
     @classmethod
-    def zeros(cls, n: int) -> "StepTable":
+    def zeros(cls, n: int) -> StepTable:
         return cls(np.zeros(n), np.zeros(n, np.int32), np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros(n, np.int32))
 
@@ -566,7 +584,8 @@ def workpiece_compliance(robot, q, placement_rotation, stiffness_scale: float = 
 
 def _no_drive():
     """A switched-off :data:`DriveLoop` (same types, so the loop compiles once)."""
-    from simulate.robot.drive import DriveParams, dyn_params_empty, new_state as drive_state
+    from simulate.robot.drive import DriveParams, dyn_params_empty
+    from simulate.robot.drive import new_state as drive_state
     from simulate.robot.loop_friction import assemble, new_state
 
     z6 = np.zeros(6)
@@ -591,8 +610,17 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
     The Jacobian (tracking error and ``-J^T F``) is taken at the commanded joints, for all steps at once.
     The state starts at equilibrium on the first command.
     """
-    from simulate.robot.drive import (DriveFlags, as_substeps, command_velocity, drive_init, drive_params,
-                                      dyn_params, load_torques, new_state as drive_state, substeps_for)
+    from simulate.robot.drive import (
+        DriveFlags,
+        as_substeps,
+        command_velocity,
+        drive_init,
+        drive_params,
+        dyn_params,
+        load_torques,
+        substeps_for,
+    )
+    from simulate.robot.drive import new_state as drive_state
     from simulate.robot.kinematics import jacobian
     from simulate.robot.loop_friction import new_state
 

@@ -53,7 +53,7 @@ class VirtualWorkpiece:
         return p
 
     @classmethod
-    def load(cls, path) -> "VirtualWorkpiece":
+    def load(cls, path) -> VirtualWorkpiece:
         p = Path(path)
         if not p.exists():
             raise InputError("virtual workpiece not found", source=str(p))
