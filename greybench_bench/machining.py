@@ -42,7 +42,7 @@ def bench_machining(
     import numba
     from rich.markup import escape
 
-    from simulate.machining.cutting import Spindle, load_material, step_forces, substeps
+    from simulate.machining.cutting import Spindle, force_model, load_material, step_forces, substeps
     from simulate.machining.removal import RemovalBuffers, remove_horizontal, remove_vertical
     from simulate.machining.simulation import simulate_machining, workpiece_compliance
 
@@ -95,23 +95,16 @@ def bench_machining(
         w0_ = wp.copy()
         simulate_machining(w0_, cutter, jt.t[:start + 1], jt.line[:start + 1], jt.xyz[:start + 1], mat, spindle)
         wref = w0_.copy()
-        buf = RemovalBuffers(wref, cutter.radius, 0.01)
-        nsub = substeps(0.002, spindle.omega, cutter.flutes, per_tooth=4)
-        fx, fy, fz = wref.families
-        nx, ny, nz = wref.shape
+        buf = RemovalBuffers.sized(wref, cutter.radius, 0.01)
+        model = force_model(cutter, mat, spindle, substeps(0.002, spindle.omega, cutter.flutes, per_tooth=4))
+        dex, grid, tool = wref.rays, wref.grid, cutter.shape
         out4 = np.zeros(4)
         w0, c0 = time.perf_counter(), time.process_time()
         for k in range(start + 1, start + m):
             p0, p1 = jt.xyz[k - 1], jt.xyz[k]
-            _, _, ztop = remove_vertical(fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count, wref.lower, wref.spacing,
-                                         nx, ny, p0, p1, cutter.radius, cutter.corner_radius, cutter.length, k)
-            k0, nl, _ = remove_horizontal(fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count, fy.lo, fy.hi, fy.lo_step,
-                                          fy.hi_step, fy.count, wref.lower, wref.spacing, nx, ny, nz, p0, p1,
-                                          cutter.radius, cutter.corner_radius, cutter.length, k, True, buf.samp_ang,
-                                          buf.samp_eng, buf.samp_cnt, buf.layer_removed, ztop)
-            step_forces(buf.samp_ang, buf.samp_eng, buf.samp_cnt, k0, nl, wref.lower[2], wref.spacing, p0, p1, 0.002,
-                        jt.t[k], cutter.radius, cutter.corner_radius, cutter.length, cutter.flutes,
-                        float(np.tan(cutter.helix)), spindle.omega, spindle.phase, mat.kc, mat.ke, nsub, out4)
+            _, _, ztop = remove_vertical(dex.z, grid, p0, p1, tool, k)
+            k0, nl, _ = remove_horizontal(dex, grid, p0, p1, tool, k, True, buf, ztop)
+            step_forces(buf.samples, k0, nl, grid, p0, p1, 0.002, jt.t[k], model, out4)
         ref = (start, m - 1, time.perf_counter() - w0, time.process_time() - c0)
         del wref
         w0, c0 = time.perf_counter(), time.process_time()

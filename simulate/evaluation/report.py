@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+from enum import IntFlag
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,17 @@ from simulate.evaluation.trace import trace_point
 from simulate.figures import pyplot, save_png
 from simulate.toolpath.switching import axes_of
 from simulate.toolpath.testpiece import TestPiece, iso_test_piece
+
+
+class SwitchAxis(IntFlag):
+    """The bits of a step's switching integer (:mod:`simulate.toolpath.switching`: bit i - 1 for axis i)."""
+
+    A1 = 1
+    A2 = 2
+    A3 = 4
+    A4 = 8
+    A5 = 16
+    A6 = 32
 
 
 def nominal_residuals(name: str, pts: np.ndarray, piece: TestPiece) -> np.ndarray:
@@ -151,10 +163,10 @@ def switching_plot(xyz, switch, path: Path, title: str) -> str:
     fig, ax = plt.subplots(figsize=(7, 6))
     ax.plot(xyz[:, 0] / MM, xyz[:, 1] / MM, lw=0.4, color="0.6")
     k = np.nonzero(sw)[0]
-    for axis in range(6):
-        sel = k[(sw[k] >> axis) & 1 == 1]
+    for bit in SwitchAxis:
+        sel = k[(sw[k] & bit) != 0]
         if len(sel):
-            ax.scatter(xyz[sel, 0] / MM, xyz[sel, 1] / MM, s=10, label=f"A{axis + 1} ({len(sel)})")
+            ax.scatter(xyz[sel, 0] / MM, xyz[sel, 1] / MM, s=10, label=f"{bit.name} ({len(sel)})")
     ax.legend(fontsize=8, loc="upper right")
     ax.set_aspect("equal")
     ax.set_xlabel("x [mm] (workpiece)")

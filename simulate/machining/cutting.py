@@ -29,6 +29,7 @@ import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -37,6 +38,7 @@ from identify.errors import InputError
 
 from .engagement import nearest_engaged, sort_layers
 from .removal import radius_at
+from .tools import CutterShape
 
 MATERIALS_FILE = Path(__file__).resolve().parents[2] / "data" / "materials.toml"
 _KEYS = ("Ktc", "Krc", "Kac", "Kte", "Kre", "Kae")
@@ -94,7 +96,7 @@ class Spindle:
     phase: float = 0.0
 
     @classmethod
-    def from_rpm(cls, rpm: float, phase: float = 0.0) -> "Spindle":
+    def from_rpm(cls, rpm: float, phase: float = 0.0) -> Spindle:
         if not (rpm > 0 and math.isfinite(rpm)):
             raise InputError(f"spindle speed must be > 0 rpm, got {rpm}", field="spindle")
         return cls(rpm * 2 * math.pi / 60.0, phase)
@@ -139,15 +141,15 @@ def _arc_force(p1_, p2_, A, B, Cc, b, sk, ck, T, kc, ke, acc):
 
 
 @njit(cache=True)
-def _cell_force(l, r, theta, alpha, A, B, Cc, b, sk, ck, T, kc, ke, acc):
-    """Integrate over the angular cell [l, r] (r >= l, width < 2 pi) intersected with the arc where
+def _cell_force(left, r, theta, alpha, A, B, Cc, b, sk, ck, T, kc, ke, acc):
+    """Integrate over the angular cell [left, r] (r >= left, width < 2 pi) intersected with the arc where
     the chip thickness is positive, [theta - alpha, theta + alpha] (alpha >= pi: everywhere)."""
     if alpha >= math.pi:
-        _arc_force(l, r, A, B, Cc, b, sk, ck, T, kc, ke, acc)
+        _arc_force(left, r, A, B, Cc, b, sk, ck, T, kc, ke, acc)
         return
     # shift so that the h > 0 arc is [-alpha, alpha]; the cell may then straddle +-pi
-    lo = _wrap(l - theta)
-    hi = lo + (r - l)
+    lo = _wrap(left - theta)
+    hi = lo + (r - left)
     for shift in (0.0, -2.0 * math.pi):
         a_ = max(lo + shift, -alpha)
         b_ = min(hi + shift, alpha)
@@ -155,15 +157,45 @@ def _cell_force(l, r, theta, alpha, A, B, Cc, b, sk, ck, T, kc, ke, acc):
             _arc_force(a_ + theta, b_ + theta, A, B, Cc, b, sk, ck, T, kc, ke, acc)
 
 
+class ForceModel(NamedTuple):
+    """What the force kernels need of the cutter, spindle and material (:func:`force_model`)."""
+
+    tool: CutterShape   # radius, corner radius, fluted length [m]
+    flutes: int         # teeth N [-]
+    tan_helix: float    # tan of the helix angle [-]
+    omega: float        # spindle speed [rad/s]
+    phase: float        # angle of tooth 0 at the tip at t = 0 [rad]
+    kc: np.ndarray      # (3,) cutting coefficients Ktc, Krc, Kac [N/m^2]
+    ke: np.ndarray      # (3,) edge coefficients Kte, Kre, Kae [N/m]
+    n_sub: int          # instants per step for the peak force [-]
+
+
+def force_model(cutter, material: Material, spindle: Spindle, n_sub: int) -> ForceModel:
+    """The :class:`ForceModel` of a :class:`~simulate.machining.tools.Cutter`, material and spindle,
+    the peak force taken at ``n_sub`` instants per step (:func:`substeps`)."""
+    return ForceModel(cutter.shape, int(cutter.flutes), float(math.tan(cutter.helix)), float(spindle.omega),
+                      float(spindle.phase), np.ascontiguousarray(material.kc, dtype=float),
+                      np.ascontiguousarray(material.ke, dtype=float), int(n_sub))
+
+
+class ForceScratch(NamedTuple):
+    """Work arrays of :func:`step_forces_sorted`: nothing is allocated per step."""
+
+    acc: np.ndarray    # (3,) revolution integral [N rad]
+    inst: np.ndarray   # (>= n_sub, 3) instantaneous force per instant [N]
+    trig: np.ndarray   # (>= n_sub * N, 2) cos, sin of the tooth angles per instant [-]
+
+
 @njit(cache=True)
-def step_forces(samp_ang, samp_eng, samp_cnt, k0, n_layers, lower_z, s, p0, p1, dt, t_end,
-                R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, out):
-    """Revolution-mean and peak cutting force of one step (on the cutter, workpiece frame).
+def step_forces(samples, k0, n_layers, grid, p0, p1, dt, t_end, model, out):
+    """Revolution-mean and peak cutting force of one step of ``dt`` [s] ending at ``t_end`` [s] (on
+    the cutter, workpiece frame); tool tip from ``p0`` to ``p1`` [m].
 
     Writes ``out[0:3]`` = mean force over a spindle revolution [N] at this step's engagement and
     chip thickness (closed-form integral over the engaged arcs), ``out[3]`` = peak |F| of the
-    instantaneous force over ``n_sub`` instants of the step [N]. Samples of layer ``k0 + kk`` are
-    in row ``kk`` (sorted here in place).
+    instantaneous force over ``model.n_sub`` instants of the step [N]. Samples of layer ``k0 + kk``
+    are in row ``kk`` of ``samples`` (:class:`~simulate.machining.removal.Samples`, sorted here in
+    place).
     """
     vx = (p1[0] - p0[0]) / dt
     vy = (p1[1] - p0[1]) / dt
@@ -174,25 +206,28 @@ def step_forces(samp_ang, samp_eng, samp_cnt, k0, n_layers, lower_z, s, p0, p1, 
     out[3] = 0.0
     if n_layers <= 0 or vx * vx + vy * vy + vz * vz == 0.0:
         return
-    klow = sort_layers(samp_ang, samp_eng, samp_cnt, n_layers)
+    klow = sort_layers(samples.ang, samples.eng, samples.cnt, n_layers)
     if klow < 0:
         return
     vel = np.array([vx, vy, vz])
-    step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z, s, p1, vel, dt, t_end,
-                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, np.zeros(3), np.zeros((n_sub, 3)),
-                       np.zeros((n_sub * N, 2)), out)
+    scratch = ForceScratch(np.zeros(3), np.zeros((model.n_sub, 3)), np.zeros((model.n_sub * model.flutes, 2)))
+    step_forces_sorted(samples, k0, n_layers, klow, grid, p1, vel, dt, t_end, model, scratch, out)
 
 
 @njit(cache=True)
-def step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z, s, p1, vel, dt, t_end,
-                       R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, acc, inst, trig, out):
+def step_forces_sorted(samples, k0, n_layers, klow, grid, p1, vel, dt, t_end, model, scratch, out):
     """The force part of :func:`step_forces` on already sorted samples (``klow``: first layer
-    with samples), with scratch ``acc`` (3,), ``inst`` (>= n_sub, 3) and ``trig`` (>= n_sub * N, 2):
-    no allocation.
+    with samples), with the work arrays ``scratch`` (:class:`ForceScratch`): no allocation.
 
     ``p1`` [m] places the disks (tool tip at the end of the step), ``vel`` [m/s] is the tool
     velocity that sets the chip thickness ``h = T_tooth (vel . n)``.
     """
+    R, rc, L = model.tool
+    N, tan_helix, omega, phase, kc, ke, n_sub = (model.flutes, model.tan_helix, model.omega, model.phase,
+                                                 model.kc, model.ke, model.n_sub)
+    acc, inst, trig = scratch
+    samp_ang, samp_eng, samp_cnt = samples
+    lower_z, s = grid.lower[2], grid.spacing
     vx = vel[0]
     vy = vel[1]
     vz = vel[2]
@@ -241,17 +276,17 @@ def step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z
         if sk < 1e-3:
             continue
         b = dzk / sk
-        # chip thickness h = T * g(psi), g = A cos + B sin + Cc = S cos(psi - theta) + Cc
+        # chip thickness h = T * g(psi), g = A cos + B sin + Cc = amp cos(psi - theta) + Cc
         A = sk * vx
         B = sk * vy
         Cc = -ck * vz
-        S = sk * vxy
-        if S <= abs(Cc):
+        amp = sk * vxy
+        if amp <= abs(Cc):
             if Cc <= 0.0:
                 continue
             alpha = 4.0
         else:
-            alpha = math.acos(min(1.0, max(-1.0, -Cc / S)))
+            alpha = math.acos(min(1.0, max(-1.0, -Cc / amp)))
         ang = samp_ang[kk]
         eng = samp_eng[kk]
         engaged = False
@@ -267,12 +302,12 @@ def step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, n_layers, klow, lower_z
             prev = ang[i - 1] if i > 0 else ang[cnt - 1] - 2.0 * math.pi
             nxt = ang[i + 1] if i + 1 < cnt else ang[0] + 2.0 * math.pi
             if cnt == 1:
-                l = ang[i] - math.pi
+                left = ang[i] - math.pi
                 rr = ang[i] + math.pi
             else:
-                l = 0.5 * (prev + ang[i])
+                left = 0.5 * (prev + ang[i])
                 rr = 0.5 * (ang[i] + nxt)
-            _cell_force(l, rr, theta, alpha, A, B, Cc, b, sk, ck, t_tooth, kc, ke, acc)
+            _cell_force(left, rr, theta, alpha, A, B, Cc, b, sk, ck, t_tooth, kc, ke, acc)
         # instantaneous force at n_sub instants, for the peak
         lag = zp * tan_helix / R
         cl = math.cos(lag)

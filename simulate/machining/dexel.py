@@ -24,6 +24,7 @@ import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -33,6 +34,34 @@ from identify.errors import InputError, read_json
 #: Default interval capacity per ray family (x, y, z). A 2.5-D part seen along z is one interval
 #: per ray; along x and y a ray can cross several bosses and pockets.
 DEFAULT_CAPACITY = (8, 8, 4)
+
+
+class Rays(NamedTuple):
+    """One ray family's arrays as the compiled kernels take them (see :class:`RayFamily`)."""
+
+    lo: np.ndarray        # (n_rays, capacity) float64, interval entries [m]
+    hi: np.ndarray        # (n_rays, capacity) float64, interval exits [m]
+    lo_step: np.ndarray   # (n_rays, capacity) int32, step that made each entry (-1: stock)
+    hi_step: np.ndarray   # (n_rays, capacity) int32, step that made each exit (-1: stock)
+    count: np.ndarray     # type: ignore[assignment]  # (n_rays,) int32, intervals per ray (shadows tuple.count)
+
+
+class Dexels(NamedTuple):
+    """The three ray families (along x, y, z) for the compiled kernels."""
+
+    x: Rays
+    y: Rays
+    z: Rays
+
+
+class Grid(NamedTuple):
+    """The dexel grid for the compiled kernels: ray centres at ``lower + (i + 0.5) * spacing``."""
+
+    lower: tuple        # (x, y, z) grid box corner [m] (floats, not an array: nothing to reference-count)
+    spacing: float      # ray pitch [m]
+    nx: int             # cells along x [-]
+    ny: int             # cells along y [-]
+    nz: int             # cells along z [-]
 
 
 @dataclass
@@ -61,6 +90,12 @@ class RayFamily:
     @property
     def capacity(self) -> int:
         return self.lo.shape[1]
+
+    @property
+    def rays(self) -> Rays:
+        """The arrays as one named tuple for the kernels (a view: replaced arrays after :meth:`grow`
+        need a new one)."""
+        return Rays(self.lo, self.hi, self.lo_step, self.hi_step, self.count)
 
     @property
     def nbytes(self) -> int:
@@ -103,7 +138,7 @@ class TriDexel:
 
     # ---- construction -------------------------------------------------------------------
     @classmethod
-    def empty(cls, lower, upper, spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
+    def empty(cls, lower, upper, spacing: float, capacity=DEFAULT_CAPACITY) -> TriDexel:
         """An empty grid (no material) covering ``[lower, upper]`` at ``spacing`` [m]."""
         if not (isinstance(spacing, (int, float)) and math.isfinite(spacing) and spacing > 0):
             raise InputError(f"dexel spacing must be a positive length in metres, got {spacing!r}",
@@ -129,7 +164,7 @@ class TriDexel:
         return cls(lower, upper, float(spacing), (nx, ny, nz), fams)
 
     @classmethod
-    def from_boxes(cls, boxes, spacing: float, capacity=DEFAULT_CAPACITY, bounds=None) -> "TriDexel":
+    def from_boxes(cls, boxes, spacing: float, capacity=DEFAULT_CAPACITY, bounds=None) -> TriDexel:
         """Workpiece as the union of axis-aligned boxes ``[(min3, max3), ...]`` [m].
 
         The grid box is the union's bounding box (or ``bounds``). For the test piece: the base
@@ -152,7 +187,7 @@ class TriDexel:
         return wp
 
     @classmethod
-    def from_solids(cls, solids: list["ConvexSolid"], spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
+    def from_solids(cls, solids: list[ConvexSolid], spacing: float, capacity=DEFAULT_CAPACITY) -> TriDexel:
         """Workpiece as the union of convex solids (prisms with planar tops, cylinders) [m]."""
         if not solids:
             raise InputError("stock has no solids", field="stock")
@@ -176,12 +211,12 @@ class TriDexel:
         return wp
 
     @classmethod
-    def box(cls, lower, upper, spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
+    def box(cls, lower, upper, spacing: float, capacity=DEFAULT_CAPACITY) -> TriDexel:
         """A rectangular block ``[lower, upper]`` [m]."""
         return cls.from_boxes([(lower, upper)], spacing, capacity)
 
     @classmethod
-    def from_stock_file(cls, path, spacing: float, capacity=DEFAULT_CAPACITY) -> "TriDexel":
+    def from_stock_file(cls, path, spacing: float, capacity=DEFAULT_CAPACITY) -> TriDexel:
         """Workpiece from a stock description JSON: the toolpath's test-piece stock (``base`` +
         ``blanks`` of kind polygon / circle with planar tops, see :func:`read_stock_solids`) or the
         simple box form of :func:`read_stock_boxes`."""
@@ -194,6 +229,19 @@ class TriDexel:
             if isinstance(doc, dict) and "base" in doc:
                 return cls.from_solids(read_stock_solids(p), spacing, capacity)
         return cls.from_boxes(read_stock_boxes(path), spacing, capacity)
+
+    # ---- views for the compiled kernels ---------------------------------------------------
+    @property
+    def grid(self) -> Grid:
+        nx, ny, nz = self.shape
+        lx, ly, lz = (float(v) for v in self.lower)
+        return Grid((lx, ly, lz), float(self.spacing), int(nx), int(ny), int(nz))
+
+    @property
+    def rays(self) -> Dexels:
+        """The three families' arrays (a view: take it again after a family grows)."""
+        fx, fy, fz = self.families
+        return Dexels(fx.rays, fy.rays, fz.rays)
 
     # ---- geometry helpers ---------------------------------------------------------------
     def ray_coords(self, axis: int) -> tuple[np.ndarray, np.ndarray]:
@@ -239,7 +287,7 @@ class TriDexel:
             if ok != -1:
                 raise AssertionError(f"dexel family {f.axis}: ray {ok} has unordered or empty intervals")
 
-    def copy(self) -> "TriDexel":
+    def copy(self) -> TriDexel:
         fams = [RayFamily(f.axis, f.lo.copy(), f.hi.copy(), f.lo_step.copy(), f.hi_step.copy(), f.count.copy())
                 for f in self.families]
         return TriDexel(self.lower.copy(), self.upper.copy(), self.spacing, self.shape, fams)
@@ -405,7 +453,7 @@ def read_stock_solids(path) -> list[ConvexSolid]:
                 area = 0.5 * np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1])
                 if area < 0:
                     v = v[::-1]
-                for a, b in zip(v, np.roll(v, -1, axis=0)):
+                for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
                     d = b - a
                     n = np.array([d[1], -d[0]])  # outward for counter-clockwise vertices
                     n /= np.linalg.norm(n)

@@ -56,9 +56,9 @@ def engagement_map(workpiece, k0: int, n_layers: int, buffers) -> EngagementMap:
     """Python view of the samples left by :func:`simulate.machining.removal.remove_step`."""
     zs, angs, engs = [], [], []
     for kk in range(n_layers):
-        m = int(buffers.samp_cnt[kk])
-        a = buffers.samp_ang[kk, :m].copy()
-        e = buffers.samp_eng[kk, :m].copy()
+        m = int(buffers.samples.cnt[kk])
+        a = buffers.samples.ang[kk, :m].copy()
+        e = buffers.samples.eng[kk, :m].copy()
         o = np.argsort(a)
         zs.append(workpiece.lower[2] + (k0 + kk + 0.5) * workpiece.spacing)
         angs.append(a[o])

@@ -48,7 +48,7 @@ def font(size: int):
 
     try:
         spec = importlib.util.find_spec("matplotlib")
-        root = Path(next(iter(spec.submodule_search_locations)))
+        root = Path(next(iter((spec.submodule_search_locations if spec else None) or [])))
         return ImageFont.truetype(str(root / "mpl-data" / "fonts" / "ttf" / "DejaVuSans.ttf"), size)
     except (OSError, AttributeError, StopIteration, TypeError):  # pragma: no cover - matplotlib ships it
         return ImageFont.load_default(size)
@@ -121,7 +121,7 @@ def colour_bar_image(bar: ColourBar, height: int, size: int = 13):
     d = ImageDraw.Draw(im)
     d.rectangle([pad, top, pad + bw, bottom], outline=INK)
     span = bar.hi - bar.lo if bar.hi > bar.lo else 1.0
-    for v, s in zip(ticks, labels):
+    for v, s in zip(ticks, labels, strict=True):
         y = bottom - (v - bar.lo) / span * (bottom - top)
         d.line([pad + bw, y, pad + bw + 4, y], fill=INK)
         d.text((pad + bw + 6, y), s, font=fnt, fill=INK, anchor="lm")
@@ -137,7 +137,7 @@ def figure(panel: Panel, bar: ColourBar, title: str, size: int = 14):
     img = Image.fromarray(np.ascontiguousarray(panel.rgb[..., :3]), "RGB")
     k = MIN_PANEL_PX // max(img.width, img.height, 1)
     if k > 1:   # a small part: whole pixels enlarged, not interpolated
-        img = img.resize((img.width * k, img.height * k), Image.NEAREST)
+        img = img.resize((img.width * k, img.height * k), Image.Resampling.NEAREST)
     left, top = (70 if panel.extent_mm else 20), 40
     bottom = 60 if panel.extent_mm else 20 + 10 * bool(bar.note)
     cb = colour_bar_image(bar, max(img.height, MIN_BAR_PX), size)

@@ -26,15 +26,60 @@ there before the cut (:mod:`simulate.machining.engagement`).
 from __future__ import annotations
 
 import math
+from enum import IntEnum, IntFlag
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
+
+from .dexel import Grid, Rays
 
 #: Inward offset [m] for testing material just inside the cutter boundary (1 nm, far below any
 #: geometric feature but far above float64 rounding at metre-scale coordinates).
 _ETA = 1e-9
 _INF = 1e300
 _GOLD = 0.6180339887498949
+
+
+class CutFlags(IntFlag):
+    """What a removal kernel reports about the rays it cut."""
+
+    OVERFLOW = 1   # a split would have exceeded a ray's capacity (that ray is unchanged)
+    X_FULL = 2     # an x-ray is now at its capacity (its next split would overflow)
+    Y_FULL = 4     # a y-ray is now at its capacity
+    Z_FULL = 8     # a z-ray is now at its capacity
+
+
+class StepStatus(IntEnum):
+    """Outcome of a removal step or of a chunk of the coupled loop."""
+
+    OK = 0         # done
+    OVERFLOW = 1   # a ray's capacity was exceeded (rebuild with a larger capacity)
+    LAYERS = 2     # the step spans more z-layers than the buffers hold
+    FULL = 3       # steps done, but a family's ray is at its capacity: grow it before going on
+
+
+# the members as plain ints for the compiled kernels (numba does not type IntFlag arithmetic)
+CUT_OVERFLOW = int(CutFlags.OVERFLOW)
+CUT_X_FULL = int(CutFlags.X_FULL)
+CUT_Y_FULL = int(CutFlags.Y_FULL)
+CUT_Z_FULL = int(CutFlags.Z_FULL)
+STEP_OK = int(StepStatus.OK)
+STEP_OVERFLOW = int(StepStatus.OVERFLOW)
+STEP_LAYERS = int(StepStatus.LAYERS)
+STEP_FULL = int(StepStatus.FULL)
+
+
+class LayerSpan(NamedTuple):
+    """The z-layers and rays a step touches (:func:`layer_range`); row ``kk`` of the buffers is
+    layer ``k0 + kk``. Ray ranges are unclipped: rays beyond the grid give non-engaged samples."""
+
+    k0: int         # first z-layer [-]
+    n_layers: int   # layers from k0 [-]
+    ju0: int        # first x-ray row j [-]
+    ju1: int        # last x-ray row j [-]
+    iu0: int        # first y-ray column i [-]
+    iu1: int        # last y-ray column i [-]
 
 
 @njit(cache=True, inline="always")
@@ -336,24 +381,24 @@ def subtract_interval(lo, hi, lo_step, hi_step, count, r, a, b, step):
     removed = 0.0
     w = i
     for q in range(i, n):
-        l = lo[r, q]
+        lv = lo[r, q]
         h = hi[r, q]
         ls = lo_step[r, q]
         hs = hi_step[r, q]
-        if l >= b:
+        if lv >= b:
             pass
-        elif l < a:
+        elif lv < a:
             removed += h - a
             h = a
             hs = step
         elif h > b:
-            removed += b - l
-            l = b
+            removed += b - lv
+            lv = b
             ls = step
         else:
-            removed += h - l
+            removed += h - lv
             continue
-        lo[r, w] = l
+        lo[r, w] = lv
         hi[r, w] = h
         lo_step[r, w] = ls
         hi_step[r, w] = hs
@@ -380,18 +425,22 @@ def _grid_range(vmin, vmax, lower, s, n):
 
 
 @njit(cache=True)
-def sample_layer(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, k, kk, ju0, ju1, iu0, iu1, p1, R, rc, L,
-                 samp_ang, samp_eng, samp_cnt):
-    """Engagement samples of z-layer ``k`` into row ``kk``: where the x- and y-rays cross the
-    cutter circle at ``p1``, the angle [rad] and whether material is there (read *before* the cut).
-    Rays beyond the grid or without material still give (non-engaged) samples, so the engaged
-    arcs end where the material ends."""
+def sample_layer(xr, yr, grid, span, kk, p1, tool, samples):
+    """Engagement samples of z-layer ``span.k0 + kk`` into row ``kk`` of ``samples``: where the x-
+    and y-rays (``xr``, ``yr``) cross the cutter circle at ``p1``, the angle [rad] and whether
+    material is there (read *before* the cut). Rays beyond the grid or without material still give
+    (non-engaged) samples, so the engaged arcs end where the material ends."""
+    xlo, xhi, xcnt = xr.lo, xr.hi, xr.count
+    ylo, yhi, ycnt = yr.lo, yr.hi, yr.count
+    lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
+    samp_ang, samp_eng = samples.ang, samples.eng
+    k = span.k0 + kk
     zc = lower[2] + (k + 0.5) * s
     m = 0
-    r1 = radius_at(zc - p1[2], R, rc, L)
+    r1 = radius_at(zc - p1[2], tool.R, tool.rc, tool.L)
     mcap = samp_ang.shape[1]
     if r1 > 0.0:
-        for j in range(ju0, ju1 + 1):
+        for j in range(span.ju0, span.ju1 + 1):
             yc = lower[1] + (j + 0.5) * s
             de = yc - p1[1]
             if de * de < r1 * r1 and m + 2 <= mcap:
@@ -406,7 +455,7 @@ def sample_layer(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, k, kk, ju0, j
                     samp_eng[kk, m] = 0
                     samp_eng[kk, m + 1] = 0
                 m += 2
-        for i in range(iu0, iu1 + 1):
+        for i in range(span.iu0, span.iu1 + 1):
             xc = lower[0] + (i + 0.5) * s
             de = xc - p1[0]
             if de * de < r1 * r1 and m + 2 <= mcap:
@@ -421,22 +470,24 @@ def sample_layer(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, k, kk, ju0, j
                     samp_eng[kk, m] = 0
                     samp_eng[kk, m + 1] = 0
                 m += 2
-    samp_cnt[kk] = m
+    samples.cnt[kk] = m
 
 
 @njit(cache=True)
-def circle_samples(p1, R, lower, s, ju0, ju1, iu0, iu1, mcap, pair_ray, pair_w, sorted_ang, perm):
-    """The engagement sample layout of a layer where the cutter has its full radius R at ``p1``.
+def circle_samples(p1, R, grid, span, mcap, circle):
+    """The engagement sample layout of a layer where the cutter has its full radius R [m] at ``p1``.
 
     The same on every such layer (only the material flags differ), so it is computed once per
-    step, in the order and with the arithmetic of :func:`sample_layer`: pair q is x-ray row
-    ``pair_ray[q, 1]`` (``pair_ray[q, 0] == 0``) or y-ray column (``== 1``), possibly outside the
-    grid, with half-chord ``pair_w[q]``. ``sorted_ang`` gets the sample angles sorted, ``perm`` the sample
-    index of each sorted position. Returns the number of samples m.
+    step, in the order and with the arithmetic of :func:`sample_layer` (at most ``mcap`` samples):
+    pair q is x-ray row ``circle.ray[q, 1]`` (``circle.ray[q, 0] == 0``) or y-ray column (``== 1``),
+    possibly outside the grid, with half-chord ``circle.w[q]``. ``circle.ang`` gets the sample angles
+    sorted, ``circle.perm`` the sample index of each sorted position. Returns the number of samples m.
     """
+    lower, s = grid.lower, grid.spacing
+    pair_ray, pair_w, sorted_ang, perm = circle
     m = 0
     r1 = R
-    for j in range(ju0, ju1 + 1):
+    for j in range(span.ju0, span.ju1 + 1):
         yc = lower[1] + (j + 0.5) * s
         de = yc - p1[1]
         if de * de < r1 * r1 and m + 2 <= mcap:
@@ -447,7 +498,7 @@ def circle_samples(p1, R, lower, s, ju0, ju1, iu0, iu1, mcap, pair_ray, pair_w, 
             pair_ray[m // 2, 1] = j
             pair_w[m // 2] = w
             m += 2
-    for i in range(iu0, iu1 + 1):
+    for i in range(span.iu0, span.iu1 + 1):
         xc = lower[0] + (i + 0.5) * s
         de = xc - p1[0]
         if de * de < r1 * r1 and m + 2 <= mcap:
@@ -479,10 +530,15 @@ def circle_samples(p1, R, lower, s, ju0, ju1, iu0, iu1, mcap, pair_ray, pair_w, 
 
 
 @njit(cache=True)
-def sample_layer_full(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k, kk, p1, m, pair_ray, pair_w, sorted_ang, perm,
-                      samp_ang, samp_eng, samp_cnt):
-    """:func:`sample_layer` for a full-radius layer from the step's :func:`circle_samples`: the
-    same samples, written already sorted by angle."""
+def sample_layer_full(xr, yr, grid, span, kk, p1, m, circle, samples):
+    """:func:`sample_layer` for a full-radius layer from the step's :func:`circle_samples` (``m``
+    samples laid out in ``circle``): the same samples, written already sorted by angle."""
+    xlo, xhi, xcnt = xr.lo, xr.hi, xr.count
+    ylo, yhi, ycnt = yr.lo, yr.hi, yr.count
+    nx, ny = grid.nx, grid.ny
+    pair_ray, pair_w, sorted_ang, perm = circle
+    samp_ang, samp_eng = samples.ang, samples.eng
+    k = span.k0 + kk
     for q in range(m):
         src = perm[q]
         pr = src // 2
@@ -501,41 +557,50 @@ def sample_layer_full(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k, kk, p1, m, pair
                 e = 1 if material_at(ylo, yhi, ycnt, k * nx + i, t) else 0
         samp_ang[kk, q] = sorted_ang[q]
         samp_eng[kk, q] = e
-    samp_cnt[kk] = m
+    samples.cnt[kk] = m
 
 
 @njit(cache=True)
-def column_intervals(p0, p1, R, lower, s, nx, ny, ju0, ju1, iu0, iu1, colx, coly):
+def column_intervals(p0, p1, R, grid, span, cols):
     """Swept intervals of the x- and y-ray columns for a horizontal move, shared by all layers.
 
-    For a horizontal move every layer at a height where the cutter has its full radius R sees the
-    same stadium, so :func:`swept_interval` gives the same interval on every layer: computed here
-    once per step (the same call, so the same numbers). ``colx[j] = (lo, hi)`` for the x-rays of
-    row j, ``coly[i]`` for the y-rays of column i. Returns False (nothing written) for other moves.
+    For a horizontal move every layer at a height where the cutter has its full radius R [m] sees
+    the same stadium, so :func:`swept_interval` gives the same interval on every layer: computed
+    here once per step (the same call, so the same numbers). ``cols.x[j] = (lo, hi)`` [m] for the
+    x-rays of row j, ``cols.y[i]`` for the y-rays of column i. Returns False (nothing written) for
+    other moves.
     """
     if abs(p1[2] - p0[2]) >= 1e-15:
         return False
-    for j in range(max(ju0, 0), min(ju1, ny - 1) + 1):
+    lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
+    colx, coly = cols
+    for j in range(max(span.ju0, 0), min(span.ju1, ny - 1) + 1):
         yc = lower[1] + (j + 0.5) * s
         colx[j, 0], colx[j, 1] = stadium_interval(p0[0], p0[1], p1[0], p1[1], R, yc)
-    for i in range(max(iu0, 0), min(iu1, nx - 1) + 1):
+    for i in range(max(span.iu0, 0), min(span.iu1, nx - 1) + 1):
         xc = lower[0] + (i + 0.5) * s
         coly[i, 0], coly[i, 1] = stadium_interval(p0[1], p0[0], p1[1], p1[0], R, xc)
     return True
 
 
 @njit(cache=True)
-def cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k, kk, ju0, ju1, iu0, iu1,
-              p0, p1, R, rc, L, step, layer_removed, use_cols, colx, coly):
-    """Subtract the swept cutter from the x- and y-rays of z-layer ``k``; ``layer_removed[kk]`` gets
-    the volume seen by the x-rays [m^3]. Returns flags: 1 a ray overflowed its capacity (nothing
-    changed on it), 2 an x-ray, 4 a y-ray is now at its capacity (the next split would overflow).
+def cut_layer(xr, yr, grid, span, kk, p0, p1, tool, step, layer_removed, cols, use_cols):
+    """Subtract the swept cutter from the x- and y-rays (``xr``, ``yr``) of z-layer ``span.k0 + kk``;
+    ``layer_removed[kk]`` gets the volume seen by the x-rays [m^3]. Returns :class:`CutFlags`
+    (as an int): OVERFLOW a ray overflowed its capacity (nothing changed on it), X_FULL / Y_FULL an
+    x- / y-ray is now at its capacity (the next split would overflow).
 
     A ray whose material lies entirely outside the swept box along its axis is rejected before
     the swept interval is computed (it could not lose anything). With ``use_cols`` (a horizontal
     move, see :func:`column_intervals`) layers where the cutter has its full radius take the
-    column intervals instead of recomputing them.
+    column intervals ``cols`` instead of recomputing them.
     """
+    xlo, xhi, xls, xhs, xcnt = xr
+    ylo, yhi, yls, yhs, ycnt = yr
+    lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
+    R, rc, L = tool.R, tool.rc, tool.L
+    colx, coly = cols
+    k = span.k0 + kk
     zc = lower[2] + (k + 0.5) * s
     xa = min(p0[0], p1[0]) - R
     xb = max(p0[0], p1[0]) + R
@@ -544,9 +609,9 @@ def cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, 
     cols = False
     if use_cols:
         cols = radius_at(zc - p0[2], R, rc, L) == R
-    overflow = 0
+    flags = 0
     rem = 0.0
-    for j in range(max(ju0, 0), min(ju1, ny - 1) + 1):
+    for j in range(max(span.ju0, 0), min(span.ju1, ny - 1) + 1):
         ridx = k * ny + j
         n = xcnt[ridx]
         if n == 0 or xlo[ridx, 0] >= xb or xhi[ridx, n - 1] <= xa:
@@ -560,12 +625,12 @@ def cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, 
         if a < b:
             got = subtract_interval(xlo, xhi, xls, xhs, xcnt, ridx, a, b, step)
             if got < 0.0:
-                overflow |= 1
+                flags |= CUT_OVERFLOW
             else:
                 rem += got
                 if xcnt[ridx] == xlo.shape[1]:
-                    overflow |= 2
-    for i in range(max(iu0, 0), min(iu1, nx - 1) + 1):
+                    flags |= CUT_X_FULL
+    for i in range(max(span.iu0, 0), min(span.iu1, nx - 1) + 1):
         ridx = k * nx + i
         n = ycnt[ridx]
         if n == 0 or ylo[ridx, 0] >= yb or yhi[ridx, n - 1] <= ya:
@@ -579,42 +644,41 @@ def cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, 
         if a < b:
             got = subtract_interval(ylo, yhi, yls, yhs, ycnt, ridx, a, b, step)
             if got < 0.0:
-                overflow |= 1
+                flags |= CUT_OVERFLOW
             elif ycnt[ridx] == ylo.shape[1]:
-                overflow |= 4
+                flags |= CUT_Y_FULL
     layer_removed[kk] = rem * s * s
-    return overflow
+    return flags
 
 
 @njit(cache=True)
-def horizontal_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k, kk,
-                     ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample, samp_ang, samp_eng, samp_cnt,
-                     layer_removed, use_cols, colx, coly):
-    """Engagement samples (if ``sample``) then removal on the x- and y-rays of z-layer ``k`` (row
-    ``kk`` of the buffers). Each sample reads only its own ray, so sampling the whole layer first
-    equals sampling each ray just before cutting it. Returns the flags of :func:`cut_layer`."""
+def horizontal_layer(xr, yr, grid, span, kk, p0, p1, tool, step, sample, buf, use_cols):
+    """Engagement samples (if ``sample``) then removal on the x- and y-rays of z-layer
+    ``span.k0 + kk`` (row ``kk`` of the buffers). Each sample reads only its own ray, so sampling
+    the whole layer first equals sampling each ray just before cutting it. Returns the flags of
+    :func:`cut_layer`."""
     if sample:
-        sample_layer(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, k, kk, ju0, ju1, iu0, iu1, p1, R, rc, L,
-                     samp_ang, samp_eng, samp_cnt)
+        sample_layer(xr, yr, grid, span, kk, p1, tool, buf.samples)
     else:
-        samp_cnt[kk] = 0
-    return cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k, kk, ju0, ju1,
-                     iu0, iu1, p0, p1, R, rc, L, step, layer_removed, use_cols, colx, coly)
+        buf.samples.cnt[kk] = 0
+    return cut_layer(xr, yr, grid, span, kk, p0, p1, tool, step, buf.layer_removed, buf.cols, use_cols)
 
 
 @njit(cache=True)
-def horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop):
+def horizontal_range(grid, p0, p1, tool, ztop):
     """Layer and ray ranges of a step: ``(k0, k1, ju0, ju1, iu0, iu1)``.
 
     Layers from the lowest tip position to the top of the cutter, clipped to one layer above
-    ``ztop`` (the highest material in the footprint, from the z-rays). Ray ranges are unclipped
+    ``ztop`` [m] (the highest material in the footprint, from the z-rays). Ray ranges are unclipped
     (rays beyond the grid give non-engaged samples) and cover the swept box and the circle at p1.
     """
+    lower, s = grid.lower, grid.spacing
+    R, L = tool.R, tool.L
     zmin = min(p0[2], p1[2])
     zmax = min(max(p0[2], p1[2]) + L, max(ztop, zmin - 2.0 * s) + s)
-    k0, k1 = _grid_range(zmin, zmax, lower[2], s, nz)
-    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
-    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
+    k0, k1 = _grid_range(zmin, zmax, lower[2], s, grid.nz)
+    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, grid.ny)
+    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, grid.nx)
     ju0 = int(math.ceil((p1[1] - R - lower[1]) / s - 0.5))
     ju1 = int(math.floor((p1[1] + R - lower[1]) / s - 0.5))
     iu0 = int(math.ceil((p1[0] - R - lower[0]) / s - 0.5))
@@ -623,18 +687,22 @@ def horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop):
 
 
 @njit(cache=True)
-def layer_has_material(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k, ju0, ju1, iu0, iu1, p0, p1, R):
-    """True if an x- or y-ray of z-layer ``k`` holds material inside the step's swept box."""
+def layer_has_material(xr, yr, grid, k, span, p0, p1, R):
+    """True if an x- or y-ray (``xr``, ``yr``) of z-layer ``k`` (rays of ``span``) holds material
+    inside the step's swept box (cutter radius ``R`` [m])."""
+    xlo, xhi, xcnt = xr.lo, xr.hi, xr.count
+    ylo, yhi, ycnt = yr.lo, yr.hi, yr.count
+    nx, ny = grid.nx, grid.ny
     xa = min(p0[0], p1[0]) - R
     xb = max(p0[0], p1[0]) + R
     ya = min(p0[1], p1[1]) - R
     yb = max(p0[1], p1[1]) + R
-    for j in range(max(ju0, 0), min(ju1, ny - 1) + 1):
+    for j in range(max(span.ju0, 0), min(span.ju1, ny - 1) + 1):
         r = k * ny + j
         for q in range(xcnt[r]):
             if xlo[r, q] < xb and xhi[r, q] > xa:
                 return True
-    for i in range(max(iu0, 0), min(iu1, nx - 1) + 1):
+    for i in range(max(span.iu0, 0), min(span.iu1, nx - 1) + 1):
         r = k * nx + i
         for q in range(ycnt[r]):
             if ylo[r, q] < yb and yhi[r, q] > ya:
@@ -643,81 +711,91 @@ def layer_has_material(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k, ju0, ju1, iu0,
 
 
 @njit(cache=True)
-def layer_range(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, nz, p0, p1, R, L, ztop):
-    """Layers of a step: ``(k0, n_layers, ju0, ju1, iu0, iu1)`` (see :func:`horizontal_range`).
+def layer_range(dex, grid, p0, p1, tool, ztop):
+    """Layers and rays of a step, a :class:`LayerSpan` (see :func:`horizontal_range`).
 
     From the lowest tip position up to the top of the cutter, but ending at the first layer above
-    ``ztop + spacing`` (``ztop``: highest z-ray material in the footprint) whose x- and y-rays hold
-    no material in the swept box. The z-rays alone are not a safe bound: a sliver thinner than the
-    spacing between two z-ray columns (a finishing allowance on a coarse grid) is seen only by
+    ``ztop + spacing`` (``ztop`` [m]: highest z-ray material in the footprint) whose x- and y-rays
+    hold no material in the swept box. The z-rays alone are not a safe bound: a sliver thinner than
+    the spacing between two z-ray columns (a finishing allowance on a coarse grid) is seen only by
     the x- and y-rays. Exact for 2.5-D material (one interval from the bottom per column, as left
     by a vertical cutter from a stock of prisms), where nothing lies above an empty layer.
     """
-    k0, k1, ju0, ju1, iu0, iu1 = horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, 1e300)
-    k1z = horizontal_range(lower, s, nx, ny, nz, p0, p1, R, L, ztop)[1]
+    k0, k1, ju0, ju1, iu0, iu1 = horizontal_range(grid, p0, p1, tool, 1e300)
+    k1z = horizontal_range(grid, p0, p1, tool, ztop)[1]
+    span = LayerSpan(k0, 0, ju0, ju1, iu0, iu1)
+    xr, yr = dex.x, dex.y
     k = k0
     while k <= k1:
-        if k > k1z and not layer_has_material(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k, ju0, ju1, iu0, iu1,
-                                              p0, p1, R):
+        if k > k1z and not layer_has_material(xr, yr, grid, k, span, p0, p1, tool.R):
             break
         k += 1
-    return k0, k - k0, ju0, ju1, iu0, iu1
+    return LayerSpan(k0, k - k0, ju0, ju1, iu0, iu1)
 
 
 @njit(parallel=True, cache=True)
-def _horizontal_layers_parallel(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k0, nl,
-                                ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample, samp_ang, samp_eng,
-                                samp_cnt, layer_removed, use_cols, colx, coly):
+def _horizontal_layers_parallel(dex, grid, span, p0, p1, tool, step, sample, buf, use_cols):
+    """:func:`horizontal_layer` on every layer of ``span``, one layer per parallel task; returns
+    the flags of :func:`cut_layer` of all layers."""
+    # a parallel loop cannot take tuples of arrays or the grid's corner tuple from outside (numba's
+    # gufunc arguments are arrays and scalars): unpack here, rebuild the named tuples inside the loop
+    xlo, xhi, xls, xhs, xcnt = dex.x
+    ylo, yhi, yls, yhs, ycnt = dex.y
+    s_ang, s_eng, s_cnt = buf.samples
+    colx, coly = buf.cols
+    c_ray, c_w, c_ang, c_perm = buf.circle
+    layer_removed = buf.layer_removed
+    lx, ly, lz = grid.lower
+    s, nx, ny, nz = grid.spacing, grid.nx, grid.ny, grid.nz
+    nl = span.n_layers
     overflow = np.zeros(nl, np.int32)
     for kk in prange(nl):
-        overflow[kk] = horizontal_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny,
-                                        k0 + kk, kk, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample,
-                                        samp_ang, samp_eng, samp_cnt, layer_removed, use_cols, colx, coly)
+        g = Grid((lx, ly, lz), s, nx, ny, nz)
+        bb = RemovalBuffers(Samples(s_ang, s_eng, s_cnt), layer_removed, Columns(colx, coly),
+                            CircleLayout(c_ray, c_w, c_ang, c_perm))
+        overflow[kk] = horizontal_layer(Rays(xlo, xhi, xls, xhs, xcnt), Rays(ylo, yhi, yls, yhs, ycnt), g, span, kk,
+                                        p0, p1, tool, step, sample, bb, use_cols)
     flags = 0
     for kk in range(nl):
         flags |= overflow[kk]
     return flags
 
 
-@njit(parallel=True, cache=True)
-def remove_horizontal(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, nz,
-                      p0, p1, R, rc, L, step, sample, samp_ang, samp_eng, samp_cnt, layer_removed,
-                      ztop=1e300):
+@njit(cache=True)
+def remove_horizontal(dex, grid, p0, p1, tool, step, sample, buf, ztop=1e300):
     """Remove the swept cutter from x- and y-rays, one z-layer per parallel task.
 
-    Engagement samples of layer ``k0 + kk`` go to row ``kk`` of ``samp_ang`` (angle [rad] about the
-    cutter axis at ``p1``, from +x counter-clockwise) and ``samp_eng`` (1 if material was there
-    before the cut). ``ztop`` [m]: highest material in the cutter's footprint (from the z-rays);
-    empty layers above it are skipped (:func:`layer_range`). Returns ``(k0, n_layers, status)``; status 1:
-    a ray overflowed its capacity, 2: more layers than the buffers hold.
+    Engagement samples of layer ``k0 + kk`` go to row ``kk`` of ``buf.samples.ang`` (angle [rad] about
+    the cutter axis at ``p1``, from +x counter-clockwise) and ``buf.samples.eng`` (1 if material was
+    there before the cut). ``ztop`` [m]: highest material in the cutter's footprint (from the
+    z-rays); empty layers above it are skipped (:func:`layer_range`). Returns ``(k0, n_layers,
+    status)``, status a :class:`StepStatus`: OK, OVERFLOW (a ray overflowed its capacity) or LAYERS
+    (more layers than the buffers hold).
     """
-    k0, nl, ju0, ju1, iu0, iu1 = layer_range(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, nz, p0, p1, R, L,
-                                             ztop)
+    span = layer_range(dex, grid, p0, p1, tool, ztop)
+    k0, nl = span.k0, span.n_layers
     if nl <= 0:
-        return k0, 0, 0
-    if nl > samp_cnt.shape[0]:
-        return k0, 0, 2
-    colx = np.empty((ny, 2))
-    coly = np.empty((nx, 2))
-    use_cols = column_intervals(p0, p1, R, lower, s, nx, ny, ju0, ju1, iu0, iu1, colx, coly)
-    overflow = np.zeros(nl, np.int32)
-    for kk in prange(nl):
-        overflow[kk] = horizontal_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny,
-                                        k0 + kk, kk, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, step, sample,
-                                        samp_ang, samp_eng, samp_cnt, layer_removed, use_cols, colx, coly)
-    return k0, nl, 1 if (overflow & 1).sum() > 0 else 0
+        return k0, 0, STEP_OK
+    if nl > buf.samples.cnt.shape[0]:
+        return k0, 0, STEP_LAYERS
+    use_cols = column_intervals(p0, p1, tool.R, grid, span, buf.cols)
+    flags = _horizontal_layers_parallel(dex, grid, span, p0, p1, tool, step, sample, buf, use_cols)
+    return k0, nl, STEP_OVERFLOW if flags & CUT_OVERFLOW else STEP_OK
 
 
 @njit(cache=True)
-def vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j, i0, i1, p0, p1, R, rc, L, step, out):
-    """Remove the swept cutter from the z-rays of row ``j``, columns ``i0..i1``.
+def vertical_row(rays, grid, j, i0, i1, p0, p1, tool, step, out):
+    """Remove the swept cutter from the z-rays ``rays`` of row ``j``, columns ``i0..i1``.
 
     Writes ``out[0]`` = removed length [m] summed over the row, ``out[1]`` = highest material top
-    [m] before the cut (-1e300 if none), ``out[2]`` = flags: 1 a ray overflowed, 8 a ray is now at
-    its capacity. Rays whose top is at
-    or below the lowest tip position are rejected before the swept interval is computed (the
-    swept solid lies above ``min(p0_z, p1_z)`` for every cutter shape).
+    [m] before the cut (-1e300 if none), ``out[2]`` = :class:`CutFlags` (as a float): OVERFLOW a
+    ray overflowed, Z_FULL a ray is now at its capacity. Rays whose top is at or below the lowest
+    tip position are rejected before the swept interval is computed (the swept solid lies above
+    ``min(p0_z, p1_z)`` for every cutter shape).
     """
+    lower, s, nx = grid.lower, grid.spacing, grid.nx
+    R, rc, L = tool.R, tool.rc, tool.L
+    zlo, zhi, zls, zhs, zcnt = rays
     yc = lower[1] + (j + 0.5) * s
     zfloor = min(p0[2], p1[2])
     # the footprint (stadium of radius R, slightly enlarged so rounding cannot drop a ray) along
@@ -725,7 +803,7 @@ def vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j, i0, i1, p0, p1, R, r
     xa, xb = stadium_interval(p0[0], p0[1], p1[0], p1[1], R * (1.0 + 1e-9) + 1e-12, yc)
     acc = 0.0
     top = -1e300
-    overflow = 0.0
+    flags = 0
     for i in range(i0, i1 + 1):
         ridx = j * nx + i
         n = zcnt[ridx]
@@ -743,76 +821,108 @@ def vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j, i0, i1, p0, p1, R, r
         if a < b:
             got = subtract_interval(zlo, zhi, zls, zhs, zcnt, ridx, a, b, step)
             if got < 0.0:
-                overflow = 1.0 if overflow < 8.0 else 9.0
+                flags |= CUT_OVERFLOW
             else:
                 acc += got
-                if zcnt[ridx] == zlo.shape[1] and (overflow == 0.0 or overflow == 1.0):
-                    overflow += 8.0
+                if zcnt[ridx] == zlo.shape[1]:
+                    flags |= CUT_Z_FULL
     out[0] = acc
     out[1] = top
-    out[2] = overflow
+    out[2] = flags
 
 
 @njit(cache=True)
-def remove_vertical_serial(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, step, row_out):
+def remove_vertical_serial(rays, grid, p0, p1, tool, step, row_out):
     """Serial :func:`remove_vertical` with a scratch ``row_out`` (3,): no allocation per step.
 
-    Returns (removed volume [m^3] seen by z-rays, flags (1 overflow, 8 a z-ray now at its
-    capacity), highest material top [m] in the cutter's footprint before the cut, -1e300 if none)."""
-    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
-    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
+    Returns (removed volume [m^3] seen by z-rays, :class:`CutFlags` (OVERFLOW, Z_FULL), highest
+    material top [m] in the cutter's footprint before the cut, -1e300 if none)."""
+    lower, s, R = grid.lower, grid.spacing, tool.R
+    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, grid.ny)
+    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, grid.nx)
     if j1 < j0 or i1 < i0:
         return 0.0, 0, -1e300
     rem = 0.0
     top = -1e300
-    status = 0
+    flags = 0
     for j in range(j0, j1 + 1):
-        vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j, i0, i1, p0, p1, R, rc, L, step, row_out)
+        vertical_row(rays, grid, j, i0, i1, p0, p1, tool, step, row_out)
         rem += row_out[0]
         if row_out[1] > top:
             top = row_out[1]
-        status |= int(row_out[2])
-    return rem * s * s, status, top
+        flags |= int(row_out[2])
+    return rem * s * s, flags, top
 
 
 @njit(parallel=True, cache=True)
-def remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, step):
-    """Remove the swept cutter from the z-rays, one row of the footprint per parallel task.
+def remove_vertical(rays, grid, p0, p1, tool, step):
+    """Remove the swept cutter from the z-rays ``rays``, one row of the footprint per parallel task.
 
-    Returns (removed volume [m^3] seen by z-rays, status, highest material top [m] in the cutter's
-    footprint before the cut, -1e300 if none)."""
-    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, ny)
-    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, nx)
+    Returns (removed volume [m^3] seen by z-rays, :class:`CutFlags` (OVERFLOW, Z_FULL), highest
+    material top [m] in the cutter's footprint before the cut, -1e300 if none)."""
+    lower, s, R = grid.lower, grid.spacing, tool.R
+    j0, j1 = _grid_range(min(p0[1], p1[1]) - R, max(p0[1], p1[1]) + R, lower[1], s, grid.ny)
+    i0, i1 = _grid_range(min(p0[0], p1[0]) - R, max(p0[0], p1[0]) + R, lower[0], s, grid.nx)
     nj = j1 - j0 + 1
     if nj <= 0 or i1 < i0:
         return 0.0, 0, -1e300
+    # unpacked for the parallel loop (module note in _horizontal_layers_parallel)
+    zlo, zhi, zls, zhs, zcnt = rays
+    lx, ly, lz = grid.lower
+    nx, ny, nz = grid.nx, grid.ny, grid.nz
     rows = np.zeros((nj, 3))
     for jj in prange(nj):
-        vertical_row(zlo, zhi, zls, zhs, zcnt, lower, s, nx, j0 + jj, i0, i1, p0, p1, R, rc, L, step, rows[jj])
+        g = Grid((lx, ly, lz), s, nx, ny, nz)
+        vertical_row(Rays(zlo, zhi, zls, zhs, zcnt), g, j0 + jj, i0, i1, p0, p1, tool, step, rows[jj])
     flags = 0
     for jj in range(nj):
         flags |= int(rows[jj, 2])
     return rows[:, 0].sum() * s * s, flags, rows[:, 1].max()
 
 
-class RemovalBuffers:
-    """Scratch arrays for the engagement samples of one step (sized for the grid and cutter)."""
+class Samples(NamedTuple):
+    """Engagement samples of a step, one row per z-layer from the step's first layer."""
 
-    def __init__(self, workpiece, R: float, max_move: float):
+    ang: np.ndarray   # (nz, M) float64, angle about the cutter axis from +x counter-clockwise [rad]
+    eng: np.ndarray   # (nz, M) int8, 1: material at the sample before the cut
+    cnt: np.ndarray   # (nz,) int64, samples per row
+
+
+class Columns(NamedTuple):
+    """Swept intervals of the x-ray rows and y-ray columns of a horizontal move (:func:`column_intervals`)."""
+
+    x: np.ndarray   # (ny, 2) float64, (lo, hi) of the x-rays of row j [m]
+    y: np.ndarray   # (nx, 2) float64, (lo, hi) of the y-rays of column i [m]
+
+
+class CircleLayout(NamedTuple):
+    """The full-radius sample layout of a step (:func:`circle_samples`)."""
+
+    ray: np.ndarray    # (M / 2 + 1, 2) int64, family (0: x, 1: y) and row / column of each sample pair
+    w: np.ndarray      # (M / 2 + 1,) float64, half-chord of each pair [m]
+    ang: np.ndarray    # (M,) float64, sample angles sorted [rad]
+    perm: np.ndarray   # (M,) int64, sample index of each sorted position
+
+
+class RemovalBuffers(NamedTuple):
+    """Scratch arrays of one step's removal and engagement samples (:meth:`sized` for a grid and cutter)."""
+
+    samples: Samples
+    layer_removed: np.ndarray   # (nz,) float64, volume the x-rays of each layer row lost [m^3]
+    cols: Columns
+    circle: CircleLayout
+
+    @classmethod
+    def sized(cls, workpiece, R: float, max_move: float) -> RemovalBuffers:
+        """Buffers for ``workpiece``, a cutter of radius ``R`` [m] and moves up to ``max_move`` [m]."""
         s = workpiece.spacing
         nx, ny, nz = workpiece.shape
         across = int(math.ceil((2 * R + max_move) / s)) + 3
-        self.samp_ang = np.zeros((nz, 4 * across))
-        self.samp_eng = np.zeros((nz, 4 * across), np.int8)
-        self.samp_cnt = np.zeros(nz, np.int64)
-        self.layer_removed = np.zeros(nz)
-        self.colx = np.zeros((ny, 2))   # per-step column intervals of horizontal moves [m]
-        self.coly = np.zeros((nx, 2))
         m = 4 * across
-        self.pair_ray = np.zeros((m // 2 + 1, 2), np.int64)   # full-radius sample layout of a step
-        self.pair_w = np.zeros(m // 2 + 1)
-        self.sorted_ang = np.zeros(m)
-        self.perm = np.zeros(m, np.int64)
+        return cls(Samples(np.zeros((nz, m)), np.zeros((nz, m), np.int8), np.zeros(nz, np.int64)), np.zeros(nz),
+                   Columns(np.zeros((ny, 2)), np.zeros((nx, 2))),
+                   CircleLayout(np.zeros((m // 2 + 1, 2), np.int64), np.zeros(m // 2 + 1), np.zeros(m),
+                                np.zeros(m, np.int64)))
 
 
 def remove_step(workpiece, cutter, p0, p1, step: int, buffers: RemovalBuffers | None = None,
@@ -825,17 +935,10 @@ def remove_step(workpiece, cutter, p0, p1, step: int, buffers: RemovalBuffers | 
     p0 = np.asarray(p0, float)
     p1 = np.asarray(p1, float)
     if buffers is None:
-        buffers = RemovalBuffers(workpiece, cutter.radius, float(np.linalg.norm(p1 - p0)))
-    fx, fy, fz = workpiece.families
-    R, rc, L = cutter.radius, cutter.corner_radius, cutter.length
-    nx, ny, nz = workpiece.shape
-    _, st2, ztop = remove_vertical(fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count, workpiece.lower,
-                                   workpiece.spacing, nx, ny, p0, p1, R, rc, L, step)
-    k0, nl, st = remove_horizontal(fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count,
-                                   fy.lo, fy.hi, fy.lo_step, fy.hi_step, fy.count,
-                                   workpiece.lower, workpiece.spacing, nx, ny, nz, p0, p1, R, rc, L, step,
-                                   sample, buffers.samp_ang, buffers.samp_eng, buffers.samp_cnt,
-                                   buffers.layer_removed, ztop)
-    if st or (st2 & 1):
+        buffers = RemovalBuffers.sized(workpiece, cutter.radius, float(np.linalg.norm(p1 - p0)))
+    dex, grid, tool = workpiece.rays, workpiece.grid, cutter.shape
+    _, st2, ztop = remove_vertical(dex.z, grid, p0, p1, tool, step)
+    k0, nl, st = remove_horizontal(dex, grid, p0, p1, tool, step, sample, buffers, ztop)
+    if st != StepStatus.OK or (st2 & CutFlags.OVERFLOW):
         raise RuntimeError("dexel ray capacity exceeded; rebuild the workpiece with a larger capacity")
     return k0, nl, buffers

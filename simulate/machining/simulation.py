@@ -35,21 +35,42 @@ import time
 import types as pytypes
 from collections import namedtuple
 from dataclasses import dataclass, field
-
-import numpy as np
+from enum import IntFlag
+from typing import NamedTuple
 
 import numba
+import numpy as np
 from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
 from simulate.robot.drive import CycleInput, drive_step, load_torque_step
 
-from .cutting import Material, Spindle, step_forces_sorted, substeps
+from .cutting import ForceScratch, Material, Spindle, force_model, step_forces_sorted, substeps
 from .engagement import sort_layers
-from .removal import (RemovalBuffers, _horizontal_layers_parallel, circle_samples, column_intervals, cut_layer,
-                      layer_range, radius_at, remove_vertical, sample_layer_full,
-                      remove_vertical_serial, sample_layer)
+from .removal import (
+    CUT_OVERFLOW,
+    CUT_X_FULL,
+    CUT_Y_FULL,
+    CUT_Z_FULL,
+    STEP_FULL,
+    STEP_LAYERS,
+    STEP_OK,
+    STEP_OVERFLOW,
+    CutFlags,
+    RemovalBuffers,
+    StepStatus,
+    _horizontal_layers_parallel,
+    circle_samples,
+    column_intervals,
+    cut_layer,
+    layer_range,
+    radius_at,
+    remove_vertical,
+    remove_vertical_serial,
+    sample_layer,
+    sample_layer_full,
+)
 from .tools import Cutter
 
 
@@ -72,7 +93,7 @@ class StepTable:
     switch: np.ndarray
 
     @classmethod
-    def zeros(cls, n: int) -> "StepTable":
+    def zeros(cls, n: int) -> StepTable:
         return cls(np.zeros(n), np.zeros(n, np.int32), np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)),
                    np.zeros((n, 3)), np.zeros(n, np.int32))
 
@@ -157,9 +178,44 @@ DEFLECTION_TIME_CONSTANT = 1.0 / (2.0 * math.pi * 15.0)
 #: Intervals added to a ray family's capacity when one of its rays fills up.
 CAPACITY_STEP = 4
 
-#: Status codes of :func:`coupled_steps`: done, ray capacity exceeded, more layers than the
-#: buffers, a family's ray reached its capacity (step completed; grow before the next step).
-STATUS_OK, STATUS_OVERFLOW, STATUS_LAYERS, STATUS_FULL = 0, 1, 2, 3
+
+class LoopFlags(IntFlag):
+    """What the coupled loop computes besides the removal (:class:`LoopOptions`)."""
+
+    FORCES = 1       # engagement and cutting forces
+    COMPLIANCE = 2   # the deflection from the forces through the robot's compliance (needs FORCES)
+
+
+# the members as plain ints for the compiled kernel (numba does not type IntFlag arithmetic)
+LOOP_FORCES = int(LoopFlags.FORCES)
+LOOP_COMPLIANCE = int(LoopFlags.COMPLIANCE)
+
+
+class LoopPath(NamedTuple):
+    """The commanded path of :func:`coupled_steps`, one row per step (workpiece frame)."""
+
+    t: np.ndarray            # (N,) step times [s]
+    xyz: np.ndarray          # (N, 3) commanded tool tip [m]
+    err: np.ndarray          # (N, 3) tool offset [m]: the given one in, plus the drives' tracking error out
+    compliance: np.ndarray   # (N, 3, 3) translational compliance [m/N] ((1, 3, 3) unused without COMPLIANCE)
+
+
+class LoopOptions(NamedTuple):
+    """Settings of :func:`coupled_steps`."""
+
+    flags: int             # LoopFlags as an int
+    time_constant: float   # lag of the deflection behind C F [s] (DEFLECTION_TIME_CONSTANT)
+    parallel_work: int     # ray visits per step above which a step's removal runs in parallel [-] (0: never)
+
+
+class LoopOutput(NamedTuple):
+    """What :func:`coupled_steps` fills, one row per step, and what it carries between calls."""
+
+    force: np.ndarray        # (N, 3) revolution-mean force on the cutter [N]
+    peak: np.ndarray         # (N,) peak force [N]
+    deflection: np.ndarray   # (N, 3) deflection [m]
+    state: np.ndarray        # (7,) p0 [m] (3), deflection [m] (3), removed z-ray volume [m^3]
+    ticks: np.ndarray        # (6,) int64 clock ticks: removal, engagement, forces, robot, z-rays, drives
 
 
 #: The six drives inside the coupled loop (:func:`loop_drive`), a named tuple of:
@@ -213,41 +269,55 @@ def drive_cycle(dr, k, dt, force):
 
 
 @njit(cache=True)
-def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, zlo, zhi, zls, zhs, zcnt,
-                  lower, s, nx, ny, nz, xyz, err, t, C, use_compliance, R, rc, L, N, tan_helix, omega, phase,
-                  kc, ke, n_sub, forces, time_constant, parallel_work, samp_ang, samp_eng, samp_cnt, layer_removed, colx, coly,
-                  pair_ray, pair_w, sorted_ang, perm, state, force, peak, deflection, ticks, drive):
+def coupled_steps(k_from, k_to, dex, grid, path, model, opts, buf, out, drive):
     """Steps ``k_from .. k_to - 1`` of the coupled loop (paper Figure 4) in one compiled call.
 
-    Per step k: tool tip ``p1 = xyz[k] + deflection(k-1) + err[k]``; removal of the cutter swept
-    from the previous actual tip on the z-rays (giving the material top in the footprint) and on
-    the x/y-rays of the layers holding material (:func:`simulate.machining.removal.layer_range`); engagement samples at ``p1``; revolution-mean and
-    peak force; deflection ``C[k] F`` for the next step. Serial over steps (each depends on the
-    previous deflection); a step's removal runs in parallel only when it visits more than
-    ``parallel_work`` rays (0: never; the caller passes 0 when numba has one thread). Nothing is
-    allocated per step.
+    Per step k: tool tip ``p1 = path.xyz[k] + deflection(k-1) + path.err[k]``; removal of the cutter
+    swept from the previous actual tip on the z-rays (giving the material top in the footprint) and
+    on the x/y-rays of the layers holding material (:func:`simulate.machining.removal.layer_range`);
+    engagement samples at ``p1``; revolution-mean and peak force; deflection ``C[k] F`` for the next
+    step. Serial over steps (each depends on the previous deflection); a step's removal runs in
+    parallel only when it visits more than ``opts.parallel_work`` rays (0: never; the caller passes
+    0 when numba has one thread). Nothing is allocated per step.
 
-    ``state`` (7,) carries ``[p0 (3), deflection (3), removed z-ray volume [m^3]]`` between calls;
-    ``drive`` (:data:`DriveLoop`) steps the six drives with their friction models first
-    (:func:`drive_cycle`), giving the step's tracking error (added to ``err``, which enters holding
-    the given offset).
-    ``ticks`` (6,) accumulates clock ticks of removal, engagement, forces, robot (deflection), the
-    z-ray part of the removal and the drives: always 0 here (cached kernel, no clock); the copy from
-    :func:`profiling_kernel` fills them from the CPU's time-stamp counter.
-    Returns ``(status, step, mask)``: status 0 (``step = k_to``); 1 (ray capacity exceeded) / 2
-    (more layers than the buffers) at ``step``; 3: after completing ``step - 1`` a ray of the
-    families in ``mask`` (x 1, y 2, z 4) is at its capacity, to be grown before going on at
-    ``step``.
+    Arguments: ``dex`` the ray families (:class:`~simulate.machining.dexel.Dexels`, changed),
+    ``grid`` (:class:`~simulate.machining.dexel.Grid`), ``path`` the command (:class:`LoopPath`;
+    ``err`` enters holding the given offset and leaves with the drives' tracking error added),
+    ``model`` the cutting forces (:class:`~simulate.machining.cutting.ForceModel`), ``opts``
+    (:class:`LoopOptions`, flags :class:`LoopFlags`), ``buf`` the step's scratch
+    (:class:`~simulate.machining.removal.RemovalBuffers`), ``out`` (:class:`LoopOutput`) and
+    ``drive`` (:data:`DriveLoop`) the six drives stepped first with their friction models
+    (:func:`drive_cycle`), giving the step's tracking error.
+
+    ``out.state`` (7,) carries ``[p0 (3), deflection (3), removed z-ray volume [m^3]]`` between
+    calls. ``out.ticks`` (6,) accumulates clock ticks of removal, engagement, forces, robot
+    (deflection), the z-ray part of the removal and the drives: always 0 here (cached kernel, no
+    clock); the copy from :func:`profiling_kernel` fills them from the CPU's time-stamp counter.
+    Returns ``(status, step, full)``, status a :class:`~simulate.machining.removal.StepStatus`: OK
+    (``step = k_to``); OVERFLOW (ray capacity exceeded) / LAYERS (more layers than the buffers) at
+    ``step``; FULL: after completing ``step - 1`` a ray of the families in ``full`` (the X_FULL,
+    Y_FULL, Z_FULL bits of :class:`~simulate.machining.removal.CutFlags`) is at its capacity, to be
+    grown before going on at ``step``.
     """
+    tool = model.tool
+    R, rc, L = tool
+    lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
+    t, xyz, err, C = path
+    force, peak, deflection, state, ticks = out
+    xr, yr, zr = dex
+    samples, layer_removed, cols, circle = buf
+    mcap = samples.ang.shape[1]
+    forces = (opts.flags & LOOP_FORCES) != 0
+    use_compliance = (opts.flags & LOOP_COMPLIANCE) != 0
+    time_constant, parallel_work = opts.time_constant, opts.parallel_work
     p0 = state[0:3].copy()
     defl = state[3:6].copy()
     p1 = np.empty(3)
     row = np.empty(3)
-    acc = np.empty(3)
     vel = np.empty(3)
-    inst = np.empty((max(n_sub, 1), 3))
-    trig = np.empty((max(n_sub, 1) * N, 2))
-    out = np.zeros(4)
+    n_sub = max(model.n_sub, 1)
+    scratch = ForceScratch(np.empty(3), np.empty((n_sub, 3)), np.empty((n_sub * model.flutes, 2)))
+    fout = np.zeros(4)
     removed = state[6]
     par_ok = parallel_work > 0
     for k in range(k_from, k_to):
@@ -272,53 +342,44 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
         i1 = min(nx - 1, int(math.floor((max(p0[0], p1[0]) + R - lower[0]) / s - 0.5)))
         zwork = max(0, j1 - j0 + 1) * max(0, i1 - i0 + 1)
         if par_ok and zwork > parallel_work:
-            vz, st2, ztop = remove_vertical(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, k)
+            vz, st2, ztop = remove_vertical(zr, grid, p0, p1, tool, k)
         else:
-            vz, st2, ztop = remove_vertical_serial(zlo, zhi, zls, zhs, zcnt, lower, s, nx, ny, p0, p1, R, rc, L, k,
-                                                   row)
-        if st2 & 1:
-            return STATUS_OVERFLOW, k, 0
-        full = (st2 & 8) >> 1   # z-family bit 4 of the mask: x 1, y 2, z 4
+            vz, st2, ztop = remove_vertical_serial(zr, grid, p0, p1, tool, k, row)
+        if st2 & CUT_OVERFLOW:
+            return STEP_OVERFLOW, k, 0
+        full = st2 & CUT_Z_FULL
         removed += vz
         # ---- x/y-rays: engagement samples, then removal
-        k0, nl, ju0, ju1, iu0, iu1 = layer_range(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, nz, p0, p1, R, L,
-                                                 ztop)
-        if nl > samp_cnt.shape[0]:
-            return STATUS_LAYERS, k, 0
+        span = layer_range(dex, grid, p0, p1, tool, ztop)
+        k0, nl = span.k0, span.n_layers
+        if nl > samples.cnt.shape[0]:
+            return STEP_LAYERS, k, 0
         c1 = _clock()
         c2 = c1
         if nl > 0:
-            use_cols = column_intervals(p0, p1, R, lower, s, nx, ny, ju0, ju1, iu0, iu1, colx, coly)
-            hwork = nl * (ju1 - ju0 + iu1 - iu0 + 2)
+            use_cols = column_intervals(p0, p1, R, grid, span, cols)
+            hwork = nl * (span.ju1 - span.ju0 + span.iu1 - span.iu0 + 2)
             if par_ok and hwork > parallel_work:
-                st1 = _horizontal_layers_parallel(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx,
-                                                  ny, k0, nl, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, k, forces,
-                                                  samp_ang, samp_eng, samp_cnt, layer_removed, use_cols, colx,
-                                                  coly)
+                st1 = _horizontal_layers_parallel(dex, grid, span, p0, p1, tool, k, forces, buf, use_cols)
                 c2 = _clock()
             else:
                 m_full = -1
                 for kk in range(nl):
                     if not forces:
-                        samp_cnt[kk] = 0
+                        samples.cnt[kk] = 0
                     elif radius_at(lower[2] + (k0 + kk + 0.5) * s - p1[2], R, rc, L) == R:
                         if m_full < 0:
-                            m_full = circle_samples(p1, R, lower, s, ju0, ju1, iu0, iu1, samp_ang.shape[1],
-                                                    pair_ray, pair_w, sorted_ang, perm)
-                        sample_layer_full(xlo, xhi, xcnt, ylo, yhi, ycnt, nx, ny, k0 + kk, kk, p1, m_full,
-                                          pair_ray, pair_w, sorted_ang, perm, samp_ang, samp_eng, samp_cnt)
+                            m_full = circle_samples(p1, R, grid, span, mcap, circle)
+                        sample_layer_full(xr, yr, grid, span, kk, p1, m_full, circle, samples)
                     else:
-                        sample_layer(xlo, xhi, xcnt, ylo, yhi, ycnt, lower, s, nx, ny, k0 + kk, kk, ju0, ju1, iu0,
-                                     iu1, p1, R, rc, L, samp_ang, samp_eng, samp_cnt)
+                        sample_layer(xr, yr, grid, span, kk, p1, tool, samples)
                 c2 = _clock()
                 st1 = 0
                 for kk in range(nl):
-                    st1 |= cut_layer(xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, ycnt, lower, s, nx, ny, k0 + kk,
-                                     kk, ju0, ju1, iu0, iu1, p0, p1, R, rc, L, k, layer_removed, use_cols, colx,
-                                     coly)
-            if st1 & 1:
-                return STATUS_OVERFLOW, k, 0
-            full |= (st1 & 6) >> 1
+                    st1 |= cut_layer(xr, yr, grid, span, kk, p0, p1, tool, k, layer_removed, cols, use_cols)
+            if st1 & CUT_OVERFLOW:
+                return STEP_OVERFLOW, k, 0
+            full |= st1 & (CUT_X_FULL | CUT_Y_FULL)
         c3 = _clock()
         ticks[0] += (c1 - c0) + (c3 - c2)
         ticks[1] += c2 - c1
@@ -332,21 +393,20 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
                 vel[a] = (xyz[k, a] + err[k, a] - xyz[k - 1, a] - err[k - 1, a]) / dt
             klow = -1
             if nl > 0 and vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2] != 0.0:
-                klow = sort_layers(samp_ang, samp_eng, samp_cnt, nl)
+                klow = sort_layers(samples.ang, samples.eng, samples.cnt, nl)
             c4 = _clock()
             ticks[1] += c4 - c3
-            step_forces_sorted(samp_ang, samp_eng, samp_cnt, k0, nl, klow, lower[2], s, p1, vel, dt, t[k],
-                               R, rc, L, N, tan_helix, omega, phase, kc, ke, n_sub, acc, inst, trig, out)
+            step_forces_sorted(samples, k0, nl, klow, grid, p1, vel, dt, t[k], model, scratch, fout)
             for a in range(3):
-                force[k, a] = out[a]
-            peak[k] = out[3]
+                force[k, a] = fout[a]
+            peak[k] = fout[3]
             c5 = _clock()
             ticks[2] += c5 - c4
             # ---- robot: deflection for the next step, first-order lag towards C F
             if use_compliance:
                 alpha = 1.0 - math.exp(-dt / time_constant) if time_constant > 0.0 else 1.0
                 for a in range(3):
-                    target = C[k, a, 0] * out[0] + C[k, a, 1] * out[1] + C[k, a, 2] * out[2]
+                    target = C[k, a, 0] * fout[0] + C[k, a, 1] * fout[1] + C[k, a, 2] * fout[2]
                     defl[a] += alpha * (target - defl[a])
                     deflection[k, a] = defl[a]
             ticks[3] += _clock() - c5
@@ -358,11 +418,11 @@ def coupled_steps(k_from, k_to, xlo, xhi, xls, xhs, xcnt, ylo, yhi, yls, yhs, yc
             state[0:3] = p0
             state[3:6] = defl
             state[6] = removed
-            return STATUS_FULL, k + 1, full
+            return STEP_FULL, k + 1, full
     state[0:3] = p0
     state[3:6] = defl
     state[6] = removed
-    return STATUS_OK, k_to, 0
+    return STEP_OK, k_to, 0
 
 
 _PROFILING_KERNEL = None
@@ -443,22 +503,23 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     if n < 2:
         return MachiningResult(st, 0.0, 0.0)
     max_move = float(np.max(np.linalg.norm(np.diff(xyz + err, axis=0), axis=1))) + 1e-3
-    buf = RemovalBuffers(workpiece, cutter.radius, max_move)
-    R, rc, L = cutter.radius, cutter.corner_radius, cutter.length
-    N, tanb = cutter.flutes, math.tan(cutter.helix)
-    nsub = substeps(float(np.median(np.diff(t))), spindle.omega, N, per_tooth=4)
-    fx, fy, fz = workpiece.families
-    nx, ny, nz = workpiece.shape
+    buf = RemovalBuffers.sized(workpiece, cutter.radius, max_move)
+    nsub = substeps(float(np.median(np.diff(t))), spindle.omega, cutter.flutes, per_tooth=4)
+    model = force_model(cutter, material, spindle, nsub)
     use_c = compliance is not None and forces
     C = np.ascontiguousarray(np.broadcast_to(np.asarray(compliance, float), (n, 3, 3))) if use_c \
         else np.zeros((1, 3, 3))
+    path = LoopPath(t, xyz, err, C)
+    flags = (LoopFlags.FORCES if forces else LoopFlags(0)) | (LoopFlags.COMPLIANCE if use_c else LoopFlags(0))
     state = np.zeros(7)
     state[:3] = xyz[0] + err[0]
     ticks = np.zeros(6, np.int64)
+    out = LoopOutput(st.force, st.peak_force, st.deflection, state, ticks)
     sv = drive if drive is not None else _no_drive()
     if sv.on and (sv.q.shape[0] != n or sv.jac.shape[0] != n):
         raise ValueError("the drives' command must have one row per step")
     par_work = int(parallel_work) if numba.get_num_threads() > 1 else 0
+    opts = LoopOptions(int(flags), float(time_constant), par_work)
     chunk = max(1, n // 200)
     kernel = coupled_steps
     if profile:
@@ -473,24 +534,15 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     k_from = 1
     while k_from < n:
         k_to = min(n, k_from + chunk)
-        fx, fy, fz = workpiece.families   # arrays are replaced when a family grows
-        status, k, mask = kernel(k_from, k_to, fx.lo, fx.hi, fx.lo_step, fx.hi_step, fx.count,
-                                 fy.lo, fy.hi, fy.lo_step, fy.hi_step, fy.count,
-                                 fz.lo, fz.hi, fz.lo_step, fz.hi_step, fz.count,
-                                 workpiece.lower, workpiece.spacing, nx, ny, nz, xyz, err, t, C, use_c,
-                                 R, rc, L, N, tanb, spindle.omega, spindle.phase, material.kc, material.ke,
-                                 nsub, bool(forces), float(time_constant), par_work, buf.samp_ang,
-                                 buf.samp_eng, buf.samp_cnt, buf.layer_removed, buf.colx, buf.coly,
-                                 buf.pair_ray, buf.pair_w, buf.sorted_ang, buf.perm, state, st.force,
-                                 st.peak_force, st.deflection, ticks, sv)
-        if status == STATUS_OVERFLOW:
+        # the arrays are replaced when a family grows: a fresh view per call
+        status, k, full = kernel(k_from, k_to, workpiece.rays, workpiece.grid, path, model, opts, buf, out, sv)
+        if status == StepStatus.OVERFLOW:
             raise RuntimeError(f"dexel ray capacity exceeded at step {k}; use a larger capacity")
-        if status == STATUS_LAYERS:
+        if status == StepStatus.LAYERS:
             raise RuntimeError(f"step {k} spans more z-layers than the engagement buffers hold")
-        if status == STATUS_FULL:
-            for axis in range(3):
-                if mask & (1 << axis):
-                    fam = workpiece.families[axis]
+        if status == StepStatus.FULL:
+            for fam, bit in zip(workpiece.families, (CutFlags.X_FULL, CutFlags.Y_FULL, CutFlags.Z_FULL), strict=True):
+                if full & bit:
                     fam.grow(fam.capacity + CAPACITY_STEP)
         if advance is not None and k > k_from:
             advance(k - k_from)
@@ -532,7 +584,8 @@ def workpiece_compliance(robot, q, placement_rotation, stiffness_scale: float = 
 
 def _no_drive():
     """A switched-off :data:`DriveLoop` (same types, so the loop compiles once)."""
-    from simulate.robot.drive import DriveParams, dyn_params_empty, new_state as drive_state
+    from simulate.robot.drive import DriveParams, dyn_params_empty
+    from simulate.robot.drive import new_state as drive_state
     from simulate.robot.loop_friction import assemble, new_state
 
     z6 = np.zeros(6)
@@ -557,8 +610,17 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
     The Jacobian (tracking error and ``-J^T F``) is taken at the commanded joints, for all steps at once.
     The state starts at equilibrium on the first command.
     """
-    from simulate.robot.drive import (DriveFlags, as_substeps, command_velocity, drive_init, drive_params,
-                                      dyn_params, load_torques, new_state as drive_state, substeps_for)
+    from simulate.robot.drive import (
+        DriveFlags,
+        as_substeps,
+        command_velocity,
+        drive_init,
+        drive_params,
+        dyn_params,
+        load_torques,
+        substeps_for,
+    )
+    from simulate.robot.drive import new_state as drive_state
     from simulate.robot.kinematics import jacobian
     from simulate.robot.loop_friction import new_state
 

@@ -22,6 +22,7 @@ surface), so any step variable (deflection, force, ...) can colour the mesh.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -35,6 +36,15 @@ MAX_NODES = 40_000_000
 #: a quarter of the triangles), which keeps the deviation pattern of features 10 mm and more wide
 #: and the GLB under 5 MiB.
 EXPORT_MAX_NODES = 10_000_000
+
+
+class MeshBuffers(NamedTuple):
+    """Output arrays of the mesh kernel, sized by the cell and edge counts."""
+
+    verts: np.ndarray   # (V, 3) float64, sum of each vertex's crossings [m]
+    nsum: np.ndarray    # (V,) int32, crossings per vertex
+    vstep: np.ndarray   # (V,) int32, newest step behind each vertex (-1: stock)
+    faces: np.ndarray   # (F, 3) int64, triangles
 
 
 @dataclass
@@ -95,18 +105,16 @@ def surface_mesh(workpiece: TriDexel, stride: int | None = None, max_nodes: int 
     nx, ny, nz = workpiece.shape
     # lattice node n (1..m) sits on ray index (n - 1) * stride; nodes 0 and m + 1 are empty padding
     mx, my, mz = (len(range(0, n, stride)) for n in (nx, ny, nz))
-    fx, fy, fz = workpiece.families
     occ = np.zeros((mx + 2, my + 2, mz + 2), np.uint8)
-    _occupancy(fz.lo, fz.hi, fz.count, workpiece.lower, workpiece.spacing, nx, stride, mx, my, mz, occ)
+    dex, grid = workpiece.rays, workpiece.grid
+    _occupancy(dex.z, grid, stride, occ)
     cell_vertex = np.full((mx + 1, my + 1, mz + 1), -1, np.int32)
     nv, nf = _count(occ, cell_vertex)
     verts = np.zeros((nv, 3))
     nsum = np.zeros(nv, np.int32)
     vstep = np.full(nv, -1, np.int32)
     faces = np.zeros((2 * nf, 3), np.int64)
-    _build(occ, cell_vertex, fx.lo, fx.hi, fx.hi_step, fx.lo_step, fx.count,
-           fy.lo, fy.hi, fy.hi_step, fy.lo_step, fy.count, fz.lo, fz.hi, fz.hi_step, fz.lo_step, fz.count,
-           workpiece.lower, workpiece.spacing, nx, ny, stride, verts, nsum, vstep, faces)
+    _build(occ, cell_vertex, dex, grid, stride, MeshBuffers(verts, nsum, vstep, faces))
     verts /= np.maximum(nsum, 1)[:, None]
     return SurfaceMesh(verts, faces, vstep, stride, stride * workpiece.spacing)
 
@@ -118,22 +126,26 @@ def _node_coord(lower_a, s, stride, n):
 
 
 @njit(cache=True)
-def _occupancy(zlo, zhi, zcnt, lower, s, nx, stride, mx, my, mz, occ):
-    for I in range(1, mx + 1):
-        i = (I - 1) * stride
-        for J in range(1, my + 1):
-            j = (J - 1) * stride
+def _occupancy(rays, grid, stride, occ):
+    """Mark the lattice nodes inside the material of the z-rays ``rays`` (padding layers stay 0)."""
+    zlo, zhi, zcnt = rays.lo, rays.hi, rays.count
+    lower, s, nx = grid.lower, grid.spacing, grid.nx
+    mx, my, mz = occ.shape[0] - 2, occ.shape[1] - 2, occ.shape[2] - 2
+    for ix in range(1, mx + 1):
+        i = (ix - 1) * stride
+        for iy in range(1, my + 1):
+            j = (iy - 1) * stride
             r = j * nx + i
             n = zcnt[r]
             if n == 0:
                 continue
             q = 0
-            for K in range(1, mz + 1):
-                z = _node_coord(lower[2], s, stride, K)
+            for iz in range(1, mz + 1):
+                z = _node_coord(lower[2], s, stride, iz)
                 while q < n and zhi[r, q] < z:
                     q += 1
                 if q < n and zlo[r, q] <= z:
-                    occ[I, J, K] = 1
+                    occ[ix, iy, iz] = 1
 
 
 @njit(cache=True)
@@ -141,37 +153,38 @@ def _count(occ, cell_vertex):
     """Number the cells that get a vertex; count crossed edges (one quad each)."""
     X, Y, Z = occ.shape
     nf = 0
-    for I in range(X):
-        for J in range(Y):
-            for K in range(Z):
-                o = occ[I, J, K]
-                if I + 1 < X and occ[I + 1, J, K] != o:
+    for ix in range(X):
+        for iy in range(Y):
+            for iz in range(Z):
+                o = occ[ix, iy, iz]
+                if ix + 1 < X and occ[ix + 1, iy, iz] != o:
                     nf += 1
-                if J + 1 < Y and occ[I, J + 1, K] != o:
+                if iy + 1 < Y and occ[ix, iy + 1, iz] != o:
                     nf += 1
-                if K + 1 < Z and occ[I, J, K + 1] != o:
+                if iz + 1 < Z and occ[ix, iy, iz + 1] != o:
                     nf += 1
     nv = 0
-    for I in range(X - 1):
-        for J in range(Y - 1):
-            for K in range(Z - 1):
-                o = occ[I, J, K]
+    for ix in range(X - 1):
+        for iy in range(Y - 1):
+            for iz in range(Z - 1):
+                o = occ[ix, iy, iz]
                 mixed = False
                 for a in range(2):
                     for b in range(2):
                         for c in range(2):
-                            if occ[I + a, J + b, K + c] != o:
+                            if occ[ix + a, iy + b, iz + c] != o:
                                 mixed = True
                 if mixed:
-                    cell_vertex[I, J, K] = nv
+                    cell_vertex[ix, iy, iz] = nv
                     nv += 1
     return nv, nf
 
 
 @njit(cache=True)
-def _crossing(lo, hi, hi_step, lo_step, cnt, r, a, b, exiting):
-    """Dexel end of ray r in [a, b]: the last exit (``exiting``) or the first entry; returns
-    (position, step), NaN if the ray has none there."""
+def _crossing(rays, r, a, b, exiting):
+    """Dexel end of ray r of ``rays`` in [a, b] [m]: the last exit (``exiting``) or the first entry;
+    returns (position [m], step), NaN if the ray has none there."""
+    lo, hi, lo_step, hi_step, cnt = rays
     n = cnt[r]
     pos = np.nan
     st = -1
@@ -187,8 +200,8 @@ def _crossing(lo, hi, hi_step, lo_step, cnt, r, a, b, exiting):
 
 
 @njit(cache=True)
-def _add(verts, nsum, vstep, cell_vertex, I, J, K, x, y, z, st):
-    v = cell_vertex[I, J, K]
+def _add(verts, nsum, vstep, cell_vertex, ix, iy, iz, x, y, z, st):
+    v = cell_vertex[ix, iy, iz]
     verts[v, 0] += x
     verts[v, 1] += y
     verts[v, 2] += z
@@ -198,52 +211,56 @@ def _add(verts, nsum, vstep, cell_vertex, I, J, K, x, y, z, st):
 
 
 @njit(cache=True)
-def _build(occ, cell_vertex, xlo, xhi, xhs, xls, xcnt, ylo, yhi, yhs, yls, ycnt, zlo, zhi, zhs, zls, zcnt,
-           lower, s, nx, ny, stride, verts, nsum, vstep, faces):
+def _build(occ, cell_vertex, dex, grid, stride, mesh):
+    """Vertices (sums of crossings, ``mesh.nsum`` per vertex), their newest step and the faces
+    into ``mesh`` (:class:`MeshBuffers`) from the occupancy and the exact dexel ends of ``dex``."""
+    lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
+    verts, nsum, vstep, faces = mesh
+    xr, yr, zr = dex
     X, Y, Z = occ.shape
     f = 0
-    for I in range(X):
-        for J in range(Y):
-            for K in range(Z):
-                o = occ[I, J, K]
-                x0 = _node_coord(lower[0], s, stride, I)
-                y0 = _node_coord(lower[1], s, stride, J)
-                z0 = _node_coord(lower[2], s, stride, K)
+    for ix in range(X):
+        for iy in range(Y):
+            for iz in range(Z):
+                o = occ[ix, iy, iz]
+                x0 = _node_coord(lower[0], s, stride, ix)
+                y0 = _node_coord(lower[1], s, stride, iy)
+                z0 = _node_coord(lower[2], s, stride, iz)
                 for axis in range(3):
-                    I1 = I + (1 if axis == 0 else 0)
-                    J1 = J + (1 if axis == 1 else 0)
-                    K1 = K + (1 if axis == 2 else 0)
-                    if I1 >= X or J1 >= Y or K1 >= Z or occ[I1, J1, K1] == o:
+                    ix1 = ix + (1 if axis == 0 else 0)
+                    iy1 = iy + (1 if axis == 1 else 0)
+                    iz1 = iz + (1 if axis == 2 else 0)
+                    if ix1 >= X or iy1 >= Y or iz1 >= Z or occ[ix1, iy1, iz1] == o:
                         continue
                     exiting = o == 1   # material at the lower node: the edge crosses an exit end
                     x, y, z = x0, y0, z0
                     st = -1
                     pos = np.nan
                     if axis == 0:
-                        a, b = x0, _node_coord(lower[0], s, stride, I1)
-                        if 1 <= J < Y - 1 and 1 <= K < Z - 1:
-                            r = ((K - 1) * stride) * ny + (J - 1) * stride
-                            pos, st = _crossing(xlo, xhi, xhs, xls, xcnt, r, a, b, exiting)
+                        a, b = x0, _node_coord(lower[0], s, stride, ix1)
+                        if 1 <= iy < Y - 1 and 1 <= iz < Z - 1:
+                            r = ((iz - 1) * stride) * ny + (iy - 1) * stride
+                            pos, st = _crossing(xr, r, a, b, exiting)
                         x = pos if pos == pos else 0.5 * (a + b)
                     elif axis == 1:
-                        a, b = y0, _node_coord(lower[1], s, stride, J1)
-                        if 1 <= I < X - 1 and 1 <= K < Z - 1:
-                            r = ((K - 1) * stride) * nx + (I - 1) * stride
-                            pos, st = _crossing(ylo, yhi, yhs, yls, ycnt, r, a, b, exiting)
+                        a, b = y0, _node_coord(lower[1], s, stride, iy1)
+                        if 1 <= ix < X - 1 and 1 <= iz < Z - 1:
+                            r = ((iz - 1) * stride) * nx + (ix - 1) * stride
+                            pos, st = _crossing(yr, r, a, b, exiting)
                         y = pos if pos == pos else 0.5 * (a + b)
                     else:
-                        a, b = z0, _node_coord(lower[2], s, stride, K1)
-                        if 1 <= I < X - 1 and 1 <= J < Y - 1:
-                            r = ((J - 1) * stride) * nx + (I - 1) * stride
-                            pos, st = _crossing(zlo, zhi, zhs, zls, zcnt, r, a, b, exiting)
+                        a, b = z0, _node_coord(lower[2], s, stride, iz1)
+                        if 1 <= ix < X - 1 and 1 <= iy < Y - 1:
+                            r = ((iy - 1) * stride) * nx + (ix - 1) * stride
+                            pos, st = _crossing(zr, r, a, b, exiting)
                         z = pos if pos == pos else 0.5 * (a + b)
                     # the four cells around the edge, counter-clockwise seen from +axis
                     if axis == 0:
-                        c = ((I, J - 1, K - 1), (I, J, K - 1), (I, J, K), (I, J - 1, K))
+                        c = ((ix, iy - 1, iz - 1), (ix, iy, iz - 1), (ix, iy, iz), (ix, iy - 1, iz))
                     elif axis == 1:
-                        c = ((I - 1, J, K - 1), (I - 1, J, K), (I, J, K), (I, J, K - 1))
+                        c = ((ix - 1, iy, iz - 1), (ix - 1, iy, iz), (ix, iy, iz), (ix, iy, iz - 1))
                     else:
-                        c = ((I - 1, J - 1, K), (I, J - 1, K), (I, J, K), (I - 1, J, K))
+                        c = ((ix - 1, iy - 1, iz), (ix, iy - 1, iz), (ix, iy, iz), (ix - 1, iy, iz))
                     v = np.empty(4, np.int64)
                     for q in range(4):
                         ci, cj, ck = c[q]

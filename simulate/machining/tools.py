@@ -19,10 +19,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import Enum
+from typing import NamedTuple
 
 import numpy as np
 
 from identify.errors import InputError
+
+
+class CutterShape(NamedTuple):
+    """The cutter's analytic shape as the compiled kernels take it (module docstring)."""
+
+    R: float    # radius [m]
+    rc: float   # corner radius [m]
+    L: float    # fluted length [m]
 
 
 class CutterKind(str, Enum):
@@ -60,6 +69,11 @@ class Cutter:
     @property
     def radius(self) -> float:
         return 0.5 * self.diameter
+
+    @property
+    def shape(self) -> CutterShape:
+        """Radius, corner radius and fluted length [m] for the compiled kernels."""
+        return CutterShape(float(self.radius), float(self.corner_radius), float(self.length))
 
     def params(self) -> np.ndarray:
         """Kernel parameters ``[R, rc, L, N, tan(helix)]`` (SI)."""

@@ -53,14 +53,15 @@ class VirtualWorkpiece:
         return p
 
     @classmethod
-    def load(cls, path) -> "VirtualWorkpiece":
+    def load(cls, path) -> VirtualWorkpiece:
         p = Path(path)
         if not p.exists():
             raise InputError("virtual workpiece not found", source=str(p))
         z = np.load(p)
         fams = [RayFamily(a, z[f"f{a}_lo"], z[f"f{a}_hi"], z[f"f{a}_lo_step"], z[f"f{a}_hi_step"], z[f"f{a}_count"])
                 for a in range(3)]
-        wp = TriDexel(z["lower"], z["upper"], float(z["spacing"]), tuple(int(v) for v in z["shape"]), fams)
+        nx, ny, nz = (int(v) for v in z["shape"])
+        wp = TriDexel(z["lower"], z["upper"], float(z["spacing"]), (nx, ny, nz), fams)
         st = StepTable(*(z[f"step_{k}"] for k in StepTable.__dataclass_fields__))
         return cls(wp, st)
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from simulate.machining.cutting import Spindle, load_material, step_forces, substeps
+from simulate.machining.cutting import Spindle, force_model, load_material, step_forces, substeps
 from simulate.machining.removal import RemovalBuffers, remove_step
 
 
@@ -15,17 +15,14 @@ def run_path(wp, cutter, points, dt=0.002, rpm=10000.0, material="Al7075", force
     mat = load_material(material)
     sp = Spindle.from_rpm(rpm)
     steps = np.diff(points, axis=0)
-    buf = RemovalBuffers(wp, cutter.radius, float(np.max(np.linalg.norm(steps, axis=1))) if len(steps) else 0.0)
-    nsub = substeps(dt, sp.omega, cutter.flutes)
+    buf = RemovalBuffers.sized(wp, cutter.radius, float(np.max(np.linalg.norm(steps, axis=1))) if len(steps) else 0.0)
+    model = force_model(cutter, mat, sp, substeps(dt, sp.omega, cutter.flutes))
     out = np.zeros(4)
     F = np.zeros((len(points) - 1, 4))
     for k in range(1, len(points)):
         k0, nl, _ = remove_step(wp, cutter, points[k - 1], points[k], k, buf, sample=forces)
         if forces:
-            step_forces(buf.samp_ang, buf.samp_eng, buf.samp_cnt, k0, nl, wp.lower[2], wp.spacing,
-                        points[k - 1], points[k], dt, k * dt, cutter.radius, cutter.corner_radius,
-                        cutter.length, cutter.flutes, math.tan(cutter.helix), sp.omega, sp.phase,
-                        mat.kc, mat.ke, nsub, out)
+            step_forces(buf.samples, k0, nl, wp.grid, points[k - 1], points[k], dt, k * dt, model, out)
             F[k - 1] = out
     return F
 
