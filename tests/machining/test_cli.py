@@ -106,7 +106,7 @@ def _robot_with_tool(tmp_path, **tool):
     """A copy of data/robots/max100.toml with keys of its [tool] table replaced."""
     from greybench.support import resolve_robot
 
-    text = open(resolve_robot("max100"), encoding="utf-8").read()
+    text = resolve_robot("max100").read_text(encoding="utf-8")
     head, tail = text.split("\n[tool]\n")
     lines = tail.splitlines()
     for key, value in tool.items():

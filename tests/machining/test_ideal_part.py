@@ -96,7 +96,7 @@ def test_min_zone_plane_through_three_probed_lines_stands_at_their_weighted_mean
         c = rng.uniform(0.0, CUSP, 3)
         ys = [y0 + f * (y1 - y0) for f in (0.25, 0.5, 0.75)]
         pts = np.concatenate([np.column_stack([x, np.full_like(x, y), piece.slope_height(x) + ci])
-                              for y, ci in zip(ys, c)])
+                              for y, ci in zip(ys, c, strict=False)])
         dz = fit_plane_mz(pts).z_at(piece.slope_x[0], ys[1]) - float(piece.slope_height(piece.slope_x[0]))
         assert dz == pytest.approx((c[0] + 2 * c[1] + c[2]) / 4, abs=1e-12)
 
@@ -126,8 +126,8 @@ def test_ideal_robot_machines_iso160_to_the_drawing_coarse():
 def test_ideal_robot_machines_iso320_to_the_drawing_every_pose():
     """iso320 at the ranking spacing (0.5 mm) in every pose and at the one-part spacing (0.25 mm) in
     the first: every Table-2 row within 5 um, the slope height within [0, cusp] = [0, 4 um] and within
-    the window of the cusp profile its probed ray columns can see, every other row within 1 um; halving the spacing changes no row but the slope's (bounded at both) by
-    more than 1 um."""
+    the window of the cusp profile its probed ray columns can see, every other row within 1 um;
+    halving the spacing changes no row but the slope's (bounded at both) by more than 1 um."""
     ranking = _ideal_rows(320, defaults.RANKING_DEXEL_SPACING, poses=slice(None))
     assert len(ranking) == 4
     _assert_ideal(ranking)

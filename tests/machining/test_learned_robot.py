@@ -78,8 +78,10 @@ def test_learned_models_machine_a_different_part(learned_robot):
     jf_in, jf_le = np.abs(inline.result.joint_friction), np.abs(learned.result.joint_friction)
     assert np.all(jf_le[:, :3].max(axis=0) < 0.3 * jf_in[:, :3].max(axis=0))
     assert all(f["kind"] == "lugre" and f["source"] == "inline" for f in learned.friction[3:])
-    rms = lambda a, b: float(np.sqrt(np.mean((a - b) ** 2)))
-    pts = lambda mo: np.concatenate([mo.scan.points[k] for k in sorted(mo.scan.points)])
+    def rms(a, b):
+        return float(np.sqrt(np.mean((a - b) ** 2)))
+    def pts(mo):
+        return np.concatenate([mo.scan.points[k] for k in sorted(mo.scan.points)])
     assert rms(again.tracking_error, inline.tracking_error) == 0.0          # a repeated job: identical
     assert rms(pts(again), pts(inline)) == 0.0
     d_path = rms(learned.tracking_error, inline.tracking_error)
@@ -119,8 +121,9 @@ from simulate.robot.friction import loop_friction
 from simulate.robot.model import load_robot
 from simulate.toolpath.placement import load_poses
 pl = load_poses(Path({str(SMALL / "small160.poses.json")!r}))[0]
-run_job(MachiningJob(program=Path({str(SMALL / "small160.nc")!r}), robot=Path({str(ROOT / "data/robots/max100.toml")!r}),
-                     placement=pl, settings=MachiningSettings(spacing=4e-3)))
+run_job(MachiningJob(program=Path({str(SMALL / "small160.nc")!r}),
+                     robot=Path({str(ROOT / "data/robots/max100.toml")!r}), placement=pl,
+                     settings=MachiningSettings(spacing=4e-3)))
 print("torch" in sys.modules)
 """
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=600)

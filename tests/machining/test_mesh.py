@@ -130,7 +130,7 @@ def test_merging_flat_quads_keeps_surface_and_colours():
         assert one.mean() > 0.5
         key = cols[:, 0].astype(np.int64) @ np.array([1 << 24, 1 << 16, 1 << 8, 1])
         total = {}
-        for k, a in zip(key[one], m.area_faces[one]):
+        for k, a in zip(key[one], m.area_faces[one], strict=False):
             total[k] = total.get(k, 0.0) + a
         return total, m.area_faces[~one].sum()
 
@@ -142,8 +142,8 @@ def test_merging_flat_quads_keeps_surface_and_colours():
         assert a_merged[k] == pytest.approx(a_full[k], rel=1e-9, abs=1e-15)
     assert mixed_merged == pytest.approx(mixed_full, rel=1e-9)
     # every vertex kept is an original vertex with its original colour
-    lookup = {tuple(v): tuple(c) for v, c in zip(full.vertices, np.asarray(full.visual.vertex_colors))}
-    for v, c in zip(merged.vertices, np.asarray(merged.visual.vertex_colors)):
+    lookup = {tuple(v): tuple(c) for v, c in zip(full.vertices, np.asarray(full.visual.vertex_colors), strict=False)}
+    for v, c in zip(merged.vertices, np.asarray(merged.visual.vertex_colors), strict=False):
         assert lookup[tuple(v)] == tuple(c)
 
 

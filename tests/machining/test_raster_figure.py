@@ -70,7 +70,7 @@ def test_saved_workpiece_reads_back(tmp_path):
     st = StepTable(*(np.zeros((n, 3)) if k in ("deflection", "tracking_error") else np.arange(n)
                      for k in StepTable.__dataclass_fields__))
     back = VirtualWorkpiece.load(VirtualWorkpiece(wp, st).save(tmp_path / "w.npz"))
-    for a, b in zip(wp.families, back.workpiece.families):
+    for a, b in zip(wp.families, back.workpiece.families, strict=False):
         np.testing.assert_array_equal(a.lo, b.lo)
         np.testing.assert_array_equal(a.count, b.count)
     np.testing.assert_array_equal(back.steps.t, st.t)

@@ -70,7 +70,7 @@ def test_parallel_steps_match_serial():
                                  load_material("Al7075"), Spindle.from_rpm(12000), compliance=C, parallel_work=work)
         out.append((wp, res))
     (w0, r0), (w1, r1) = out
-    for f0, f1 in zip(w0.families, w1.families):
+    for f0, f1 in zip(w0.families, w1.families, strict=False):
         np.testing.assert_array_equal(f0.count, f1.count)
         np.testing.assert_array_equal(f0.lo, f1.lo)
         np.testing.assert_array_equal(f0.hi_step, f1.hi_step)
