@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import json
-import re
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +11,15 @@ import pytest
 from typer.testing import CliRunner
 
 from greybench.cli import app
-from simulate.evaluation.circle import (CircleSpec, Plane, circle_program, evaluate_circle, evaluate_run,
-                                        joint_reversals, simulate_circle)
+from simulate.evaluation.circle import (
+    CircleSpec,
+    Plane,
+    circle_program,
+    evaluate_circle,
+    evaluate_run,
+    joint_reversals,
+    simulate_circle,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 POSES = ROOT / "data" / "poses" / "iso320.json"
@@ -164,7 +171,7 @@ def test_no_backlash_removes_the_play_from_the_a1_lost_motion(robot, runs):
 
     with_play, without = a1_flips(runs["base"][0]), a1_flips(runs["no_backlash"][0])
     assert len(with_play) == len(without) == 2
-    for (lm, lever), (lm0, _) in zip(with_play, without):
+    for (lm, lever), (lm0, _) in zip(with_play, without, strict=True):
         assert lm - lm0 == pytest.approx(robot.backlash[0] * lever, rel=0.03)
 
 

@@ -2,6 +2,7 @@
 and a friction model registered in a temporary MLflow store."""
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -40,7 +41,7 @@ class Server:
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
 
-    def start(self, timeout: float = 60.0) -> "Server":
+    def start(self, timeout: float = 60.0) -> Server:
         self.log = self.data_dir.parent / f"server-{self.port}-{int(time.time() * 1000)}.log"
         self.proc = subprocess.Popen([GREYBENCH, "serve", "--port", str(self.port), "--log-level", "warning"],
                                      env=self.env, stdout=self.log.open("w"), stderr=subprocess.STDOUT,
@@ -67,10 +68,8 @@ class Server:
         """End the server and every process of its group (workers included)."""
         if self.proc is None:
             return
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(self.proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
         self.proc.wait(10)
 
     def client(self, **kw) -> httpx.Client:

@@ -6,9 +6,9 @@ import csv
 import io
 import json
 import time
+from pathlib import Path
 
 import pytest
-from pathlib import Path
 
 HEADERS = {"X-API-Key": "test-key-0123456789"}  # conftest.KEY
 BAD_GCODE = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 X10 Y0 Z0 F300\nG1 X10 Y10 Q\n"
@@ -76,8 +76,8 @@ def test_accepted_job_reports_its_status(client):
 def test_job_body_passes_robot_file_and_models(tmp_path, monkeypatch):
     """The job body hands run_compensation the shipped robot file and the fetched model folders per axis."""
     from service import compensation
-    from simulate import compensation_report
     from service.paths import DATA_DIR
+    from simulate import compensation_report
 
     seen = {}
 

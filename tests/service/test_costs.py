@@ -7,8 +7,17 @@ from pathlib import Path
 import pytest
 
 from identify.errors import InputError
-from simulate.costs import (BASELINE_BYTES, BYTES_PER_SAMPLE, DEXEL_COPIES, CostFields, CostLimits,
-                            check_machining_cost, check_program_size, dexel_bytes, stock_bounds)
+from simulate.costs import (
+    BASELINE_BYTES,
+    BYTES_PER_SAMPLE,
+    DEXEL_COPIES,
+    CostFields,
+    CostLimits,
+    check_machining_cost,
+    check_program_size,
+    dexel_bytes,
+    stock_bounds,
+)
 
 DATA = Path(__file__).resolve().parents[2] / "data"
 BOX_MM = '{"units": "mm", "box": {"min": [0, 0, 0], "max": [10, 20, 30]}}'

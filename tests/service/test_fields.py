@@ -3,7 +3,7 @@ form rows without a nominal size (JSON and CSV)."""
 import csv
 import io
 import json
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 from service.schemas import JobStatus, Report
 
@@ -22,7 +22,7 @@ def test_job_times_are_iso_8601_utc():
                    created=1_700_000_000.25, started=1_700_000_001.0, finished=None)
     doc = json.loads(st.model_dump_json())
     assert doc["created"] == "2023-11-14T22:13:20.250000Z" and doc["finished"] is None
-    assert datetime.fromisoformat(doc["started"]) == datetime.fromtimestamp(1_700_000_001.0, tz=timezone.utc)
+    assert datetime.fromisoformat(doc["started"]) == datetime.fromtimestamp(1_700_000_001.0, tz=UTC)
 
 
 def test_report_fields_carry_units_and_form_rows_no_nominal():

@@ -6,6 +6,7 @@ seconds (plus a server start); the soak with many jobs and a crash is marked slo
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -420,10 +421,8 @@ def test_workers_and_the_processes_they_fork_die_with_their_parent(tmp_path):
         parent.wait(10)
         wait_until(lambda: not alive(pids), 5, f"worker and its child {pids} ended")
     finally:
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(parent.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
 
 
 # ---- soak: many clients, jobs, cancels and a crash; nothing lost ------------------------------

@@ -121,7 +121,7 @@ def _record_csv(seed: int, n: int = 2000) -> str:
     q = 0.5 * np.sin(2 * np.pi * 0.7 * t)
     qd = 0.5 * 2 * np.pi * 0.7 * np.cos(2 * np.pi * 0.7 * t)
     tau = 1.0 * np.tanh(qd / 2e-3) + 0.6 * qd + rng.normal(0, 0.02, n)
-    lines = ["t,q,qd,tau"] + [f"{a:.6f},{b:.9f},{c:.9f},{d:.9f}" for a, b, c, d in zip(t, q, qd, tau)]
+    lines = ["t,q,qd,tau"] + [f"{a:.6f},{b:.9f},{c:.9f},{d:.9f}" for a, b, c, d in zip(t, q, qd, tau, strict=True)]
     return "\n".join(lines) + "\n"
 
 

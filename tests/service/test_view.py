@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import struct
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import service
 from service.view import sign, verify
 
 KEY = "test-key-0123456789"
@@ -111,7 +112,7 @@ def test_compensation_page_shows_before_and_after(client):
     data = client.get(f"/compensations/{job_id}/view/data", headers=HEADERS).json()
     sections = {s["type"]: s for s in data["sections"]}
     rows = sections["before-after"]["rows"]
-    for got, want in zip(rows, COMPENSATED_ROWS):
+    for got, want in zip(rows, COMPENSATED_ROWS, strict=True):
         assert got["name"] == want["name"]
         assert got["before_um"] == pytest.approx(want["before"] * 1e3)
         assert got["after_um"] == pytest.approx(want["after"] * 1e3)
@@ -131,10 +132,10 @@ def test_static_files_ship_with_the_package(client):
     assert r.status_code == 200 and "three.core.js" in r.text
     assert "MIT" in client.get("/view-static/vendor/three/LICENSE").text
     assert "three 0.187.0" in client.get("/view-static/vendor/three/VERSION").text
-    page = (shutil.os.path.dirname(__import__("service").__file__) + "/static/view/index.html")
-    text = open(page).read()
+    static = Path(service.__file__).parent / "static" / "view"
+    text = (static / "index.html").read_text()
     assert "http://" not in text and "https://" not in text   # nothing fetched from elsewhere
-    js = open(page.replace("index.html", "view.js")).read()
+    js = (static / "view.js").read_text()
     assert "http://" not in js and "https://" not in js
 
 
@@ -198,7 +199,7 @@ def test_view_data_is_the_report(job):
     sections = {s["type"]: s for s in data["sections"]}
     rows = sections["ranking"]["rows"]
     assert [r["name"] for r in rows] == [f["name"] for f in report["features"]] and len(rows) == 10
-    for r, f in zip(rows, report["features"]):
+    for r, f in zip(rows, report["features"], strict=True):
         assert r["tolerance_mm"] == f["tolerance_mm"] and r["deviation_mm"]["near"] == f["deviation_mm"]["near"]
     wp = sections["workpiece"]
     assert wp["poses"] == ["near"] and {v["name"] for v in wp["variables"]} >= {"deflection", "force", "switch"}
@@ -255,7 +256,8 @@ def test_click_is_what_trace_gives(job):
                   params={"x_mm": p[0] * 1e3, "y_mm": p[1] * 1e3, "z_mm": p[2] * 1e3, "radius_mm": 1.5}).json()
     tr = trace_point(vw, p, 1.5e-3, program=str(folder / "program.nc"))
     assert tr.lines, "the chosen point was machined"
-    assert [(ln["line"], ln["text"], ln["n_ends"]) for ln in r["lines"]] == [(t.line, t.text, t.n_ends) for t in tr.lines]
+    assert ([(ln["line"], ln["text"], ln["n_ends"]) for ln in r["lines"]]
+            == [(t.line, t.text, t.n_ends) for t in tr.lines])
     assert r["n_ends"] == tr.n_ends and r["t_first_s"] == pytest.approx(tr.times[0])
     program = (folder / "program.nc").read_text().splitlines()
     for ln in r["lines"]:
@@ -400,7 +402,7 @@ def test_page_in_chromium(job, browser, tmp_path):
     assert table.locator("tbody tr").count() == 10
     assert table.locator("thead th[data-pose='near']").count() == 1
     cells = table.locator("tbody tr td:nth-child(4)").all_inner_texts()
-    for text, f in zip(cells, report["features"]):
+    for text, f in zip(cells, report["features"], strict=True):
         dev = f["deviation_mm"]["near"]
         assert float(text) == pytest.approx(dev, abs=6e-5)
     marked = table.locator("td.in-tol").count()
@@ -468,7 +470,8 @@ def test_compensation_page_in_chromium(job, browser):
         link = c.post(f"/compensations/{job_id}/view-link").json()
     page, problems = _open(browser, srv.url + link["url"])
     rows = page.locator("section.before-after table tr").all_inner_texts()
-    assert len(rows) == 1 + len(COMPENSATED_ROWS) and rows[1].split("\t")[:4] == ["circle diameter", "20", "50.0", "12.0"]
+    assert len(rows) == 1 + len(COMPENSATED_ROWS)
+    assert rows[1].split("\t")[:4] == ["circle diameter", "20", "50.0", "12.0"]
     assert page.locator("section.before-after td.in-tol").count() == 3     # 12 µm; -4 and -9 µm of 20
     page.wait_for_function("document.querySelector('section.image img').naturalWidth === 60")
     assert not problems, problems

@@ -142,13 +142,14 @@ def test_placement_page_best_against_given(client):
     assert client.get(f"/placement-searches/{job_id}/view", headers=HEADERS).status_code == 200
     secs = _sections(client, "/placement-searches", job_id)
     poses = next(s for s in secs if s.get("id") == "poses")
-    rows = {r[0]: dict(zip(poses["columns"], r)) for r in poses["rows"]}
+    rows = {r[0]: dict(zip(poses["columns"], r, strict=True)) for r in poses["rows"]}
     assert list(rows) == ["optimised", "near", "far_rotated"] and poses["highlight"] == [0]
     best = rows["optimised"]
     assert [best["x [mm]"], best["y [mm]"], best["z [mm]"]] == pytest.approx([1620.0, -80.0, -50.0])
     assert best["yaw [deg]"] == pytest.approx(np.degrees(0.25)) and best["score [-]"] == 3.0
     # the given poses' places come from best.json; the gain is (score - best) / score
-    assert rows["far_rotated"]["yaw [deg]"] == pytest.approx(30.0) and rows["far_rotated"]["x [mm]"] == pytest.approx(1900.0)
+    assert rows["far_rotated"]["yaw [deg]"] == pytest.approx(30.0)
+    assert rows["far_rotated"]["x [mm]"] == pytest.approx(1900.0)
     assert rows["near"]["best is lower by [%]"] == pytest.approx(25.0)
     assert rows["far_rotated"]["best is lower by [%]"] == pytest.approx(40.0)
     items = dict(next(s for s in secs if s["type"] == "summary")["items"])
