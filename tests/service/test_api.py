@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-HEADERS = {"X-API-Key": "test-key-0123456789"}  # the key of conftest.KEY
+from .conftest import HEADERS
 
 BAD_GCODE = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 X10 Y0 Z0 F300\nG1 X10 Y10 Q\n"
 

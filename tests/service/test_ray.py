@@ -2,22 +2,12 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 
 from service.pipeline import PoseTask, run_local, run_ray
 
-DATA = Path(__file__).resolve().parents[2] / "data"
-
-
-def short_program() -> str:
-    """The 160 test piece's header and its last finishing pass (the slope's inner wall): a short,
-    real cut of the same part, so every pose simulation stays brief."""
-    lines = (DATA / "programs" / "iso160.nc").read_text().splitlines()
-    head = lines[:7]
-    start = next(i for i, line in enumerate(lines) if line.startswith("(slope inner wall"))
-    return "\n".join(head + lines[start:]) + "\n"
+from .conftest import DATA, short_program
 
 
 def test_ray_tasks_give_the_same_results_as_local(tmp_path):

@@ -11,7 +11,7 @@ import pytest
 import schemathesis
 from hypothesis import HealthCheck, settings
 
-KEY = "test-key-0123456789"
+from .conftest import KEY
 
 
 def _schema_document() -> dict:

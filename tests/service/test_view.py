@@ -9,7 +9,6 @@ they fail instead.
 from __future__ import annotations
 
 import json
-import os
 import struct
 import time
 from pathlib import Path
@@ -20,12 +19,9 @@ import pytest
 import service
 from service.view import sign, verify
 
-KEY = "test-key-0123456789"
-HEADERS = {"X-API-Key": KEY}
+from .conftest import HEADERS, KEY, ROBOT_FRICTION, Server, server_env, wait_for, watched_page
+
 JOB_ID = "0123456789abcdef0123456789abcdef"
-CHROMIUM = "/usr/bin/chromium"
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync", "--no-first-run"]
 
 
 # ---- signed links ---------------------------------------------------------------------------------------
@@ -140,31 +136,19 @@ def test_static_files_ship_with_the_package(client):
 
 
 # ---- one finished job -------------------------------------------------------------------------------
-def _poll(c, job: str, timeout: float = 1800) -> dict:
-    deadline = time.time() + timeout
-    while True:
-        st = c.get(f"/simulations/{job}").json()
-        if st["state"] in ("succeeded", "failed", "cancelled"):
-            return st
-        assert time.time() < deadline, st
-        time.sleep(0.5)
-
-
 @pytest.fixture(scope="module")
 def job(tmp_path_factory):
     """(server, job id, job folder) of one finished iso160 job, pose 'near', 1 mm dexels."""
-    from tests.service.conftest import Server, server_env
-
     d = tmp_path_factory.mktemp("view") / "data"
     srv = Server(data_dir=d, env=server_env(d)).start()
     try:
         with srv.client() as c:
             r = c.post("/simulations", json={"program": "iso160", "pose_set": "iso160", "select": ["near"],
                                              "options": {"spacing_mm": 1.0},
-                                             "friction": [{"axis": a, "model": "robot"} for a in range(1, 7)]})
+                                             "friction": ROBOT_FRICTION})
             assert r.status_code == 202, r.text
             job_id = r.json()["id"]
-            st = _poll(c, job_id)
+            st = wait_for(c, job_id, prefix="/simulations", timeout=1800, interval=0.5)
             assert st["state"] == "succeeded", st
         yield srv, job_id, d / "jobs" / job_id
     finally:
@@ -338,50 +322,21 @@ def test_links_and_files(job):
                      params={"token": tok}).status_code in (404, 422)
 
 
-# ---- the page in a browser ----------------------------------------------------------------------------
-def _browser():
-    required = os.environ.get("GREYBENCH_BROWSER_TESTS") == "required"
-    reason = None
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        reason = "the playwright package is not installed (pip install playwright)"
-    if reason is None and not os.path.exists(CHROMIUM):
-        reason = f"no chromium at {CHROMIUM} (apt-get install chromium)"
-    if reason:
-        if required:
-            pytest.fail(reason)
-        pytest.skip(reason)
-    return sync_playwright
-
-
+# ---- the page in a browser (the browser fixture: conftest) ----------------------------------------------
 def test_browser_tests_skip_with_a_reason_or_fail_when_required(monkeypatch):
-    import tests.service.test_view as me
+    from . import conftest
 
-    monkeypatch.setattr(me, "CHROMIUM", "/nonexistent/chromium")
+    monkeypatch.setattr(conftest, "CHROMIUM", "/nonexistent/chromium")
     monkeypatch.delenv("GREYBENCH_BROWSER_TESTS", raising=False)
     with pytest.raises(pytest.skip.Exception, match="chromium"):
-        me._browser()
+        conftest.require_browser()
     monkeypatch.setenv("GREYBENCH_BROWSER_TESTS", "required")
     with pytest.raises(pytest.fail.Exception, match="chromium"):
-        me._browser()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    sync_playwright = _browser()
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
-        yield b
-        b.close()
+        conftest.require_browser()
 
 
 def _open(browser, url):
-    page = browser.new_page(viewport={"width": 1280, "height": 1000})
-    problems = []
-    page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
-    page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
-    page.on("requestfailed", lambda r: problems.append(f"request failed: {r.url}"))
+    page, problems = watched_page(browser)
     page.goto(url)
     page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
     return page, problems
