@@ -501,11 +501,10 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     def report(request: Request, job_id: str = job_id_param,
                format: Literal["json", "csv"] = Query("json", description="json or csv")):
         rec = _job(request, job_id, JobKind.simulation)
-        # the CSV is built from report.json: the same unit-named fields as the JSON report
+        # the CSV is the job's report.csv, written with report.json: the same unit-named fields
         if format == "csv":
-            return _result(request, rec, "report.json",
-                           lambda p: PlainTextResponse(Report.csv_from_stored(json.loads(p.read_text())),
-                                                       media_type="text/csv"))
+            return _result(request, rec, "report.csv", lambda p: PlainTextResponse(p.read_text(),
+                                                                                  media_type="text/csv"))
         return _result(request, rec, "report.json", lambda p: Report.from_stored(job_id, json.loads(p.read_text())))
 
     @app.get("/simulations/{job_id}/workpiece/{pose}.glb", dependencies=keyed, tags=["simulations"],

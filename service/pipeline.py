@@ -32,6 +32,7 @@ import numpy as np
 
 from identify.errors import InputError
 from identify.files import atomic_folder
+from identify.records import write_table
 from service import schemas
 from service.paths import DATA_DIR
 from service.states import JobKind
@@ -344,7 +345,7 @@ def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address
               "friction": request.get("friction", [])}
     _write_atomic(job_dir / "report.json", json.dumps(report, indent=1))
     # the stored CSV is the one the API serves (unit-named columns, from report.json)
-    _write_atomic(job_dir / "report.csv", schemas.report_csv(report))
+    write_table(schemas.report_frame(report), job_dir / "report.csv")
     _write_atomic(job_dir / "ranking.json", json.dumps({"ranking": ranking}, indent=1))
     return {"ranking": ranking, "poses": poses, "backend": "ray" if ray_address else "local",
             "friction": request.get("friction", [])}

@@ -8,13 +8,16 @@ Friction references name registered MLflow models ``<robot>-axis<N>-friction`` b
 from __future__ import annotations
 
 from datetime import UTC, datetime
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from service.paths import NAME_PATTERN
 from service.states import JobKind, JobState
 from simulate.defaults import DEXEL_SPACING, RANKING_DEXEL_SPACING
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 Name = Annotated[str, Field(pattern=NAME_PATTERN, min_length=1, max_length=64)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -277,10 +280,6 @@ class Report(Strict):
         """From a job's ``report.json`` (rows with ``nominal``, ``tolerance``, ``deviation`` in mm or deg)."""
         return cls(job=job, poses=doc["poses"], features=[feature_row(r) for r in doc["features"]])
 
-    @staticmethod
-    def csv_from_stored(doc: dict) -> str:
-        """The CSV report (:func:`report_csv`) of a job's ``report.json``."""
-        return report_csv(doc)
 
 
 def feature_row(row: dict) -> FeatureRow:
@@ -300,20 +299,18 @@ def feature_row(row: dict) -> FeatureRow:
 REPORT_CSV_COLUMNS = ("feature", "nominal_mm", "nominal_deg", "tolerance_mm", "pose", "deviation_mm", "in_tolerance")
 
 
-def report_csv(doc: dict) -> str:
-    """The report as CSV (:data:`REPORT_CSV_COLUMNS`), from a job's ``report.json``."""
-    import csv
-    import io
+def report_frame(doc: dict) -> pd.DataFrame:
+    """The report as a table (:data:`REPORT_CSV_COLUMNS`: mm, deg), from a job's ``report.json``; the job
+    writes it as ``report.csv`` with :func:`identify.records.write_table`."""
+    import pandas as pd
 
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(REPORT_CSV_COLUMNS)
+    rows = []
     for stored in doc["features"]:
         row = feature_row(stored)
         for pose, dev in row.deviation_mm.items():
             ok = None if dev is None else abs(dev) <= row.tolerance_mm
-            w.writerow([row.name, row.nominal_mm, row.nominal_deg, row.tolerance_mm, pose, dev, ok])
-    return buf.getvalue()
+            rows.append([row.name, row.nominal_mm, row.nominal_deg, row.tolerance_mm, pose, dev, ok])
+    return pd.DataFrame(rows, columns=list(REPORT_CSV_COLUMNS))
 
 
 # ---- friction ---------------------------------------------------------------------------
