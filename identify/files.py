@@ -42,10 +42,13 @@ def as_created(path: str | os.PathLike, directory: bool = False) -> None:
 
 
 @contextmanager
-def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
+def atomic_file(path: str | os.PathLike, mode: int | None = None) -> Iterator[Path]:
     """Write a file atomically: yields a temporary path beside ``path`` (same folder, so the rename
     stays on one file system); when the block ends without an error it gets the mode of a new file
-    and is renamed onto ``path``, otherwise it is removed and ``path`` is left as it was."""
+    and is renamed onto ``path``, otherwise it is removed and ``path`` is left as it was.
+
+    ``mode``: the file's mode instead of a new file's, e.g. 0o600 for a secret (the temporary has
+    0600 from the start, so the content is never readable by others on the way)."""
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, name = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
@@ -53,7 +56,10 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
     tmp = Path(name)
     try:
         yield tmp
-        as_created(tmp)
+        if mode is None:
+            as_created(tmp)
+        else:
+            os.chmod(tmp, mode)
         os.replace(tmp, target)
     finally:
         if tmp.exists():
@@ -61,16 +67,27 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
 
 
 @contextmanager
-def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
+def atomic_folder(path: str | os.PathLike, replace: bool = True) -> Iterator[Path]:
     """Write a folder atomically: yields an empty temporary folder beside ``path``; when the block ends
     without an error it gets the mode of a new folder and replaces ``path`` (an existing folder is
-    removed first), otherwise it is removed and ``path`` is left as it was."""
+    removed first), otherwise it is removed and ``path`` is left as it was.
+
+    ``replace=False``: a folder at ``path`` (another writer's, finished first) is kept and this one
+    dropped; for content-addressed folders that concurrent writers fill alike, so a reader of the
+    first one never sees it removed."""
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     try:
         yield tmp
         as_created(tmp, directory=True)
+        if not replace:
+            try:
+                os.replace(tmp, target)
+            except OSError:
+                if not target.is_dir():
+                    raise
+            return
         if target.exists():
             shutil.rmtree(target)
         os.replace(tmp, target)

@@ -3,8 +3,8 @@
 Usage: python scripts/mutation_report.py [--survivors] [--sample N [--seed S] [MODULE_PREFIX ...]]
 
 ``--sample N`` prints (instead of the table) the names of N mutants drawn at random (seeded) per
-module among those not run yet (or reached by no test when last run), for ``mutmut run NAME ...``
-on a busy machine: a random sample's score estimates the module's score (about +-10 % at 95 % confidence for N = 80).
+module among those not run yet (or reached by no test when last run), for ``mutmut run NAME ...`` on a busy
+machine: a random sample's score estimates the module's score (about +-10 % at 95 % confidence for N = 80).
 
 The score is killed / checked: killed includes timeouts (the mutant hung the tests; counted apart in
 the last column) and checked
@@ -48,7 +48,7 @@ def main(argv: list[str]) -> int:
         skip = {i, i + 1} | ({argv.index("--seed"), argv.index("--seed") + 1} if "--seed" in argv else set())
         sample(metas, int(argv[i + 1]), seed, [a for k, a in enumerate(argv) if k not in skip])
         return 0
-    total = collections.Counter()
+    total: collections.Counter[str] = collections.Counter()
     print(f"{'module':45s} {'killed':>7s} {'checked':>8s} {'score':>7s} {'not run':>8s} {'timeout':>8s}")
     survivors = {}
     for meta in metas:

@@ -20,12 +20,13 @@ import math
 import sqlite3
 import sys
 import threading
-from contextlib import asynccontextmanager
+from contextlib import asynccontextmanager, suppress
 from pathlib import Path
 from typing import Literal
 
 import pandas as pd
-from fastapi import Depends, FastAPI, Path as PathParam, Query, Request
+from fastapi import Depends, FastAPI, Query, Request
+from fastapi import Path as PathParam
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, Response
 from fastapi_offline import FastAPIOffline
@@ -36,10 +37,26 @@ from service import registry
 from service.auth import require_key
 from service.jobs import DataDirLock, JobKind, JobManager, JobRecord, JobState, JobStore, QueueFull, owner_of
 from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside, named_file
-from service.schemas import (STATUS_BY_KIND, AnyJobStatus, DiagnoseJobStatus, DiagnoseRequest, ErrorBody,
-                             ExplainJobStatus, ExplainRequest, FrictionPredictRequest, FrictionPredictResponse, Health,
-                             JobStatus, ModelList, QueueInfo, Ranking, Report, SimulationJobStatus,
-                             SimulationRequest)
+from service.schemas import (
+    STATUS_BY_KIND,
+    AnyJobStatus,
+    DiagnoseJobStatus,
+    DiagnoseRequest,
+    ErrorBody,
+    ExplainJobStatus,
+    ExplainRequest,
+    FrictionPredictRequest,
+    FrictionPredictResponse,
+    Health,
+    JobStatus,
+    ModelList,
+    QueueInfo,
+    Ranking,
+    Report,
+    Responses,
+    SimulationJobStatus,
+    SimulationRequest,
+)
 from service.settings import ServiceSettings, load_settings
 
 VERSION = "0.1.0"
@@ -145,10 +162,8 @@ class BodyLimit:
                 started = True
             await send(message)
 
-        try:
+        with suppress(BodyTooLarge):
             await self.app(scope, limited_receive, guarded_send)
-        except BodyTooLarge:
-            pass
 
     async def _reject(self, send):
         body = json.dumps({"detail": f"request body larger than {self.limit} bytes"}).encode()
@@ -290,6 +305,7 @@ def _poses(body: SimulationRequest) -> list[dict]:
         data = {"poses": [p.model_dump() for p in body.poses]}
         source = "poses"
     else:
+        assert body.pose_set is not None  # the request's validator: exactly one of poses and pose_set
         path = named_file("poses", body.pose_set, ".json", "pose_set")
         try:
             data = json.loads(path.read_text())
@@ -342,10 +358,9 @@ def _read_csv(text: str, source: str) -> pd.DataFrame:
 
 
 def _warm_up() -> None:
-    try:
+    # an import failure shows where mlflow is used, with its own message
+    with suppress(Exception):
         import mlflow  # noqa: F401
-    except Exception:  # an import failure shows where mlflow is used, with its own message
-        pass
 
 
 # ---- app ------------------------------------------------------------------------------------
@@ -428,7 +443,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
     keyed = [Depends(require_key)]
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
-    not_found = {404: {"model": ErrorBody}}
+    not_found: Responses = {404: {"model": ErrorBody}}
 
     @app.get("/health", response_model=Health, tags=["service"])
     def health(request: Request) -> Health:
@@ -439,7 +454,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
     @app.get("/models", response_model=ModelList, dependencies=keyed, tags=["friction"])
     def models() -> ModelList:
-        return ModelList(models=registry.list_models(settings.mlflow_tracking_uri))
+        return ModelList.model_validate({"models": registry.list_models(settings.mlflow_tracking_uri)})
 
     @app.post("/simulations", status_code=202, response_model=SimulationJobStatus, dependencies=keyed,
               tags=["simulations"], responses={**not_found, 429: {"model": ErrorBody}})
@@ -486,11 +501,10 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     def report(request: Request, job_id: str = job_id_param,
                format: Literal["json", "csv"] = Query("json", description="json or csv")):
         rec = _job(request, job_id, JobKind.simulation)
-        # the CSV is built from report.json: the same unit-named fields as the JSON report
+        # the CSV is the job's report.csv, written with report.json: the same unit-named fields
         if format == "csv":
-            return _result(request, rec, "report.json",
-                           lambda p: PlainTextResponse(Report.csv_from_stored(json.loads(p.read_text())),
-                                                       media_type="text/csv"))
+            return _result(request, rec, "report.csv", lambda p: PlainTextResponse(p.read_text(),
+                                                                                  media_type="text/csv"))
         return _result(request, rec, "report.json", lambda p: Report.from_stored(job_id, json.loads(p.read_text())))
 
     @app.get("/simulations/{job_id}/workpiece/{pose}.glb", dependencies=keyed, tags=["simulations"],
@@ -573,6 +587,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
             if col not in scan.columns:
                 raise InputError(f"missing required column '{col}'", source="scan.csv", field=col)
         if isinstance(body.pose, str):
+            assert body.pose_set is not None  # the request's validator: a pose by name needs pose_set
             path = named_file("poses", body.pose_set, ".json", "pose_set")
             placements = {p.name: p for p in parse_poses(json.loads(path.read_text()), source=path.name)}
             if body.pose not in placements:
@@ -607,7 +622,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     add_compensation_routes(app, settings, keyed, svc)
     from service.circle import add_routes as add_circle_routes
     add_circle_routes(app, settings, keyed, svc)
-    from service.placement import add_routes as add_placement_routes   # placement searches (optimize-pose)
+    from service.placement import add_routes as add_placement_routes  # placement searches (optimize-pose)
     add_placement_routes(app, settings, keyed, svc)
     # the planner's browser page of finished jobs (HTML + its data routes); registered last
     from service.view import add_routes as add_view_routes

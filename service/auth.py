@@ -22,7 +22,7 @@ def key_ok(given: str | None, keys: frozenset[str]) -> bool:
 
 def require_key(request: Request, key: str | None = Security(api_key_header)) -> str:
     """FastAPI dependency: 401 without a valid key."""
-    if not key_ok(key, request.app.state.settings.keys()):
+    if key is None or not key_ok(key, request.app.state.settings.keys()):
         raise HTTPException(status_code=401, detail=f"missing or invalid {HEADER} header",
                             headers={"WWW-Authenticate": HEADER})
     request.state.api_key = key  # the job owner (per-key limits)

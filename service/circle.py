@@ -23,12 +23,13 @@ from pathlib import Path
 from types import ModuleType
 from typing import Annotated, Literal
 
-from fastapi import FastAPI, Path as PathParam, Request
+from fastapi import FastAPI, Request
+from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field
 
 from identify.errors import InputError
-from service.schemas import ErrorBody, Finite, JobStatus, SinglePoseJob, Strict
+from service.schemas import ErrorBody, Finite, JobStatus, Responses, SinglePoseJob, Strict
 
 #: Files a finished job serves, with their media types.
 FILES = {"circle.csv": "text/csv", "circle.png": "image/png", "summary.json": "application/json"}
@@ -105,11 +106,11 @@ def _check(robot: str, pose: dict, options: dict) -> None:
 def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
     """Register the circle routes on the service app; ``svc`` is :mod:`service.app`,
     whose request helpers the routes share (passed in, so this module does not import it back)."""
-    from service.states import JobKind
     from service.paths import JOB_ID_PATTERN, NAME_PATTERN
+    from service.states import JobKind
 
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
-    not_found = {404: {"model": ErrorBody}}
+    not_found: Responses = {404: {"model": ErrorBody}}
 
     @app.post("/circles", status_code=202, response_model=JobStatus, dependencies=keyed, tags=["circles"],
               responses={**not_found, 429: {"model": ErrorBody}})

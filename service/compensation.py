@@ -23,12 +23,13 @@ import tempfile
 from pathlib import Path
 from types import ModuleType
 
-from fastapi import FastAPI, Path as PathParam, Request
+from fastapi import FastAPI, Request
+from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field, model_validator
 
 from identify.errors import InputError
-from service.schemas import ErrorBody, JobStatus, Name, SinglePoseJob, Strict
+from service.schemas import ErrorBody, JobStatus, Name, Responses, SinglePoseJob, Strict
 from simulate.defaults import RANKING_DEXEL_SPACING
 
 #: Files a finished job serves, with their media types.
@@ -55,7 +56,7 @@ class CompensationRequest(SinglePoseJob):
     options: CompensationOptions = Field(default_factory=CompensationOptions)
 
     @model_validator(mode="after")
-    def _one_of_each(self) -> "CompensationRequest":
+    def _one_of_each(self) -> CompensationRequest:
         if (self.program is None) == (self.gcode is None):
             raise ValueError("give exactly one of 'program' (a name) and 'gcode' (text)")
         if any(not (0 < s <= 100) for s in self.options.check_scales):
@@ -66,11 +67,11 @@ class CompensationRequest(SinglePoseJob):
 def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
     """Register the compensation routes on the service app; ``svc`` is :mod:`service.app`, whose request
     helpers the routes share (passed in by it, so this module does not import it back)."""
-    from service.states import JobKind
     from service.paths import JOB_ID_PATTERN, NAME_PATTERN
+    from service.states import JobKind
 
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
-    not_found = {404: {"model": ErrorBody}}
+    not_found: Responses = {404: {"model": ErrorBody}}
 
     @app.post("/compensations", status_code=202, response_model=JobStatus, dependencies=keyed,
               tags=["compensations"], responses={**not_found, 429: {"model": ErrorBody}})
@@ -134,7 +135,8 @@ def run(request: dict, job_dir: Path, progress) -> dict:
 
         from simulate.pipeline import load_program
 
-        n = len(load_program(program, require_spindle=True, source=task.program_source).interp.t)
+        interp = load_program(program, require_spindle=True, source=task.program_source).interp
+        n = len(interp.t)
         scales = {float(opts.get("stiffness_scale", 1.0)), *map(float, opts.get("check_scales", []))} - {1.0}
         total = [n * (int(opts.get("iterations", 4)) + 1 + 2 * len(scales))]
         try:

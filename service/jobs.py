@@ -25,6 +25,7 @@ Design
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import hashlib
@@ -39,9 +40,9 @@ import threading
 import time
 import uuid
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 from identify.errors import InputError
 from service.states import JobKind, JobState
@@ -188,7 +189,9 @@ class JobStore:
             "INSERT INTO jobs (id, kind, state, boot, created, progress, message, request, owner) "
             "VALUES (?,?,?,?,?,?,?,?,?)",
             (job_id, kind.value, JobState.queued.value, boot, now, 0.0, "queued", json.dumps(request), owner))
-        return self.get(job_id)
+        rec = self.get(job_id)
+        assert rec is not None  # inserted just above
+        return rec
 
     def start(self, job_id: str, boot: str) -> bool:
         """queued -> running; False when the job is no longer queued (cancelled, recovered)."""
@@ -300,7 +303,7 @@ class DataDirLock:
         self.path = self.folder / "server.pid"
         self._fd: int | None = None
 
-    def acquire(self) -> "DataDirLock":
+    def acquire(self) -> DataDirLock:
         import fcntl
 
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -342,10 +345,8 @@ def kill_group(pid: int) -> None:
     try:
         os.killpg(pid, signal.SIGKILL)
     except (ProcessLookupError, PermissionError):
-        try:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
             os.kill(pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
 
 
 def _set_parent_death_signal() -> bool:
@@ -424,10 +425,8 @@ def run_in_worker(db_path: str, boot: str, job_id: str, kind: str, request: dict
 def _worker_main(parent_pid: int, threads: int, db_path: str, boot: str, job_id: str, kind: str, request: dict,
                  job_dir: str, ray_address: str | None) -> None:
     """Entry point of a worker process: own process group, dies with the server, sized thread pools."""
-    try:
+    with contextlib.suppress(OSError):
         os.setpgid(0, 0)
-    except OSError:
-        pass
     die_with_parent(parent_pid)
     from identify.resources import configure_threads
 
@@ -572,6 +571,7 @@ class JobManager:
                           str(self.job_dir(job_id)), self.ray_address))
                 proc.start()
                 self._running[job_id] = proc
+                assert proc.pid is not None  # set by start()
                 self.store.set_worker(job_id, proc.pid, process_start(proc.pid))
 
     def shutdown(self) -> None:
@@ -579,7 +579,7 @@ class JobManager:
         self._stop.set()
         self._wake.set()
         with self._lock:
-            for job_id, proc in self._running.items():
+            for proc in self._running.values():
                 if proc.pid is not None:
                     kill_group(proc.pid)
             for job_id, proc in self._running.items():

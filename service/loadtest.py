@@ -7,6 +7,7 @@ transport failure or any status other than the expected one (200 for a finished 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import signal
 import socket
@@ -45,7 +46,7 @@ async def _load(base_url: str, headers: dict, paths: list[str], clients: int, du
                 expect: dict) -> dict:
     import httpx
 
-    lat = {p: [] for p in paths}
+    lat: dict[str, list[float]] = {p: [] for p in paths}
     errors = {p: 0 for p in paths}
     codes: dict = {p: {} for p in paths}
     limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
@@ -132,8 +133,6 @@ def run_bench(clients: int = 50, duration: float = 20.0, spacing_mm: float = 2.0
                           "message": st["message"]}
             return res
         finally:
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.killpg(proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
             proc.wait(10)

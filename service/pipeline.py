@@ -22,19 +22,20 @@ names the registered version every axis used.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from identify.errors import InputError
+from identify.files import atomic_folder
+from identify.records import write_table
 from service import schemas
-from service.states import JobKind
 from service.paths import DATA_DIR
+from service.states import JobKind
 from simulate.defaults import DEXEL_SPACING, RANKING_DEXEL_SPACING
 
 Progress = Callable[[float, str], None]
@@ -139,17 +140,15 @@ def _model_folders(task: PoseTask) -> dict[int, str]:
             digest.update(rel.encode() + b"\0" + files[rel] + b"\0")
         folder = (_MODEL_CACHE / digest.hexdigest()[:32]).resolve()
         if not folder.exists():
-            tmp = Path(tempfile.mkdtemp(prefix=".model-", dir=_MODEL_CACHE)).resolve()
-            for rel, data in files.items():
-                target = (tmp / rel).resolve()
-                if tmp not in target.parents:
-                    raise InputError("model file outside its folder", field=f"friction[axis {axis}]")
-                target.parent.mkdir(parents=True, exist_ok=True)
-                target.write_bytes(data)
-            try:
-                os.replace(tmp, folder)
-            except OSError:   # another thread wrote the same content first
-                shutil.rmtree(tmp, ignore_errors=True)
+            # content-addressed: a thread that wrote the same content first keeps its folder
+            with atomic_folder(folder, replace=False) as stage:
+                tmp = stage.resolve()
+                for rel, data in files.items():
+                    target = (tmp / rel).resolve()
+                    if tmp not in target.parents:
+                        raise InputError("model file outside its folder", field=f"friction[axis {axis}]")
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    target.write_bytes(data)
         out[int(axis)] = str(folder)
     return out
 
@@ -321,12 +320,13 @@ def rank(outcomes: list[PoseOutcome]) -> tuple[list[dict], list[dict]]:
     order = sorted(outcomes, key=lambda o: (o.summary["score"], -o.summary["in_tolerance"], o.pose))
     ranking = [{"pose": o.pose, "score": o.summary["score"], "rank": i + 1, "in_tolerance": o.summary["in_tolerance"],
                 "worst_feature": o.summary["worst_feature"]} for i, o in enumerate(order)]
+    rows = {o.pose: o.features or [] for o in outcomes}
     features = []
     for j, row in enumerate(outcomes[0].features or []):
         features.append({"name": row["name"], "nominal": row["nominal"], "nominal_text": row["nominal_text"],
                          "tolerance": row["tolerance"],
-                         "deviation": {o.pose: o.features[j]["deviation"] for o in outcomes},
-                         "worst_instance": {o.pose: o.features[j]["worst_instance"] for o in outcomes}})
+                         "deviation": {pose: r[j]["deviation"] for pose, r in rows.items()},
+                         "worst_instance": {pose: r[j]["worst_instance"] for pose, r in rows.items()}})
     return ranking, features
 
 
@@ -345,7 +345,7 @@ def run_simulation(request: dict, job_dir: Path, progress: Progress, ray_address
               "friction": request.get("friction", [])}
     _write_atomic(job_dir / "report.json", json.dumps(report, indent=1))
     # the stored CSV is the one the API serves (unit-named columns, from report.json)
-    _write_atomic(job_dir / "report.csv", schemas.report_csv(report))
+    write_table(schemas.report_frame(report), job_dir / "report.csv")
     _write_atomic(job_dir / "ranking.json", json.dumps({"ranking": ranking}, indent=1))
     return {"ranking": ranking, "poses": poses, "backend": "ray" if ray_address else "local",
             "friction": request.get("friction", [])}

@@ -25,12 +25,13 @@ import tempfile
 from pathlib import Path
 from types import ModuleType
 
-from fastapi import FastAPI, Path as PathParam, Request
+from fastapi import FastAPI, Request
+from fastapi import Path as PathParam
 from fastapi.responses import FileResponse
 from pydantic import Field, model_validator
 
 from identify.errors import InputError
-from service.schemas import ErrorBody, Name, PlacementSearchJobStatus, PoseIn, Strict
+from service.schemas import ErrorBody, Name, PlacementSearchJobStatus, PoseIn, Responses, Strict
 from simulate.defaults import RANKING_DEXEL_SPACING
 
 #: Files a finished job serves, with their media types.
@@ -66,7 +67,7 @@ class PlacementSearchRequest(Strict):
     options: PlacementSearchOptions = Field(default_factory=PlacementSearchOptions)
 
     @model_validator(mode="after")
-    def _one_of_each(self) -> "PlacementSearchRequest":
+    def _one_of_each(self) -> PlacementSearchRequest:
         if (self.program is None) == (self.gcode is None):
             raise ValueError("give exactly one of 'program' (a name) and 'gcode' (text)")
         if (self.pose_set is None) == (self.poses is None):
@@ -115,18 +116,18 @@ def _plan(folder: Path, text: str, source: str, stock_text: str, stock_source: s
                            poses_source="poses")
     except InputError as exc:
         src = source if exc.source == str(folder / "program.nc") else exc.source
-        raise InputError(exc.message, source=src, field=_FIELDS.get(exc.field, exc.field), row=exc.row,
+        raise InputError(exc.message, source=src, field=_FIELDS.get(exc.field or "", exc.field), row=exc.row,
                          line=exc.line, column=exc.column) from None
 
 
 def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
     """Register the placement-search routes on the service app; ``svc`` is :mod:`service.app`,
     whose request helpers the routes share (passed in, so this module does not import it back)."""
-    from service.states import JobKind
     from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound
+    from service.states import JobKind
 
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
-    not_found = {404: {"model": ErrorBody}}
+    not_found: Responses = {404: {"model": ErrorBody}}
     kind = JobKind.placement_search
 
     @app.post("/placement-searches", status_code=202, response_model=PlacementSearchJobStatus, dependencies=keyed,

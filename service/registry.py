@@ -18,6 +18,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from identify.files import atomic_folder
 from identify.models.base import PARAMS_FILE
 
 #: Test metrics shown by ``GET /models`` when the run logged them.
@@ -166,20 +167,17 @@ def fetch(model: ResolvedModel, into: str | Path, tracking_uri: str | None = Non
 
     into = Path(into)
     into.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{into.name}.", dir=into.parent))
-    try:
+    # the download holds more than the model (the run's other artifacts): only its model folder is kept
+    with (tempfile.TemporaryDirectory(prefix=f".{into.name}.", dir=into.parent) as download,
+          atomic_folder(into) as stage):
         uri = store_uri(tracking_uri)
         if uri:
             mlflow.set_tracking_uri(uri)
             mlflow.set_registry_uri(uri)
-        local = Path(mlflow.artifacts.download_artifacts(artifact_uri=model.uri, dst_path=str(tmp)))
+        local = Path(mlflow.artifacts.download_artifacts(artifact_uri=model.uri, dst_path=download))
         found = sorted(local.rglob(PARAMS_FILE), key=lambda p: len(p.parts))
         if not found:
             raise ModelNotFound(f"registered model {model.uri} holds no saved friction model ({PARAMS_FILE})",
                                 model.name)
-        if into.exists():
-            shutil.rmtree(into)
-        os.replace(found[0].parent, into)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.copytree(found[0].parent, stage, dirs_exist_ok=True)
     return into

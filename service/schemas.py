@@ -7,14 +7,17 @@ Friction references name registered MLflow models ``<robot>-axis<N>-friction`` b
 """
 from __future__ import annotations
 
-from datetime import datetime, timezone
-from typing import Annotated, Any, Literal, Union
+from datetime import UTC, datetime
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
-from service.states import JobKind, JobState
 from service.paths import NAME_PATTERN
+from service.states import JobKind, JobState
 from simulate.defaults import DEXEL_SPACING, RANKING_DEXEL_SPACING
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 Name = Annotated[str, Field(pattern=NAME_PATTERN, min_length=1, max_length=64)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -24,7 +27,7 @@ def _utc(value: Any) -> Any:
     """Seconds since the Unix epoch -> an aware UTC datetime (ISO 8601 in JSON, e.g.
     ``2026-05-04T12:00:00.250000Z``)."""
     if isinstance(value, (int, float)) and not isinstance(value, bool):
-        return datetime.fromtimestamp(value, tz=timezone.utc)
+        return datetime.fromtimestamp(value, tz=UTC)
     return value
 
 
@@ -137,7 +140,7 @@ class SimulationRequest(Strict):
     options: SimulationOptions = Field(default_factory=SimulationOptions)
 
     @model_validator(mode="after")
-    def _one_of_each(self) -> "SimulationRequest":
+    def _one_of_each(self) -> SimulationRequest:
         if (self.program is None) == (self.gcode is None):
             raise ValueError("give exactly one of 'program' (a name) and 'gcode' (text)")
         if (self.pose_set is None) == (self.poses is None):
@@ -165,7 +168,7 @@ class SinglePoseJob(Strict):
                                                      "when registered, else the robot file's friction")
 
     @model_validator(mode="after")
-    def _pose_and_axes(self) -> "SinglePoseJob":
+    def _pose_and_axes(self) -> SinglePoseJob:
         if isinstance(self.pose, str) and self.pose_set is None:
             raise ValueError("a pose given by name needs 'pose_set'")
         axes = [f.axis for f in self.friction]
@@ -228,9 +231,12 @@ class CircleJobStatus(JobStatus):
     kind: Literal[JobKind.circle] = Field(description="'circle'")
 
 
+#: A route's documented error answers (FastAPI's ``responses``), e.g. ``{404: {"model": ErrorBody}}``.
+Responses = dict[int | str, dict[str, Any]]
+
 #: Any job's status: one of the kinds, told apart by ``kind`` (OpenAPI ``oneOf`` with a discriminator).
-AnyJobStatus = Annotated[Union[SimulationJobStatus, DiagnoseJobStatus, ExplainJobStatus, CompensationJobStatus,
-                               PlacementSearchJobStatus, CircleJobStatus], Field(discriminator="kind")]
+AnyJobStatus = Annotated[SimulationJobStatus | DiagnoseJobStatus | ExplainJobStatus | CompensationJobStatus
+                         | PlacementSearchJobStatus | CircleJobStatus, Field(discriminator="kind")]
 STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: DiagnoseJobStatus,
                   JobKind.explain: ExplainJobStatus, JobKind.compensation: CompensationJobStatus,
                   JobKind.placement_search: PlacementSearchJobStatus, JobKind.circle: CircleJobStatus}
@@ -264,19 +270,16 @@ class FeatureRow(Strict):
 class Report(Strict):
     job: str
     poses: list[dict[str, Any]] = Field(description="per pose: steps, simulated_time_s [s], switching points, "
-                                                    "max_tracking_error_m [m], peak_force_n [N], peak_deflection_m [m], "
-                                                    "friction (per joint the model kind and registered version used)")
+                                                    "max_tracking_error_m [m], peak_force_n [N], "
+                                                    "peak_deflection_m [m], friction (per joint the model kind "
+                                                    "and registered version used)")
     features: list[FeatureRow]
 
     @classmethod
-    def from_stored(cls, job: str, doc: dict) -> "Report":
+    def from_stored(cls, job: str, doc: dict) -> Report:
         """From a job's ``report.json`` (rows with ``nominal``, ``tolerance``, ``deviation`` in mm or deg)."""
         return cls(job=job, poses=doc["poses"], features=[feature_row(r) for r in doc["features"]])
 
-    @staticmethod
-    def csv_from_stored(doc: dict) -> str:
-        """The CSV report (:func:`report_csv`) of a job's ``report.json``."""
-        return report_csv(doc)
 
 
 def feature_row(row: dict) -> FeatureRow:
@@ -296,20 +299,18 @@ def feature_row(row: dict) -> FeatureRow:
 REPORT_CSV_COLUMNS = ("feature", "nominal_mm", "nominal_deg", "tolerance_mm", "pose", "deviation_mm", "in_tolerance")
 
 
-def report_csv(doc: dict) -> str:
-    """The report as CSV (:data:`REPORT_CSV_COLUMNS`), from a job's ``report.json``."""
-    import csv
-    import io
+def report_frame(doc: dict) -> pd.DataFrame:
+    """The report as a table (:data:`REPORT_CSV_COLUMNS`: mm, deg), from a job's ``report.json``; the job
+    writes it as ``report.csv`` with :func:`identify.records.write_table`."""
+    import pandas as pd
 
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(REPORT_CSV_COLUMNS)
+    rows = []
     for stored in doc["features"]:
         row = feature_row(stored)
         for pose, dev in row.deviation_mm.items():
             ok = None if dev is None else abs(dev) <= row.tolerance_mm
-            w.writerow([row.name, row.nominal_mm, row.nominal_deg, row.tolerance_mm, pose, dev, ok])
-    return buf.getvalue()
+            rows.append([row.name, row.nominal_mm, row.nominal_deg, row.tolerance_mm, pose, dev, ok])
+    return pd.DataFrame(rows, columns=list(REPORT_CSV_COLUMNS))
 
 
 # ---- friction ---------------------------------------------------------------------------
@@ -340,7 +341,8 @@ class FrictionPredictResponse(Strict):
 class DiagnoseRequest(Strict):
     train_csv: str = Field(min_length=1, max_length=MAX_PROGRAM_CHARS * 8,
                            description="training axis record, CSV with t [s], q [rad], tau [Nm] (+ optional columns)")
-    test_csv: str = Field(min_length=1, max_length=MAX_PROGRAM_CHARS * 8, description="held-out axis record, same format")
+    test_csv: str = Field(min_length=1, max_length=MAX_PROGRAM_CHARS * 8,
+                          description="held-out axis record, same format")
     seed: int = Field(0, ge=0, le=2**31 - 1, description="seed of the LuGre baseline's genetic algorithm [-]")
     generations: int = Field(30, ge=1, le=200, description="GA generations of the LuGre baseline [-]")
 
@@ -366,7 +368,7 @@ class ExplainRequest(Strict):
     max_sims: int = Field(3, ge=1, le=10, description="re-simulations for the calibration [-]")
 
     @model_validator(mode="after")
-    def _one_program(self) -> "ExplainRequest":
+    def _one_program(self) -> ExplainRequest:
         if (self.program is None) == (self.gcode is None):
             raise ValueError("give exactly one of 'program' (a name) and 'gcode' (text)")
         if isinstance(self.pose, str) and self.pose_set is None:

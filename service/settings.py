@@ -73,7 +73,7 @@ class ServiceSettings(BaseSettings):
                                             description="MLflow store with the registered friction models")
 
     @model_validator(mode="after")
-    def _check_keys(self) -> "ServiceSettings":
+    def _check_keys(self) -> ServiceSettings:
         keys = self.keys()
         if not keys and not self.dev_mode:
             raise ValueError("no API key configured: set GREYBENCH_API_KEYS (comma-separated) "

@@ -51,17 +51,24 @@ import struct
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from fastapi import Body, Depends, HTTPException, Path as PathParam, Query, Request, Security
+from fastapi import Body, Depends, HTTPException, Query, Request, Security
+from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, Response
 
 from identify.errors import InputError
+from identify.files import atomic_file
 from service.auth import HEADER, api_key_header, key_ok
+
+if TYPE_CHECKING:
+    from service.jobs import JobRecord
+    from service.states import JobKind
 
 STATIC = Path(__file__).parent / "static"
 #: Lifetime of a signed view link unless the request asks otherwise [s], and the longest allowed.
@@ -86,11 +93,8 @@ def secret(settings) -> bytes:
     except (OSError, ValueError):
         pass
     value = os.urandom(32)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path.with_suffix(".tmp"), os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w") as f:
-        f.write(value.hex())
-    os.replace(path.with_suffix(".tmp"), path)
+    with atomic_file(path, mode=0o600) as tmp:
+        tmp.write_text(value.hex())
     return value
 
 
@@ -122,16 +126,16 @@ def verify(key: bytes, token: str | None, job_id: str, now: float | None = None)
 class ViewKind:
     """A job kind's page: its URL prefix (``/simulations``) and ``sections(ctx) -> list of dict``."""
 
-    kind: object
+    kind: JobKind
     prefix: str
     title: str
-    sections: Callable[["Context"], list[dict]]
+    sections: Callable[[Context], list[dict]]
 
 
 VIEWS: dict[str, ViewKind] = {}
 
 
-def register(kind, prefix: str, title: str, sections: Callable[["Context"], list[dict]]) -> None:
+def register(kind: JobKind, prefix: str, title: str, sections: Callable[[Context], list[dict]]) -> None:
     """Give job kind ``kind`` (a :class:`service.jobs.JobKind`) a page under ``<prefix>/{id}/view``."""
     VIEWS[prefix] = ViewKind(kind, prefix, title, sections)
 
@@ -140,11 +144,11 @@ def register(kind, prefix: str, title: str, sections: Callable[["Context"], list
 class Context:
     """What a sections function gets: the request, the job record and URL helpers."""
 
-    request: object
-    rec: object
+    request: Request
+    rec: JobRecord
     prefix: str
     token: str | None
-    svc: object = None   # service.app: its request helpers (passed in, no import back)
+    svc: Any = None   # service.app: its request helpers (passed in, no import back)
 
     @property
     def job_dir(self) -> Path:
@@ -408,7 +412,7 @@ def compensation_sections(ctx: Context) -> list[dict]:
     """Table-2 deviations before and after compensation, the deviation plot, downloads."""
     info = ctx.rec.result or {}
     ev = info.get("evaluation") or {}
-    out = [{"type": "summary", "title": "Compensation", "items": [
+    out: list[dict] = [{"type": "summary", "title": "Compensation", "items": [
         ["sum of |deviation| before [µm]", _um(ev.get("sum_before_mm"))],
         ["sum of |deviation| after [µm]", _um(ev.get("sum_after_mm"))],
         ["after / before [-]", ev.get("ratio")], ["score before [-]", ev.get("score_before")],
@@ -461,7 +465,7 @@ def circle_sections(ctx: Context) -> list[dict]:
     s = _read_json(ctx, "out/summary.json")
     c = s.get("center_offset_um") or [None, None]
     spikes = s.get("reversal_spikes") or []
-    out = [{"type": "summary", "title": "Circle test", "items": [
+    out: list[dict] = [{"type": "summary", "title": "Circle test", "items": [
         ["roundness (circular deviation G, ISO 230-4) [µm]", _num(s.get("roundness_um"))],
         ["radius error (least-squares radius - nominal) [µm]", _num(s.get("radius_error_um"))],
         ["centre offset, in-plane axes [µm]", ", ".join("-" if _num(v) is None else f"{float(v):.2f}" for v in c)],
@@ -470,7 +474,8 @@ def circle_sections(ctx: Context) -> list[dict]:
         ["plane, direction", f"{s.get('plane', '-')}, {'clockwise (G2)' if s.get('cw') else 'counter-clockwise (G3)'}"],
         ["robot, pose", f"{s.get('robot', '-')}, {s.get('pose', '-')}"],
         ["friction, backlash, friction feed-forward", ", ".join(
-            "-" if s.get(k) is None else ("on" if s.get(k) else "off") for k in ("friction", "backlash", "ff_friction"))],
+            "-" if s.get(k) is None else ("on" if s.get(k) else "off")
+            for k in ("friction", "backlash", "ff_friction"))],
         ["friction scale [-]", _num(s.get("friction_scale"))]]},
         {"type": "table", "title": "Reversal spikes", "id": "spikes",
          "columns": ["angle [deg]", "joint", "height [µm]"],
@@ -637,14 +642,14 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
     from fastapi.staticfiles import StaticFiles
     from starlette.middleware.gzip import GZipMiddleware
 
-    from service.states import JobState
     from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside
-    from service.schemas import ErrorBody
+    from service.schemas import ErrorBody, Responses
+    from service.states import JobState
 
     key_bytes = secret(settings)
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
     token_param = Query(None, max_length=200, description="signed view link token (from POST .../view-link)")
-    errors = {401: {"model": ErrorBody}, 404: {"model": ErrorBody}, 409: {"model": ErrorBody}}
+    errors: Responses = {401: {"model": ErrorBody}, 404: {"model": ErrorBody}, 409: {"model": ErrorBody}}
     # the page answers HTML; schema errors (422) stay JSON like every route's
     html_errors = {200: {"content": {"text/html": {}}, "description": "the page"},
                    401: {"content": {"text/html": {}}, "description": "the key form (no job data)"},
@@ -734,8 +739,8 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
             return vw, (ctx.rec.id, pose, digests[name])
 
         pose_param = PathParam(pattern=NAME_PATTERN, description="pose name")
-        binary = {200: {"content": {"application/octet-stream": {}},
-                        "description": "uint32 header length, JSON header, raw little-endian arrays"}}
+        binary: Responses = {200: {"content": {"application/octet-stream": {}},
+                               "description": "uint32 header length, JSON header, raw little-endian arrays"}}
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/mesh", tags=[tag], responses={**errors, **binary},
                  summary="Surface mesh of a pose's virtual workpiece (binary: vertices [mm], triangles)")

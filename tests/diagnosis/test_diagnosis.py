@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from identify.diagnosis_cases import effect_rms, magnitude_for
 from identify.diagnosis import Cause, diagnose, ripple_periodogram
+from identify.diagnosis_cases import effect_rms, magnitude_for
 from identify.errors import InputError
 from identify.models import load_model
 from identify.models.extended import LuGreExtended

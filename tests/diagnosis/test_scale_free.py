@@ -2,11 +2,10 @@
 the same named cause; a ripple needs two periods inside the travel; a cos(q) residue the
 rigid-body torque left is named gravity and modelled; the temperature extension's accuracy."""
 import numpy as np
-import pandas as pd
 import pytest
 
-from identify.diagnosis_cases import magnitude_for
 from identify.diagnosis import Cause, diagnose
+from identify.diagnosis_cases import magnitude_for
 from identify.plant import PlantConfig
 from identify.records import validate_frame
 

@@ -7,9 +7,9 @@ import numpy as np
 from typer.testing import CliRunner
 
 from greybench.cli import app
+from simulate.evaluation.nominal import nominal_workpiece
 from simulate.machining.simulation import StepTable
 from simulate.machining.virtual_workpiece import VirtualWorkpiece
-from simulate.evaluation.nominal import nominal_workpiece
 
 runner = CliRunner()
 

@@ -7,8 +7,17 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize, minimize_scalar
 
-from simulate.evaluation.fits import (FitMethod, angle_between, fit_circle_kasa, fit_circle_ls, fit_circle_mz,
-                                      fit_line_ls, fit_line_mz, fit_plane_ls, fit_plane_mz)
+from simulate.evaluation.fits import (
+    FitMethod,
+    angle_between,
+    fit_circle_kasa,
+    fit_circle_ls,
+    fit_circle_mz,
+    fit_line_ls,
+    fit_line_mz,
+    fit_plane_ls,
+    fit_plane_mz,
+)
 
 
 def lobed_circle(center, R, A, lobes, n, noise, seed):
@@ -44,7 +53,7 @@ def test_ls_circle_with_noise_recovers_radius():
     assert f.radius == pytest.approx(0.109, abs=1e-6)
     np.testing.assert_allclose(f.center, [0.01, -0.02], atol=1e-6)
     c, R = fit_circle_kasa(p)
-    assert R == pytest.approx(0.109, abs=1e-6)
+    assert pytest.approx(0.109, abs=1e-6) == R
 
 
 @pytest.mark.parametrize("lobes", [2, 3, 5])
@@ -65,7 +74,7 @@ def _brute_roundness(p, c0, span):
         d = np.hypot(p[:, 0] - c[0], p[:, 1] - c[1])
         return d.max() - d.min()
     g = np.linspace(-span, span, 81)
-    best = min(((zone(c0 + np.array([a, b])), a, b) for a in g for b in g))
+    best = min((zone(c0 + np.array([a, b])), a, b) for a in g for b in g)
     x0 = c0 + np.array(best[1:])
     for _ in range(4):  # restarts of the non-smooth simplex
         r = minimize(zone, x0, method="Nelder-Mead", options=dict(xatol=1e-14, fatol=1e-16, maxiter=20000))

@@ -7,12 +7,13 @@ import math
 import pytest
 
 from simulate.evaluation.features import TABLE2, FeatureRow, FeatureTable
-from simulate.evaluation.ranking import Ranking, RankEntry, PoseResult, ranking_json
+from simulate.evaluation.ranking import PoseResult, RankEntry, Ranking, ranking_json
 from simulate.explain.measured import read_measured_table
 from simulate.pipeline import Components
 from simulate.toolpath.placement import Placement
 
-NOMINAL = {"circle diameter": (0.108, "m"), "slope angle": (math.radians(5.0), "rad"), "circle height zMZ": (0.006, "m")}
+NOMINAL = {"circle diameter": (0.108, "m"), "slope angle": (math.radians(5.0), "rad"),
+           "circle height zMZ": (0.006, "m")}
 
 
 def _table(dev_um: float) -> FeatureTable:
@@ -35,10 +36,9 @@ def _ranking() -> Ranking:
 def _numeric_keys(obj, path=""):
     if isinstance(obj, dict):
         for k, v in obj.items():
-            if isinstance(v, (int, float)) and not isinstance(v, bool) or v is None:
-                yield path + k
-            elif isinstance(v, dict) and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                             for x in v.values()):
+            if (isinstance(v, (int, float)) and not isinstance(v, bool) or v is None
+                    or isinstance(v, dict) and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                   for x in v.values())):
                 yield path + k
             else:
                 yield from _numeric_keys(v, path + k + ".")
@@ -55,7 +55,8 @@ def test_fields_carry_units_and_form_rows_have_no_nominal():
     assert keys == {"ranking.rank", "ranking.score", "ranking.in_tolerance", "features.nominal_mm",
                     "features.nominal_deg", "features.tolerance_mm", "features.deviation_mm"}
     rows = {f["name"]: f for f in doc["features"]}
-    assert rows["circle diameter"]["nominal_mm"] == pytest.approx(108.0) and rows["circle diameter"]["nominal_deg"] is None
+    assert rows["circle diameter"]["nominal_mm"] == pytest.approx(108.0)
+    assert rows["circle diameter"]["nominal_deg"] is None
     assert rows["slope angle"]["nominal_deg"] == pytest.approx(5.0) and rows["slope angle"]["nominal_mm"] is None
     for form in ("circle roundness", "square straightness (4x)", "slope straightness"):
         assert rows[form]["nominal_mm"] is None and rows[form]["nominal_deg"] is None

@@ -8,7 +8,6 @@ import pytest
 
 from simulate.explain.pipeline import explain_part
 
-
 # (kind, axis, hidden value): stiffness factor, backlash added [rad], friction factor, tool radius change [m].
 # With the shipped max100 (velocity and torque feed-forward on, PI velocity loop) friction changes show only as
 # small reversal marks: on this part and pose, axis-3 friction x2 moves the probed surfaces by 1.3 um RMS

@@ -41,6 +41,32 @@ def test_atomic_folder_replaces_a_folder_or_leaves_it(tmp_path):
     assert sorted(p.name for p in target.iterdir()) == ["b.txt"] and _leftovers(tmp_path) == []
 
 
+def test_atomic_file_mode_keeps_a_secret_private(tmp_path):
+    target = tmp_path / "secret"
+    old = os.umask(0o022)
+    try:
+        with atomic_file(target, mode=0o600) as tmp:
+            tmp.write_text("abc")
+    finally:
+        os.umask(old)
+    assert target.read_text() == "abc" and _leftovers(tmp_path) == []
+    assert stat.S_IMODE(target.stat().st_mode) == 0o600  # not the umask's 0644
+
+
+def test_atomic_folder_without_replace_keeps_the_first_writers_folder(tmp_path):
+    target = tmp_path / "cache"
+    with atomic_folder(target, replace=False) as stage:
+        (stage / "a.txt").write_text("first")
+    assert (target / "a.txt").read_text() == "first"
+    # a second writer of the same key finishes later: the first folder stays, the second is dropped
+    with atomic_folder(target, replace=False) as stage:
+        (stage / "b.txt").write_text("second")
+    assert sorted(p.name for p in target.iterdir()) == ["a.txt"] and _leftovers(tmp_path) == []
+    with pytest.raises(ValueError), atomic_folder(tmp_path / "other", replace=False) as stage:
+        raise ValueError("failed while writing")
+    assert not (tmp_path / "other").exists() and _leftovers(tmp_path) == []
+
+
 def test_markdown_table_lines():
     lines = markdown_table(("model", "RMSE [Nm]"), [("lugre", "0.0213"), ("a|b", 2)])
     assert lines == ["| model | RMSE [Nm] |", "|---|---|", "| lugre | 0.0213 |", "| a\\|b | 2 |"]

@@ -64,7 +64,7 @@ def short_records():
 def short_files(tmp_path_factory, short_records):
     d = tmp_path_factory.mktemp("records")
     paths = []
-    for name, rec in zip(("train.csv", "test.csv"), short_records):
+    for name, rec in zip(("train.csv", "test.csv"), short_records, strict=True):
         write_table(rec.frame, d / name)
         paths.append(d / name)
     return tuple(paths)

@@ -36,7 +36,7 @@ def test_scan_gradient_matches_loop():
     w = torch.randn(301, generator=gen, dtype=torch.float64)
     ga = torch.autograd.grad((linear_recurrence(a, b, 0.1) * w).sum(), (a, b))
     gl = torch.autograd.grad((linear_recurrence_loop(a, b, 0.1) * w).sum(), (a, b))
-    for x, y in zip(ga, gl):
+    for x, y in zip(ga, gl, strict=True):
         torch.testing.assert_close(x, y, rtol=1e-10, atol=1e-12)
 
 

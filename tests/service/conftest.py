@@ -2,6 +2,7 @@
 and a friction model registered in a temporary MLflow store."""
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -18,6 +19,37 @@ import pytest
 KEY = "test-key-0123456789"
 HEADERS = {"X-API-Key": KEY}
 GREYBENCH = str(Path(sys.executable).parent / "greybench")
+DATA = Path(__file__).resolve().parents[2] / "data"
+#: Every axis with the robot file's own friction: a job that does not depend on the MLflow registry.
+ROBOT_FRICTION = [{"axis": a, "model": "robot"} for a in range(1, 7)]
+#: A job's final states.
+FINISHED = ("succeeded", "failed", "cancelled")
+#: The system's chromium, driven headless by playwright (no browser download).
+CHROMIUM = "/usr/bin/chromium"
+FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+         "--disable-component-update", "--disable-sync", "--no-first-run"]
+
+
+def short_program() -> str:
+    """The 160 test piece's header and its last finishing pass (the slope's inner wall): a real but
+    short cut of the same part, so a pose simulation takes seconds (the full program runs in the slow tests)."""
+    lines = (DATA / "programs" / "iso160.nc").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("(slope inner wall"))
+    return "\n".join(lines[:7] + lines[start:]) + "\n"
+
+
+def wait_for(client: httpx.Client, job: str, states: tuple[str, ...] = FINISHED, timeout: float = 120.0,
+             prefix: str = "/jobs", interval: float = 0.2) -> dict:
+    """Poll ``<prefix>/<job>`` every ``interval`` [s] until the job's state is one of ``states``; its status.
+    AssertionError after ``timeout`` [s]."""
+    deadline = time.time() + timeout
+    while True:
+        st = client.get(f"{prefix}/{job}").json()
+        if st["state"] in states:
+            return st
+        if time.time() > deadline:
+            raise AssertionError(f"job {job} still {st['state']} after {timeout} s: {st}")
+        time.sleep(interval)
 
 
 def free_port() -> int:
@@ -40,7 +72,7 @@ class Server:
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
 
-    def start(self, timeout: float = 60.0) -> "Server":
+    def start(self, timeout: float = 60.0) -> Server:
         self.log = self.data_dir.parent / f"server-{self.port}-{int(time.time() * 1000)}.log"
         self.proc = subprocess.Popen([GREYBENCH, "serve", "--port", str(self.port), "--log-level", "warning"],
                                      env=self.env, stdout=self.log.open("w"), stderr=subprocess.STDOUT,
@@ -67,10 +99,8 @@ class Server:
         """End the server and every process of its group (workers included)."""
         if self.proc is None:
             return
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(self.proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
         self.proc.wait(10)
 
     def client(self, **kw) -> httpx.Client:
@@ -175,3 +205,42 @@ def registered_model(tmp_path_factory, service_tracking_store):
 
     assert promote(name).promoted
     return model, rec, run.info.run_id
+
+
+# ---- the planner's page in headless Chromium -----------------------------------------------------------
+def require_browser():
+    """playwright's ``sync_playwright``; without playwright or chromium the test is skipped with the reason,
+    or fails with it when ``GREYBENCH_BROWSER_TESTS=required`` (CI with chromium installed)."""
+    required = os.environ.get("GREYBENCH_BROWSER_TESTS") == "required"
+    reason = None
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        reason = "the playwright package is not installed (pip install playwright)"
+    if reason is None and not os.path.exists(CHROMIUM):
+        reason = f"no chromium at {CHROMIUM} (apt-get install chromium)"
+    if reason:
+        if required:
+            pytest.fail(reason)
+        pytest.skip(reason)
+    return sync_playwright
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Headless Chromium for one test module."""
+    sync_playwright = require_browser()
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+        yield b
+        b.close()
+
+
+def watched_page(browser) -> tuple:
+    """A new 1280 x 1000 page and the list its console errors, page errors and failed requests go to."""
+    page = browser.new_page(viewport={"width": 1280, "height": 1000})
+    problems: list[str] = []
+    page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
+    page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
+    page.on("requestfailed", lambda r: problems.append(f"request failed: {r.url}"))
+    return page, problems

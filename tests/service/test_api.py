@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-HEADERS = {"X-API-Key": "test-key-0123456789"}  # the key of conftest.KEY
+from .conftest import HEADERS
 
 BAD_GCODE = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 X10 Y0 Z0 F300\nG1 X10 Y10 Q\n"
 
@@ -192,3 +192,34 @@ def test_explain_bad_scan_is_422(client):
     r = client.post("/explain", headers=HEADERS, json={"scan_csv": "feature,x,y,z\ncircle,0,0,0\n",
                                                        "gcode": BAD_GCODE, "pose_set": "iso160", "pose": "near"})
     assert r.status_code == 422 and r.json()["detail"]["line"] == 4
+
+
+def test_fetch_writes_the_model_folder_whole_and_leaves_nothing_else(registered_model, tmp_path):
+    """registry.fetch: the saved-model folder alone (params.json at its top), an older copy replaced, no
+    temporary left beside it; a version without a saved model is refused and the old copy kept."""
+    import mlflow
+
+    from identify.models import load_model
+    from service import registry
+
+    model, rec, _ = registered_model
+    pinned = registry.resolve("max100-axis1-friction", "champion")
+    into = tmp_path / "models" / "axis1"
+    into.mkdir(parents=True)
+    (into / "stale.txt").write_text("an older download")
+    assert registry.fetch(pinned, into) == into
+    assert (into / "params.json").is_file() and not (into / "stale.txt").exists()
+    assert sorted(p.name for p in into.parent.iterdir()) == ["axis1"]
+    got = load_model(into).predict(rec)
+    assert np.allclose(got, model.predict(rec))
+    # a registered version whose run holds no saved friction model (a name of its own: the other tests
+    # list max100-axis1-friction's versions)
+    client = mlflow.MlflowClient()
+    with mlflow.start_run() as run:
+        mlflow.log_text("not a model", "model/readme.txt")
+    client.create_registered_model("test-no-model")
+    mv = client.create_model_version("test-no-model", f"runs:/{run.info.run_id}/model", run_id=run.info.run_id)
+    empty = registry.resolve("test-no-model", str(mv.version))
+    with pytest.raises(registry.ModelNotFound, match="no saved friction model"):
+        registry.fetch(empty, into)
+    assert (into / "params.json").is_file() and sorted(p.name for p in into.parent.iterdir()) == ["axis1"]

@@ -5,13 +5,12 @@ from __future__ import annotations
 import csv
 import io
 import json
-import time
 from pathlib import Path
 
 import pytest
 
-HEADERS = {"X-API-Key": "test-key-0123456789"}  # conftest.KEY
-ROBOT_FRICTION = [{"axis": a, "model": "robot"} for a in range(1, 7)]
+from .conftest import HEADERS, ROBOT_FRICTION, wait_for
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -53,13 +52,7 @@ def test_circle_job_end_to_end(make_server, tmp_path):
         assert r.status_code == 202, r.text
         job = r.json()["id"]
         assert r.headers["Location"] == f"/circles/{job}"
-        deadline = time.time() + 900
-        while True:
-            st = c.get(f"/circles/{job}").json()
-            if st["state"] in ("succeeded", "failed", "cancelled"):
-                break
-            assert time.time() < deadline
-            time.sleep(1.0)
+        st = wait_for(c, job, prefix="/circles", timeout=900, interval=1.0)
         assert st["state"] == "succeeded", st
         res = st["result"]
         summary = json.loads(c.get(f"/circles/{job}/files/summary.json").text)

@@ -5,14 +5,13 @@ from __future__ import annotations
 import csv
 import io
 import json
-import time
-
-import pytest
 from pathlib import Path
 
-HEADERS = {"X-API-Key": "test-key-0123456789"}  # conftest.KEY
+import pytest
+
+from .conftest import HEADERS, ROBOT_FRICTION, wait_for
+
 BAD_GCODE = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 X10 Y0 Z0 F300\nG1 X10 Y10 Q\n"
-ROBOT_FRICTION = [{"axis": a, "model": "robot"} for a in range(1, 7)]
 
 
 def test_bad_gcode_unknown_pose_and_names_are_4xx(client):
@@ -41,13 +40,7 @@ def test_compensation_job_end_to_end(make_server):
         assert r.status_code == 202, r.text
         job = r.json()["id"]
         assert r.headers["Location"] == f"/compensations/{job}"
-        deadline = time.time() + 1800
-        while True:
-            st = c.get(f"/compensations/{job}").json()
-            if st["state"] in ("succeeded", "failed", "cancelled"):
-                break
-            assert time.time() < deadline
-            time.sleep(1.0)
+        st = wait_for(c, job, prefix="/compensations", timeout=1800, interval=1.0)
         assert st["state"] == "succeeded", st
         ev = st["result"]["evaluation"]
         assert ev["ratio"] < 0.6 and len(ev["rows_mm"]) == 10
@@ -76,8 +69,8 @@ def test_accepted_job_reports_its_status(client):
 def test_job_body_passes_robot_file_and_models(tmp_path, monkeypatch):
     """The job body hands run_compensation the shipped robot file and the fetched model folders per axis."""
     from service import compensation
-    from simulate import compensation_report
     from service.paths import DATA_DIR
+    from simulate import compensation_report
 
     seen = {}
 

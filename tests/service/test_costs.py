@@ -2,17 +2,24 @@
 the field and line, and the same request within the limits accepted (in process and in the API)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from identify.errors import InputError
-from simulate.costs import (BASELINE_BYTES, BYTES_PER_SAMPLE, DEXEL_COPIES, CostFields, CostLimits,
-                            check_machining_cost, check_program_size, dexel_bytes, stock_bounds)
+from simulate.costs import (
+    BASELINE_BYTES,
+    BYTES_PER_SAMPLE,
+    DEXEL_COPIES,
+    CostFields,
+    CostLimits,
+    check_machining_cost,
+    check_program_size,
+    dexel_bytes,
+    stock_bounds,
+)
 
-DATA = Path(__file__).resolve().parents[2] / "data"
+from .conftest import DATA, HEADERS, ROBOT_FRICTION
+
 BOX_MM = '{"units": "mm", "box": {"min": [0, 0, 0], "max": [10, 20, 30]}}'
-HEADERS = {"X-API-Key": "test-key-0123456789"}
 
 
 def test_dexel_grid_bytes_match_the_tri_dexel_layout():
@@ -79,7 +86,7 @@ def test_a_broken_stock_is_named():
 
 def test_the_api_refuses_costly_jobs_with_422_naming_the_field_and_accepts_the_same_within_limits(client):
     body = {"program": "iso320", "pose_set": "iso320", "select": ["pose1"],
-            "friction": [{"axis": a, "model": "robot"} for a in range(1, 7)]}
+            "friction": ROBOT_FRICTION}
     r = client.post("/simulations", headers=HEADERS, json={**body, "options": {"spacing_mm": 0.051}})
     assert r.status_code == 422 and r.json()["detail"]["field"] == "options.spacing_mm", r.text
     slow = (DATA / "programs" / "iso320.nc").read_text().replace("F2000", "F0.0001")

@@ -15,7 +15,7 @@ import pytest
 
 from service.loadtest import load
 
-KEY = "test-key-0123456789"
+from .conftest import KEY, ROBOT_FRICTION
 
 
 def poll(c, job: str, timeout: float) -> dict:
@@ -78,7 +78,7 @@ def test_submit_poll_rank_report_glb_and_restart(make_server):
         r = c.post("/simulations", json={"program": "iso160", "pose_set": "iso160", "select": poses,
                                          "options": {"spacing_mm": 1.0},
                                          # the robot file's friction: independent of the session's registry
-                                         "friction": [{"axis": a, "model": "robot"} for a in range(1, 7)]})
+                                         "friction": ROBOT_FRICTION})
         assert r.status_code == 202
         job = r.json()["id"]
         st, seen = poll(c, job, timeout=3600)

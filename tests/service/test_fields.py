@@ -3,9 +3,10 @@ form rows without a nominal size (JSON and CSV)."""
 import csv
 import io
 import json
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
-from service.schemas import JobStatus, Report
+from identify.records import write_table
+from service.schemas import JobStatus, Report, report_frame
 
 STORED = {"poses": [{"pose": "a", "score": 1.0}],
           "features": [{"name": "circle diameter", "nominal": 108.0, "nominal_text": "108", "tolerance": 0.02,
@@ -22,10 +23,10 @@ def test_job_times_are_iso_8601_utc():
                    created=1_700_000_000.25, started=1_700_000_001.0, finished=None)
     doc = json.loads(st.model_dump_json())
     assert doc["created"] == "2023-11-14T22:13:20.250000Z" and doc["finished"] is None
-    assert datetime.fromisoformat(doc["started"]) == datetime.fromtimestamp(1_700_000_001.0, tz=timezone.utc)
+    assert datetime.fromisoformat(doc["started"]) == datetime.fromtimestamp(1_700_000_001.0, tz=UTC)
 
 
-def test_report_fields_carry_units_and_form_rows_no_nominal():
+def test_report_fields_carry_units_and_form_rows_no_nominal(tmp_path):
     doc = json.loads(Report.from_stored("j", STORED).model_dump_json())
     rows = {r["name"]: r for r in doc["features"]}
     assert rows["circle diameter"] == {"name": "circle diameter", "nominal_mm": 108.0, "nominal_deg": None,
@@ -33,8 +34,11 @@ def test_report_fields_carry_units_and_form_rows_no_nominal():
                                        "worst_instance": {"a": "diameter"}}
     assert rows["circle roundness"]["nominal_mm"] is None and rows["circle roundness"]["nominal_text"] == "-"
     assert rows["slope angle"]["nominal_deg"] == 5.0 and rows["slope angle"]["nominal_mm"] is None
-    table = list(csv.DictReader(io.StringIO(Report.csv_from_stored(STORED))))
+    # the CSV a job stores and serves (report.csv, through the one table writer)
+    table = list(csv.DictReader(io.StringIO(write_table(report_frame(STORED), tmp_path / "report.csv").read_text())))
     assert list(table[0]) == ["feature", "nominal_mm", "nominal_deg", "tolerance_mm", "pose", "deviation_mm",
                               "in_tolerance"]
-    assert [r["nominal_mm"] for r in table] == ["108.0", "", ""]
+    assert [r["nominal_mm"] for r in table] == ["108", "", ""]
+    assert [r["nominal_deg"] for r in table] == ["", "", "5"]
+    assert [float(r["deviation_mm"]) for r in table] == [0.011, 0.004, -0.03]
     assert [r["in_tolerance"] for r in table] == ["True", "True", "False"]

@@ -7,16 +7,13 @@ same job with the robot file's friction, which repeats exactly.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-DATA = Path(__file__).resolve().parents[2] / "data"
+from .conftest import ROBOT_FRICTION, short_program, wait_for
 
-ROBOT = [{"axis": a, "model": "robot"} for a in range(1, 7)]
 KINDS = {1: "greybox", 2: "residual", 3: "lstm"}
 
 
@@ -53,24 +50,6 @@ def champions(tmp_path_factory):
     return uri
 
 
-def short_program() -> str:
-    """The 160 test piece's header and its last finishing pass (the slope's inner wall): a short real cut."""
-    lines = (DATA / "programs" / "iso160.nc").read_text().splitlines()
-    start = next(i for i, line in enumerate(lines) if line.startswith("(slope inner wall"))
-    return "\n".join(lines[:7] + lines[start:]) + "\n"
-
-
-def wait_for(client, job: str, states: tuple[str, ...], timeout: float) -> dict:
-    deadline = time.time() + timeout
-    while True:
-        st = client.get(f"/jobs/{job}").json()
-        if st["state"] in states:
-            return st
-        if time.time() > deadline:
-            raise AssertionError(f"job {job} still {st['state']} after {timeout} s: {st}")
-        time.sleep(0.2)
-
-
 def _run(c, friction) -> dict:
     body = {"gcode": short_program(), "stock": "iso160", "pose_set": "iso160", "select": ["near"],
             "friction": friction, "options": {"spacing_mm": 2.0}}
@@ -88,11 +67,11 @@ def _deviations(report) -> np.ndarray:
 def test_learned_champions_succeed_and_change_the_part(make_server, champions):
     srv = make_server(MLFLOW_TRACKING_URI=champions)
     with srv.client() as c:
-        base = _run(c, ROBOT)
-        again = _run(c, ROBOT)
+        base = _run(c, ROBOT_FRICTION)
+        again = _run(c, ROBOT_FRICTION)
         assert np.array_equal(_deviations(base), _deviations(again))   # a repeated job: identical
         for axis, kind in KINDS.items():
-            rep = _run(c, [{"axis": axis, "model": "champion"}] + [f for f in ROBOT if f["axis"] != axis])
+            rep = _run(c, [{"axis": axis, "model": "champion"}] + [f for f in ROBOT_FRICTION if f["axis"] != axis])
             used = rep["poses"][0]["friction"][axis - 1]
             assert used["kind"] == kind and used["model"]["version"] == 1 and used["model"]["ref"] == "champion"
             assert all(f.get("source") == "robot-file" for f in rep["poses"][0]["friction"] if f["joint"] != axis)

@@ -2,22 +2,12 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 
 from service.pipeline import PoseTask, run_local, run_ray
 
-DATA = Path(__file__).resolve().parents[2] / "data"
-
-
-def short_program() -> str:
-    """The 160 test piece's header and its last finishing pass (the slope's inner wall): a short,
-    real cut of the same part, so every pose simulation stays brief."""
-    lines = (DATA / "programs" / "iso160.nc").read_text().splitlines()
-    head = lines[:7]
-    start = next(i for i, l in enumerate(lines) if l.startswith("(slope inner wall"))
-    return "\n".join(head + lines[start:]) + "\n"
+from .conftest import DATA, short_program
 
 
 def test_ray_tasks_give_the_same_results_as_local(tmp_path):
@@ -25,7 +15,8 @@ def test_ray_tasks_give_the_same_results_as_local(tmp_path):
     poses = json.loads((DATA / "poses" / "iso160.json").read_text())["poses"]
     tasks = [PoseTask(program_text=short_program(), program_source="iso160-slope-wall.nc",
                       stock_text=(DATA / "programs" / "iso160.stock.json").read_text(),
-                      stock_source="iso160.stock.json", robot="max100", pose=p, options={"spacing_mm": 2.0, "deflection": False})
+                      stock_source="iso160.stock.json", robot="max100", pose=p,
+                      options={"spacing_mm": 2.0, "deflection": False})
              for p in poses]
     seen: list[tuple[float, str]] = []
     local = run_local(tasks, lambda f, m: seen.append((f, m)))
@@ -35,7 +26,7 @@ def test_ray_tasks_give_the_same_results_as_local(tmp_path):
     finally:
         ray.shutdown()
     assert [o.pose for o in remote] == [o.pose for o in local] == ["near", "far_rotated"]
-    for a, b in zip(local, remote):
+    for a, b in zip(local, remote, strict=True):
         assert a.summary == b.summary
         assert a.features == b.features
         assert a.glb == b.glb and len(a.glb) > 1000

@@ -6,6 +6,7 @@ seconds (plus a server start); the soak with many jobs and a crash is marked slo
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -19,11 +20,9 @@ import pytest
 
 from service.jobs import RESTART_REASON, JobKind, JobState, JobStore, folder_digests, process_start
 
-from .conftest import GREYBENCH, HEADERS, KEY, Server, server_env
+from .conftest import DATA, GREYBENCH, HEADERS, KEY, ROBOT_FRICTION, Server, server_env, short_program, wait_for
 
 OTHER_KEY = "other-key-9876543210"
-ROBOT_FRICTION = [{"axis": a, "model": "robot"} for a in range(1, 7)]
-DATA = Path(__file__).resolve().parents[2] / "data"
 
 
 def slow_program(factor: int = 10) -> str:
@@ -94,20 +93,6 @@ def wait_until(predicate, timeout: float, what: str, interval: float = 0.1):
         if time.time() > deadline:
             raise AssertionError(f"not within {timeout} s: {what}")
         time.sleep(interval)
-
-
-def wait_state(c: httpx.Client, job: str, states: tuple[str, ...], timeout: float = 120.0) -> dict:
-    last = {}
-
-    def reached():
-        nonlocal last
-        last = c.get(f"/jobs/{job}").json()
-        return last if last["state"] in states else None
-
-    try:
-        return wait_until(reached, timeout, f"job {job} in {states}", 0.2)
-    except AssertionError:
-        raise AssertionError(f"job {job} still {last.get('state')}: {last}") from None
 
 
 def fabricate_finished_job(data_dir: Path) -> tuple[str, dict[str, bytes]]:
@@ -239,7 +224,7 @@ def test_a_second_server_on_the_folder_exits_naming_it_and_the_first_keeps_its_j
     with srv.client() as c:
         job = c.post("/simulations", json=LONG_JOB).json()["id"]
         try:
-            before = wait_state(c, job, ("running",), timeout=120)
+            before = wait_for(c, job, ("running",), timeout=120)
             t0 = time.time()
             second = subprocess.run([GREYBENCH, "serve", "--port", str(srv.port + 1)], env=srv.env,
                                     capture_output=True, text=True, timeout=120)
@@ -299,7 +284,7 @@ def test_costly_requests_are_refused_at_once_naming_the_field_and_the_same_withi
 def test_cancel_of_a_running_job_ends_its_worker_processes_within_seconds(srv):
     with srv.client() as c:
         job = c.post("/simulations", json=LONG_JOB).json()["id"]
-        wait_state(c, job, ("running",), timeout=120)
+        wait_for(c, job, ("running",), timeout=120)
         workers = wait_until(lambda: job_workers(srv.proc.pid), 30, "a worker process under the server")
         t0 = time.time()
         r = c.delete(f"/simulations/{job}")
@@ -345,7 +330,7 @@ def test_kill_9_leaves_no_worker_and_a_restart_serves_finished_results_unchanged
         before = served_files(c, done)
         assert before == as_stored(files)
         job = c.post("/simulations", json=LONG_JOB).json()["id"]
-        wait_state(c, job, ("running",), timeout=120)
+        wait_for(c, job, ("running",), timeout=120)
         workers = wait_until(lambda: job_workers(a.proc.pid), 30, "a worker process under the server")
     a.kill()  # SIGKILL the server alone: its workers are orphaned, the kernel must end them
     wait_until(lambda: not alive(workers), 5, f"workers {workers} ended with their server")
@@ -420,10 +405,8 @@ def test_workers_and_the_processes_they_fork_die_with_their_parent(tmp_path):
         parent.wait(10)
         wait_until(lambda: not alive(pids), 5, f"worker and its child {pids} ended")
     finally:
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(parent.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
 
 
 # ---- soak: many clients, jobs, cancels and a crash; nothing lost ------------------------------
@@ -431,13 +414,6 @@ SHORT_CUT = {"stock": "iso160", "pose_set": "iso160", "select": ["near"], "optio
              "friction": ROBOT_FRICTION}
 UNREACHABLE = {"program": "iso160", "poses": [{"name": "far", "xyz": [9.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}],
                "friction": ROBOT_FRICTION}
-
-
-def short_program() -> str:
-    """The 160 piece's header and its last finishing pass: a real cut of seconds."""
-    lines = (DATA / "programs" / "iso160.nc").read_text().splitlines()
-    start = next(i for i, line in enumerate(lines) if line.startswith("(slope inner wall"))
-    return "\n".join(lines[:7] + lines[start:]) + "\n"
 
 
 @pytest.mark.slow  # about two minutes: dozens of jobs on a 2-core machine, a crash and a restart

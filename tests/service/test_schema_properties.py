@@ -11,7 +11,7 @@ import pytest
 import schemathesis
 from hypothesis import HealthCheck, settings
 
-KEY = "test-key-0123456789"
+from .conftest import KEY
 
 
 def _schema_document() -> dict:
@@ -35,7 +35,8 @@ def base_url(shared_server):
 
 @schema.parametrize()
 @settings(max_examples=12, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much, HealthCheck.function_scoped_fixture])
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
+                                 HealthCheck.function_scoped_fixture])
 def test_no_server_errors(case, base_url):
     response = case.call(base_url=base_url, headers={"X-API-Key": KEY}, timeout=60)
     assert response.status_code < 500, (case.method, case.path, case.body, response.status_code, response.text[:500])
@@ -43,7 +44,8 @@ def test_no_server_errors(case, base_url):
 
 @schema.parametrize()
 @settings(max_examples=3, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much, HealthCheck.function_scoped_fixture])
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
+                                 HealthCheck.function_scoped_fixture])
 def test_without_a_key_only_health_answers(case, base_url):
     response = case.call(base_url=base_url, headers={"X-API-Key": "not-a-key"}, timeout=60)
     if case.path == "/health" and case.method.upper() == "GET":

@@ -3,34 +3,18 @@ from __future__ import annotations
 
 import os
 import time
-from pathlib import Path
 
-import httpx
 import numpy as np
 import pytest
 
 from service.jobs import RESTART_REASON
 
-DATA = Path(__file__).resolve().parents[2] / "data"
+from .conftest import DATA, ROBOT_FRICTION, short_program, wait_for
 
-#: The robot file's own friction on every axis: the jobs do not depend on what the session's MLflow
-#: registry holds (another test registers a champion for axis 1).
-ROBOT_FRICTION = [{"axis": a, "model": "robot"} for a in range(1, 7)]
 #: Placed 9 m from the robot: the job's inverse kinematics fails and names the program line.
 UNREACHABLE = {"program": "iso160", "poses": [{"name": "far", "xyz": [9.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}],
                "friction": ROBOT_FRICTION}
 TWO_POSES = {"program": "iso160", "pose_set": "iso160", "options": {"spacing_mm": 2.0}, "friction": ROBOT_FRICTION}
-
-
-def wait_for(client: httpx.Client, job: str, states: tuple[str, ...], timeout: float = 120.0) -> dict:
-    deadline = time.time() + timeout
-    while True:
-        st = client.get(f"/jobs/{job}").json()
-        if st["state"] in states:
-            return st
-        if time.time() > deadline:
-            raise AssertionError(f"job {job} still {st['state']} after {timeout} s: {st}")
-        time.sleep(0.1)
 
 
 def test_restart_during_a_job_keeps_the_records(make_server, tmp_path):
@@ -65,14 +49,6 @@ def test_restart_during_a_job_keeps_the_records(make_server, tmp_path):
         # and the restarted service takes new work
         again = c.post("/simulations", json=UNREACHABLE).json()["id"]
         assert wait_for(c, again, ("failed",))["error"]["line"] >= 1
-
-
-def short_program() -> str:
-    """The 160 test piece's header and its last finishing pass (the slope's inner wall): a real but
-    short cut, so a two-pose job takes seconds (the full program runs in test_end_to_end, slow)."""
-    lines = (DATA / "programs" / "iso160.nc").read_text().splitlines()
-    start = next(i for i, line in enumerate(lines) if line.startswith("(slope inner wall"))
-    return "\n".join(lines[:7] + lines[start:]) + "\n"
 
 
 def test_bounded_load_on_status_and_ranking_has_no_errors(shared_server):
@@ -121,7 +97,7 @@ def _record_csv(seed: int, n: int = 2000) -> str:
     q = 0.5 * np.sin(2 * np.pi * 0.7 * t)
     qd = 0.5 * 2 * np.pi * 0.7 * np.cos(2 * np.pi * 0.7 * t)
     tau = 1.0 * np.tanh(qd / 2e-3) + 0.6 * qd + rng.normal(0, 0.02, n)
-    lines = ["t,q,qd,tau"] + [f"{a:.6f},{b:.9f},{c:.9f},{d:.9f}" for a, b, c, d in zip(t, q, qd, tau)]
+    lines = ["t,q,qd,tau"] + [f"{a:.6f},{b:.9f},{c:.9f},{d:.9f}" for a, b, c, d in zip(t, q, qd, tau, strict=True)]
     return "\n".join(lines) + "\n"
 
 

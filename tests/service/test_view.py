@@ -9,22 +9,19 @@ they fail instead.
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import struct
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import service
 from service.view import sign, verify
 
-KEY = "test-key-0123456789"
-HEADERS = {"X-API-Key": KEY}
+from .conftest import HEADERS, KEY, ROBOT_FRICTION, Server, server_env, wait_for, watched_page
+
 JOB_ID = "0123456789abcdef0123456789abcdef"
-CHROMIUM = "/usr/bin/chromium"
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync", "--no-first-run"]
 
 
 # ---- signed links ---------------------------------------------------------------------------------------
@@ -111,7 +108,7 @@ def test_compensation_page_shows_before_and_after(client):
     data = client.get(f"/compensations/{job_id}/view/data", headers=HEADERS).json()
     sections = {s["type"]: s for s in data["sections"]}
     rows = sections["before-after"]["rows"]
-    for got, want in zip(rows, COMPENSATED_ROWS):
+    for got, want in zip(rows, COMPENSATED_ROWS, strict=True):
         assert got["name"] == want["name"]
         assert got["before_um"] == pytest.approx(want["before"] * 1e3)
         assert got["after_um"] == pytest.approx(want["after"] * 1e3)
@@ -131,39 +128,27 @@ def test_static_files_ship_with_the_package(client):
     assert r.status_code == 200 and "three.core.js" in r.text
     assert "MIT" in client.get("/view-static/vendor/three/LICENSE").text
     assert "three 0.187.0" in client.get("/view-static/vendor/three/VERSION").text
-    page = (shutil.os.path.dirname(__import__("service").__file__) + "/static/view/index.html")
-    text = open(page).read()
+    static = Path(service.__file__).parent / "static" / "view"
+    text = (static / "index.html").read_text()
     assert "http://" not in text and "https://" not in text   # nothing fetched from elsewhere
-    js = open(page.replace("index.html", "view.js")).read()
+    js = (static / "view.js").read_text()
     assert "http://" not in js and "https://" not in js
 
 
 # ---- one finished job -------------------------------------------------------------------------------
-def _poll(c, job: str, timeout: float = 1800) -> dict:
-    deadline = time.time() + timeout
-    while True:
-        st = c.get(f"/simulations/{job}").json()
-        if st["state"] in ("succeeded", "failed", "cancelled"):
-            return st
-        assert time.time() < deadline, st
-        time.sleep(0.5)
-
-
 @pytest.fixture(scope="module")
 def job(tmp_path_factory):
     """(server, job id, job folder) of one finished iso160 job, pose 'near', 1 mm dexels."""
-    from tests.service.conftest import Server, server_env
-
     d = tmp_path_factory.mktemp("view") / "data"
     srv = Server(data_dir=d, env=server_env(d)).start()
     try:
         with srv.client() as c:
             r = c.post("/simulations", json={"program": "iso160", "pose_set": "iso160", "select": ["near"],
                                              "options": {"spacing_mm": 1.0},
-                                             "friction": [{"axis": a, "model": "robot"} for a in range(1, 7)]})
+                                             "friction": ROBOT_FRICTION})
             assert r.status_code == 202, r.text
             job_id = r.json()["id"]
-            st = _poll(c, job_id)
+            st = wait_for(c, job_id, prefix="/simulations", timeout=1800, interval=0.5)
             assert st["state"] == "succeeded", st
         yield srv, job_id, d / "jobs" / job_id
     finally:
@@ -198,7 +183,7 @@ def test_view_data_is_the_report(job):
     sections = {s["type"]: s for s in data["sections"]}
     rows = sections["ranking"]["rows"]
     assert [r["name"] for r in rows] == [f["name"] for f in report["features"]] and len(rows) == 10
-    for r, f in zip(rows, report["features"]):
+    for r, f in zip(rows, report["features"], strict=True):
         assert r["tolerance_mm"] == f["tolerance_mm"] and r["deviation_mm"]["near"] == f["deviation_mm"]["near"]
     wp = sections["workpiece"]
     assert wp["poses"] == ["near"] and {v["name"] for v in wp["variables"]} >= {"deflection", "force", "switch"}
@@ -255,7 +240,8 @@ def test_click_is_what_trace_gives(job):
                   params={"x_mm": p[0] * 1e3, "y_mm": p[1] * 1e3, "z_mm": p[2] * 1e3, "radius_mm": 1.5}).json()
     tr = trace_point(vw, p, 1.5e-3, program=str(folder / "program.nc"))
     assert tr.lines, "the chosen point was machined"
-    assert [(ln["line"], ln["text"], ln["n_ends"]) for ln in r["lines"]] == [(t.line, t.text, t.n_ends) for t in tr.lines]
+    assert ([(ln["line"], ln["text"], ln["n_ends"]) for ln in r["lines"]]
+            == [(t.line, t.text, t.n_ends) for t in tr.lines])
     assert r["n_ends"] == tr.n_ends and r["t_first_s"] == pytest.approx(tr.times[0])
     program = (folder / "program.nc").read_text().splitlines()
     for ln in r["lines"]:
@@ -336,50 +322,21 @@ def test_links_and_files(job):
                      params={"token": tok}).status_code in (404, 422)
 
 
-# ---- the page in a browser ----------------------------------------------------------------------------
-def _browser():
-    required = os.environ.get("GREYBENCH_BROWSER_TESTS") == "required"
-    reason = None
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        reason = "the playwright package is not installed (pip install playwright)"
-    if reason is None and not os.path.exists(CHROMIUM):
-        reason = f"no chromium at {CHROMIUM} (apt-get install chromium)"
-    if reason:
-        if required:
-            pytest.fail(reason)
-        pytest.skip(reason)
-    return sync_playwright
-
-
+# ---- the page in a browser (the browser fixture: conftest) ----------------------------------------------
 def test_browser_tests_skip_with_a_reason_or_fail_when_required(monkeypatch):
-    import tests.service.test_view as me
+    from . import conftest
 
-    monkeypatch.setattr(me, "CHROMIUM", "/nonexistent/chromium")
+    monkeypatch.setattr(conftest, "CHROMIUM", "/nonexistent/chromium")
     monkeypatch.delenv("GREYBENCH_BROWSER_TESTS", raising=False)
     with pytest.raises(pytest.skip.Exception, match="chromium"):
-        me._browser()
+        conftest.require_browser()
     monkeypatch.setenv("GREYBENCH_BROWSER_TESTS", "required")
     with pytest.raises(pytest.fail.Exception, match="chromium"):
-        me._browser()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    sync_playwright = _browser()
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
-        yield b
-        b.close()
+        conftest.require_browser()
 
 
 def _open(browser, url):
-    page = browser.new_page(viewport={"width": 1280, "height": 1000})
-    problems = []
-    page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
-    page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
-    page.on("requestfailed", lambda r: problems.append(f"request failed: {r.url}"))
+    page, problems = watched_page(browser)
     page.goto(url)
     page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
     return page, problems
@@ -400,7 +357,7 @@ def test_page_in_chromium(job, browser, tmp_path):
     assert table.locator("tbody tr").count() == 10
     assert table.locator("thead th[data-pose='near']").count() == 1
     cells = table.locator("tbody tr td:nth-child(4)").all_inner_texts()
-    for text, f in zip(cells, report["features"]):
+    for text, f in zip(cells, report["features"], strict=True):
         dev = f["deviation_mm"]["near"]
         assert float(text) == pytest.approx(dev, abs=6e-5)
     marked = table.locator("td.in-tol").count()
@@ -468,7 +425,8 @@ def test_compensation_page_in_chromium(job, browser):
         link = c.post(f"/compensations/{job_id}/view-link").json()
     page, problems = _open(browser, srv.url + link["url"])
     rows = page.locator("section.before-after table tr").all_inner_texts()
-    assert len(rows) == 1 + len(COMPENSATED_ROWS) and rows[1].split("\t")[:4] == ["circle diameter", "20", "50.0", "12.0"]
+    assert len(rows) == 1 + len(COMPENSATED_ROWS)
+    assert rows[1].split("\t")[:4] == ["circle diameter", "20", "50.0", "12.0"]
     assert page.locator("section.before-after td.in-tol").count() == 3     # 12 µm; -4 and -9 µm of 20
     page.wait_for_function("document.querySelector('section.image img').naturalWidth === 60")
     assert not problems, problems

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.service.test_view import CHROMIUM, FLAGS, HEADERS, _browser
+from .conftest import HEADERS, ROBOT_FRICTION, Server, server_env, watched_page
 
 #: The synthetic circle: 1 µm-per-degree free of spikes, two reversals with known heights.
 ROUNDNESS_UM, RADIUS_ERROR_UM = 12.5, -3.25
@@ -142,13 +142,14 @@ def test_placement_page_best_against_given(client):
     assert client.get(f"/placement-searches/{job_id}/view", headers=HEADERS).status_code == 200
     secs = _sections(client, "/placement-searches", job_id)
     poses = next(s for s in secs if s.get("id") == "poses")
-    rows = {r[0]: dict(zip(poses["columns"], r)) for r in poses["rows"]}
+    rows = {r[0]: dict(zip(poses["columns"], r, strict=True)) for r in poses["rows"]}
     assert list(rows) == ["optimised", "near", "far_rotated"] and poses["highlight"] == [0]
     best = rows["optimised"]
     assert [best["x [mm]"], best["y [mm]"], best["z [mm]"]] == pytest.approx([1620.0, -80.0, -50.0])
     assert best["yaw [deg]"] == pytest.approx(np.degrees(0.25)) and best["score [-]"] == 3.0
     # the given poses' places come from best.json; the gain is (score - best) / score
-    assert rows["far_rotated"]["yaw [deg]"] == pytest.approx(30.0) and rows["far_rotated"]["x [mm]"] == pytest.approx(1900.0)
+    assert rows["far_rotated"]["yaw [deg]"] == pytest.approx(30.0)
+    assert rows["far_rotated"]["x [mm]"] == pytest.approx(1900.0)
     assert rows["near"]["best is lower by [%]"] == pytest.approx(25.0)
     assert rows["far_rotated"]["best is lower by [%]"] == pytest.approx(40.0)
     items = dict(next(s for s in secs if s["type"] == "summary")["items"])
@@ -202,8 +203,6 @@ def test_unfinished_and_damaged_jobs(client):
 # ---- the pages in Chromium ---------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    from tests.service.conftest import Server, server_env
-
     d = tmp_path_factory.mktemp("view-kinds") / "data"
     srv = Server(data_dir=d, env=server_env(d)).start()
     try:
@@ -212,23 +211,10 @@ def server(tmp_path_factory):
         srv.stop()
 
 
-@pytest.fixture(scope="module")
-def browser():
-    sync_playwright = _browser()
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
-        yield b
-        b.close()
-
-
 def _open(browser, srv, prefix, job_id, shot=None):
     with srv.client() as c:
         link = c.post(f"{prefix}/{job_id}/view-link").json()
-    page = browser.new_page(viewport={"width": 1280, "height": 1000})
-    problems = []
-    page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
-    page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
-    page.on("requestfailed", lambda r: problems.append(f"request failed: {r.url}"))
+    page, problems = watched_page(browser)
     # three.js is for a page with a 3D part only: these pages must not download it
     page.on("request", lambda r: problems.append(f"fetched {r.url}") if "/vendor/three/" in r.url else None)
     page.goto(srv.url + link["url"])
@@ -301,7 +287,7 @@ def test_pages_of_real_jobs(server, browser):
 
     with server.client() as c:
         circle = c.post("/circles", json={"pose_set": "iso160", "pose": "near", "options": {"radius_mm": 50},
-                                          "friction": [{"axis": a, "model": "robot"} for a in range(1, 7)]})
+                                          "friction": ROBOT_FRICTION})
         search = c.post("/placement-searches", json={"program": "iso160", "pose_set": "iso160", "options": {
             "budget_s": 600, "spacing_mm": 1.0, "max_simulations": 4}})
         assert circle.status_code == 202 and search.status_code == 202, (circle.text, search.text)

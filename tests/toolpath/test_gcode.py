@@ -84,7 +84,8 @@ def test_radius_mismatch_within_tolerance_is_made_exact():
 def test_random_arcs_have_exact_endpoints(cx, cy, r, a0, a1, cw):
     x0, y0 = cx + r * math.cos(a0), cy + r * math.sin(a0)
     x1, y1 = cx + r * math.cos(a1), cy + r * math.sin(a1)
-    text = f"G21 G90\nG0 X{x0:.6f} Y{y0:.6f}\nG{2 if cw else 3} X{x1:.6f} Y{y1:.6f} I{cx - x0:.6f} J{cy - y0:.6f} F500\n"
+    text = (f"G21 G90\nG0 X{x0:.6f} Y{y0:.6f}\n"
+            f"G{2 if cw else 3} X{x1:.6f} Y{y1:.6f} I{cx - x0:.6f} J{cy - y0:.6f} F500\n")
     segs = parse_program(text).segments
     arc = [s for s in segs if isinstance(s, Arc)][0]
     assert (arc.sweep < 0) == cw

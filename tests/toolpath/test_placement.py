@@ -10,8 +10,15 @@ import pytest
 from identify.errors import InputError
 from simulate.toolpath.gcode import parse_program
 from simulate.toolpath.interpolation import interpolate
-from simulate.toolpath.placement import (R_WCS_TCP, Placement, joint_trajectory, load_poses, rpy_matrix, select_pose,
-                                         tcp_poses)
+from simulate.toolpath.placement import (
+    R_WCS_TCP,
+    Placement,
+    joint_trajectory,
+    load_poses,
+    rpy_matrix,
+    select_pose,
+    tcp_poses,
+)
 from simulate.toolpath.switching import switching_points
 from simulate.toolpath.testpiece import finishing_program, iso_test_piece
 

@@ -13,8 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from simulate.toolpath.switching import (DEFAULT_THRESHOLD, SwitchEvent, axes_of, switching_events,
-                                         switching_points)
+from simulate.toolpath.switching import DEFAULT_THRESHOLD, SwitchEvent, axes_of, switching_events, switching_points
 
 CYCLE = 0.002
 
@@ -47,7 +46,8 @@ def test_reversal_and_stop_bits():
 def test_random_series_agree_with_sign_changes():
     rng = np.random.default_rng(3)
     t = np.linspace(0, 10, 5001)
-    qd = np.stack([np.sin(f * t + p) for f, p in zip(rng.uniform(0.5, 5, 6), rng.uniform(0, 6, 6))], axis=1)
+    freqs, phases = rng.uniform(0.5, 5, 6), rng.uniform(0, 6, 6)
+    qd = np.stack([np.sin(f * t + p) for f, p in zip(freqs, phases, strict=True)], axis=1)
     sw = switching_points(qd, threshold=1e-6)
     for i in range(6):
         bit = (sw >> i) & 1
@@ -172,7 +172,7 @@ def piecewise_monotone(draw):
 def test_hypothesis_reversals_equal_direction_changes(case):
     qd, dirs, thr = case
     ev = switching_events(qd, thr)
-    changes = sum(a != b for a, b in zip(dirs, dirs[1:]))
+    changes = sum(a != b for a, b in zip(dirs, dirs[1:], strict=False))
     assert ev.count(1, SwitchEvent.REVERSAL) == changes
     assert ev.count(1, SwitchEvent.STOP) == len(dirs)
     # each reversal sits on the first moving sample of a bump against the previous bump's sign

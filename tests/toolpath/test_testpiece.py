@@ -9,7 +9,13 @@ import pytest
 
 from identify.errors import InputError
 from simulate.toolpath.gcode import Arc, parse_program, read_program
-from simulate.toolpath.testpiece import Technology, finishing_program, iso_test_piece, stock_description, write_test_piece
+from simulate.toolpath.testpiece import (
+    Technology,
+    finishing_program,
+    iso_test_piece,
+    stock_description,
+    write_test_piece,
+)
 
 
 def test_nominal_geometry_320_and_160():
@@ -51,8 +57,8 @@ def test_program_cuts_the_nominal_features(size):
     assert np.any(np.isclose(np.abs(xs), piece.square_side / 2 + r, atol=1e-7))
     # slope passes: tool bottom on the plane at the uphill rim
     m = math.tan(piece.slope_angle)
-    slope = [s for s in segs if not isinstance(s, Arc) and not s.rapid and abs(s.end[0] - s.start[0]) > 0.05 and abs(s.end[2] - s.start[2]) > 1e-4
-             and abs(s.end[1] - s.start[1]) < 1e-12]
+    slope = [s for s in segs if not isinstance(s, Arc) and not s.rapid and abs(s.end[0] - s.start[0]) > 0.05
+             and abs(s.end[2] - s.start[2]) > 1e-4 and abs(s.end[1] - s.start[1]) < 1e-12]
     assert slope
     for s in slope:
         for p in (s.start, s.end):
