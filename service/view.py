@@ -469,7 +469,9 @@ def circle_sections(ctx: Context) -> list[dict]:
         ["roundness (circular deviation G, ISO 230-4) [µm]", _num(s.get("roundness_um"))],
         ["radius error (least-squares radius - nominal) [µm]", _num(s.get("radius_error_um"))],
         ["centre offset, in-plane axes [µm]", ", ".join("-" if _num(v) is None else f"{float(v):.2f}" for v in c)],
-        ["largest reversal spike [µm]", _num(s.get("largest_spike_um"))],
+        ["largest reversal spike, beyond the settled trace [µm]", _num(s.get("largest_reversal_spike_um"))],
+        ["largest lost motion, step of the settled trace [µm]", _num(s.get("largest_lost_motion_um"))],
+        ["largest excursion after a reversal (lost motion and spike) [µm]", _num(s.get("largest_spike_um"))],
         ["radius [mm]", _num(s.get("radius_mm"))], ["feed [mm/min]", _num(s.get("feed_mm_min"))],
         ["plane, direction", f"{s.get('plane', '-')}, {'clockwise (G2)' if s.get('cw') else 'counter-clockwise (G3)'}"],
         ["robot, pose", f"{s.get('robot', '-')}, {s.get('pose', '-')}"],
@@ -478,11 +480,15 @@ def circle_sections(ctx: Context) -> list[dict]:
             for k in ("friction", "backlash", "ff_friction"))],
         ["friction scale [-]", _num(s.get("friction_scale"))]]},
         {"type": "table", "title": "Reversal spikes", "id": "spikes",
-         "columns": ["angle [deg]", "joint", "height [µm]"],
-         "rows": [[_num(r.get("angle_deg")), r.get("joint"), _num(r.get("height_um"))] for r in spikes],
-         "digits": [1, None, 2],
-         "note": "where a joint's commanded velocity changes sign along the circle: the extreme of the radial "
-                 "deviation just after it, relative to its value at the reversal (outward positive)",
+         "columns": ["angle [deg]", "joint", "spike [µm]", "lost motion [µm]", "excursion [µm]"],
+         "rows": [[_num(r.get("angle_deg")), r.get("joint"), _num(r.get("spike_um")), _num(r.get("lost_motion_um")),
+                   _num(r.get("height_um"))] for r in spikes],
+         "digits": [1, None, 2, 2, 2],
+         "note": "where a joint's commanded velocity changes sign along the circle, split as a ballbar analysis "
+                 "splits it: the spike is the transient peak beyond the settled trace, the lost motion the "
+                 "step of the settled trace across the reversal (after minus before), the excursion the extreme "
+                 "of the radial deviation just after the reversal relative to its value there (both together; "
+                 "outward positive)",
          "empty": "no joint reverses on this circle"}]
     digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
     if "out/circle.png" in digests:

@@ -19,6 +19,8 @@ from .conftest import HEADERS, ROBOT_FRICTION, Server, server_env, watched_page
 #: The synthetic circle: 1 µm-per-degree free of spikes, two reversals with known heights.
 ROUNDNESS_UM, RADIUS_ERROR_UM = 12.5, -3.25
 SPIKES = [(90.0, 1, 7.5), (90.0, 6, 7.5), (270.0, 2, -4.0)]
+#: per reversal of SPIKES: (spike, lost motion) [µm]
+SPLITS = [(1.5, 6.0), (-0.5, 2.0), (-3.0, -1.0)]
 
 #: The synthetic placement search: best found placement against two given poses.
 GIVEN = [{"name": "near", "xyz": [1.5, 0.0, -0.1], "rpy": [0.0, 0.0, 0.0]},
@@ -36,7 +38,8 @@ def _circle_job(store, jobs_dir) -> str:
     rec = store.create(JobKind.circle, {}, boot="test")
     ang = np.linspace(0.0, 360.0, 3601)[:-1]
     dev = ROUNDNESS_UM / 2 * np.cos(np.radians(2 * ang))        # an oval: peak-to-valley = roundness
-    spikes = tuple(ReversalSpike(angle_deg=a, joint=j, height_um=h, peak_angle_deg=a + 1) for a, j, h in SPIKES)
+    spikes = tuple(ReversalSpike(angle_deg=a, joint=j, height_um=h, peak_angle_deg=a + 1, spike_um=sp,
+                                 lost_motion_um=lm) for (a, j, h), (sp, lm) in zip(SPIKES, SPLITS, strict=True))
     res = CircleResult(angle_deg=ang, deviation_um=dev, q=np.zeros((len(ang), 6)), roundness_um=ROUNDNESS_UM,
                        radius_error_um=RADIUS_ERROR_UM, center_offset_um=np.array([0.5, -0.25]), spikes=spikes,
                        radius_m=0.05, feed_m_s=2000 / 6e4, plane="xy")
@@ -98,9 +101,12 @@ def test_circle_page_shows_the_circle_numbers(client):
     items = dict(by_type["summary"]["items"])
     assert items["roundness (circular deviation G, ISO 230-4) [µm]"] == pytest.approx(ROUNDNESS_UM)
     assert items["radius error (least-squares radius - nominal) [µm]"] == pytest.approx(RADIUS_ERROR_UM)
-    assert items["largest reversal spike [µm]"] == pytest.approx(7.5)
-    assert by_type["table"]["columns"] == ["angle [deg]", "joint", "height [µm]"]
-    assert by_type["table"]["rows"] == [[a, f"A{j}", h] for a, j, h in SPIKES]
+    assert items["largest excursion after a reversal (lost motion and spike) [µm]"] == pytest.approx(7.5)
+    assert items["largest reversal spike, beyond the settled trace [µm]"] == pytest.approx(3.0)
+    assert items["largest lost motion, step of the settled trace [µm]"] == pytest.approx(6.0)
+    assert by_type["table"]["columns"] == ["angle [deg]", "joint", "spike [µm]", "lost motion [µm]", "excursion [µm]"]
+    assert by_type["table"]["rows"] == [[a, f"A{j}", sp, lm, h] for (a, j, h), (sp, lm) in zip(SPIKES, SPLITS,
+                                                                                                  strict=True)]
     # the polar trace is the CSV's, thinned to at most POLAR_MAX_POINTS samples; the oval's extremes survive
     from service.view import POLAR_MAX_POINTS
 
@@ -236,7 +242,8 @@ def test_circle_page_in_chromium(server, browser, tmp_path):
     assert float(summary["roundness (circular deviation G, ISO 230-4) [µm]"]) == ROUNDNESS_UM
     assert float(summary["radius error (least-squares radius - nominal) [µm]"]) == RADIUS_ERROR_UM
     spikes = [r.split("\t") for r in page.locator("table[data-id='spikes'] tbody tr").all_inner_texts()]
-    assert spikes == [[f"{a:.1f}", f"A{j}", f"{h:.2f}"] for a, j, h in SPIKES]
+    assert spikes == [[f"{a:.1f}", f"A{j}", f"{sp:.2f}", f"{lm:.2f}", f"{h:.2f}"]
+                      for (a, j, h), (sp, lm) in zip(SPIKES, SPLITS, strict=True)]
     assert page.locator("section.polar svg polyline").count() == 1
     assert page.locator("section.polar svg text.mark").all_text_contents() == ["A1+A6 +7.5 µm", "A2 -4.0 µm"]
     assert page.evaluate("document.querySelector('section.image img').naturalWidth") > 300   # the job's plot
@@ -306,8 +313,9 @@ def test_pages_of_real_jobs(server, browser):
     assert float(summary["roundness (circular deviation G, ISO 230-4) [µm]"]) == pytest.approx(res["roundness_um"],
                                                                                                 abs=5e-4)
     rows = [r.split("\t") for r in page.locator("table[data-id='spikes'] tbody tr").all_inner_texts()]
-    assert [(float(a), j, float(h)) for a, j, h in rows] == [
-        (pytest.approx(s["angle_deg"], abs=0.05), s["joint"], pytest.approx(s["height_um"], abs=0.005))
+    assert [(float(a), j, float(sp), float(lm), float(h)) for a, j, sp, lm, h in rows] == [
+        (pytest.approx(s["angle_deg"], abs=0.05), s["joint"], pytest.approx(s["spike_um"], abs=0.005),
+         pytest.approx(s["lost_motion_um"], abs=0.005), pytest.approx(s["height_um"], abs=0.005))
         for s in res["reversal_spikes"]]
     assert not problems, problems
     page.close()
