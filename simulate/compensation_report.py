@@ -10,8 +10,8 @@ Files in the output folder:
   ``dq1_rad .. dq6_rad`` (the joint offsets that realise it with the tool orientation kept, from the
   inverse kinematics of the corrected points minus that of the nominal points);
 - ``feedforward.csv``: one row per cycle of the *compensated* program: ``t_s, line`` and
-  ``tau_f1_Nm .. tau_f6_Nm``, the friction torque of each joint's friction model along the
-  compensated motion (the servo simulation's friction torque), for a drive's torque feed-forward;
+  ``tau_f1_Nm .. tau_f6_Nm``, each joint's static friction curve at the commanded velocity, the
+  torque the NC's friction feed-forward adds (``--ff-friction`` runs the programs with it);
 - ``report.md`` and ``deviation.png`` (normal deviation along the path before and after).
 """
 from __future__ import annotations
@@ -95,17 +95,20 @@ def offsets_table(result: CompensationResult, robot, placement) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def feedforward_table(result: CompensationResult, robot, components, substeps: int | None) -> pd.DataFrame:
-    """Per cycle of the compensated program: t_s, line, tau_f1_Nm..tau_f6_Nm (friction torque of the
-    joints' friction models along the compensated motion, from the drive simulation)."""
-    from simulate.robot.drive import simulate_drive
+def feedforward_table(result: CompensationResult, robot) -> pd.DataFrame:
+    """Per cycle of the compensated program: t_s, line, tau_f1_Nm..tau_f6_Nm, each joint's static
+    friction curve [Nm] at the commanded joint velocity: what the NC's friction feed-forward
+    (``--ff-friction``, :data:`simulate.robot.drive.DriveFlags.FF_FRICTION`) adds to the motor torque
+    when it runs the compensated program (the drive evaluates the same curve at its substeps)."""
+    from simulate.robot.drive import command_velocity, drive_friction
+    from simulate.robot.loop_friction import static_friction
 
     jt = result.after.trajectory
-    sv = simulate_drive(robot, jt.t, jt.q, friction=bool(components.friction), backlash=bool(components.switching),
-                        substeps=substeps)
+    fp = drive_friction(robot)
+    v = command_velocity(np.asarray(jt.t, float), np.asarray(jt.q, float))
     cols = {"t_s": jt.t, "line": jt.line}
     for j in range(6):
-        cols[f"tau_f{j + 1}_Nm"] = sv.tau_friction[:, j]
+        cols[f"tau_f{j + 1}_Nm"] = np.array([static_friction(fp, j, float(x)) for x in v[:, j]])
     return pd.DataFrame(cols)
 
 
@@ -187,19 +190,21 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
     return "\n".join(lines)
 
 
-def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement, components, substeps: int,
-                  title: str, scale: float = 1.0) -> dict:
+def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement, title: str,
+                  scale: float = 1.0, ff_friction: bool = False) -> dict:
     """Write every file (module docstring) into ``out_dir``: staged in a temporary folder and moved
-    in only when all succeeded. Returns the summary (:func:`summary`) with the file paths."""
+    in only when all succeeded. Returns the summary (:func:`summary`) with the file paths and
+    ``ff_friction`` (the programs were simulated with the NC's friction feed-forward)."""
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.compensate-"))
     try:
         info = summary(result, scale)
+        info["ff_friction"] = bool(ff_friction)
         (tmp / "compensated.nc").write_text(result.program.text, encoding="utf-8")
         shutil.copyfile(result.path.setup.stock, tmp / "compensated.stock.json")
         write_table(offsets_table(result, robot, placement), tmp / "offsets.csv")
-        write_table(feedforward_table(result, robot, components, substeps), tmp / "feedforward.csv")
+        write_table(feedforward_table(result, robot), tmp / "feedforward.csv")
         plot(result, tmp / "deviation.png")
         (tmp / "report.md").write_text(report_text(result, info, title, scale), encoding="utf-8")
         (tmp / "summary.json").write_text(json.dumps(info, indent=1), encoding="utf-8")
@@ -216,9 +221,10 @@ def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement
 
 
 def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optional[str], *, spacing_mm: float,
-                     probe_spacing_mm: float, size: Optional[int], friction: dict):
+                     probe_spacing_mm: float, size: Optional[int], friction: dict, ff_friction: bool = False):
     """The loaded program, the :class:`simulate.pipeline.MachiningJob` (ranking settings: trimmed stock,
-    Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates) and the placement."""
+    Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates, with
+    ``--ff-friction`` as ``ff_friction`` says) and the placement."""
     from simulate.evaluation.ranking import RankSettings
     from simulate.pipeline import MachiningJob, load_program, piece_size
     from simulate.robot.model import Robot, load_robot
@@ -231,7 +237,8 @@ def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optiona
     rob = robot if isinstance(robot, Robot) else load_robot(robot)
     setup = load_program(program, require_spindle=True)
     sz = piece_size(setup, size)
-    rs = RankSettings(spacing=spacing_mm * 1e-3, probe_spacing=probe_spacing_mm * 1e-3, size=sz or 0)
+    rs = RankSettings(spacing=spacing_mm * 1e-3, probe_spacing=probe_spacing_mm * 1e-3, size=sz or 0,
+                      ff_friction=bool(ff_friction))
     settings = rs.machining()
     if sz is None:
         from dataclasses import replace
@@ -255,13 +262,15 @@ def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_
                      iterations: int = 4, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
                      spacing_mm: float = DEFAULTS.RANKING_DEXEL_SPACING * 1e3,
                      probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: Optional[int] = None,
-                     friction: Optional[dict] = None, advance=None) -> dict:
+                     friction: Optional[dict] = None, ff_friction: bool = False, advance=None) -> dict:
     """Compensate, evaluate and write every output (``greybench compensate``'s work; the service's
     compensation jobs call it too). ``robot``: robot TOML path or a loaded robot; ``advance(n)``:
     progress in simulated 2 ms steps.
 
     ``stiffness_scale`` [-]: the robot the *evaluation* simulates is that much stiffer than the model
     the compensation iterates with (both programs); ``check_scales`` add more such evaluations.
+    ``ff_friction``: the NC runs with its friction feed-forward (``feedforward.csv``) in the
+    iteration and in every evaluation, of both programs (``rank-poses --ff-friction``).
     Returns the summary (:func:`simulate.compensation_report.summary`) with the files.
     """
     from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
@@ -276,13 +285,14 @@ def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_
     cs.validate()
     setup, job, placement, rob = compensation_job(program, robot, pose, name, spacing_mm=spacing_mm,
                                                   probe_spacing_mm=probe_spacing_mm, size=size,
-                                                  friction=friction or {})
+                                                  friction=friction or {}, ff_friction=ff_friction)
     scales = sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
     from simulate.evaluation.cutter import robot_cutter
 
     sim = pipeline_simulator(job, advance=advance)
     res = compensate(setup, sim, cs, checks=scales, require_spindle=True, tool_radius=robot_cutter(rob).radius,
                      header=f"compensated by greybench for robot {rob.name}, pose {placement.name}")
-    title = f"{program.name}, robot {rob.name}, pose {placement.name}"
-    return write_outputs(res, out_dir, robot=rob, placement=placement, components=job.components,
-                         substeps=job.settings.substeps, title=title, scale=float(stiffness_scale))
+    title = f"{program.name}, robot {rob.name}, pose {placement.name}" + (
+        ", NC friction feed-forward on" if ff_friction else "")
+    return write_outputs(res, out_dir, robot=rob, placement=placement, title=title, scale=float(stiffness_scale),
+                         ff_friction=ff_friction)

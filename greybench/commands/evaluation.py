@@ -83,6 +83,8 @@ def rank_poses_cmd(
                                                  help="AXIS=MODEL: friction model reference for a joint (saved "
                                                       "folder, runs:/, models:/<name>@<alias>), repeatable; others "
                                                       "keep the robot file's."),
+    ff_friction: bool = typer.Option(False, "--ff-friction", help="The NC's friction feed-forward: each joint's "
+                                     "static friction curve [Nm] at the commanded velocity added to the motor torque."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object: ranking (score [-]) and feature "
                                                        "rows (nominal_mm, tolerance_mm, deviation_mm per pose)."),
 ) -> None:
@@ -111,7 +113,7 @@ def rank_poses_cmd(
             raise InputError("output must be a folder", source=str(out_dir))
         out_dir.mkdir(parents=True, exist_ok=True)
     settings = RankSettings(spacing=spacing * MM, probe_spacing=probe_spacing * MM, stiffness_scale=stiffness_scale,
-                            size=size)
+                            size=size, ff_friction=ff_friction)
     comps = Components(deflection=False, servo=False) if ideal else Components()
     n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
     with progress("simulating poses", total=n_jobs) as advance:
