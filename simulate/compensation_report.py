@@ -191,16 +191,17 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
 
 
 def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement, title: str,
-                  scale: float = 1.0, ff_friction: bool = False) -> dict:
+                  scale: float = 1.0, ff_friction: bool = False, backlash_comp: bool = False) -> dict:
     """Write every file (module docstring) into ``out_dir``: staged in a temporary folder and moved
-    in only when all succeeded. Returns the summary (:func:`summary`) with the file paths and
-    ``ff_friction`` (the programs were simulated with the NC's friction feed-forward)."""
+    in only when all succeeded. Returns the summary (:func:`summary`) with the file paths,
+    ``ff_friction`` and ``backlash_comp`` (the NC functions the programs were simulated with)."""
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.compensate-"))
     try:
         info = summary(result, scale)
         info["ff_friction"] = bool(ff_friction)
+        info["backlash_comp"] = bool(backlash_comp)
         (tmp / "compensated.nc").write_text(result.program.text, encoding="utf-8")
         shutil.copyfile(result.path.setup.stock, tmp / "compensated.stock.json")
         write_table(offsets_table(result, robot, placement), tmp / "offsets.csv")
@@ -221,10 +222,11 @@ def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement
 
 
 def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optional[str], *, spacing_mm: float,
-                     probe_spacing_mm: float, size: Optional[int], friction: dict, ff_friction: bool = False):
+                     probe_spacing_mm: float, size: Optional[int], friction: dict, ff_friction: bool = False,
+                     backlash_comp: bool = False):
     """The loaded program, the :class:`simulate.pipeline.MachiningJob` (ranking settings: trimmed stock,
     Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates, with
-    ``--ff-friction`` as ``ff_friction`` says) and the placement."""
+    ``--ff-friction`` and ``--backlash-comp`` as ``ff_friction``, ``backlash_comp`` say) and the placement."""
     from simulate.evaluation.ranking import RankSettings
     from simulate.pipeline import MachiningJob, load_program, piece_size
     from simulate.robot.model import Robot, load_robot
@@ -238,7 +240,7 @@ def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optiona
     setup = load_program(program, require_spindle=True)
     sz = piece_size(setup, size)
     rs = RankSettings(spacing=spacing_mm * 1e-3, probe_spacing=probe_spacing_mm * 1e-3, size=sz or 0,
-                      ff_friction=bool(ff_friction))
+                      ff_friction=bool(ff_friction), backlash_comp=bool(backlash_comp))
     settings = rs.machining()
     if sz is None:
         from dataclasses import replace
@@ -262,7 +264,8 @@ def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_
                      iterations: int = 4, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
                      spacing_mm: float = DEFAULTS.RANKING_DEXEL_SPACING * 1e3,
                      probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: Optional[int] = None,
-                     friction: Optional[dict] = None, ff_friction: bool = False, advance=None) -> dict:
+                     friction: Optional[dict] = None, ff_friction: bool = False, backlash_comp: bool = False,
+                     advance=None) -> dict:
     """Compensate, evaluate and write every output (``greybench compensate``'s work; the service's
     compensation jobs call it too). ``robot``: robot TOML path or a loaded robot; ``advance(n)``:
     progress in simulated 2 ms steps.
@@ -270,7 +273,8 @@ def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_
     ``stiffness_scale`` [-]: the robot the *evaluation* simulates is that much stiffer than the model
     the compensation iterates with (both programs); ``check_scales`` add more such evaluations.
     ``ff_friction``: the NC runs with its friction feed-forward (``feedforward.csv``) in the
-    iteration and in every evaluation, of both programs (``rank-poses --ff-friction``).
+    iteration and in every evaluation, of both programs (``rank-poses --ff-friction``);
+    ``backlash_comp`` likewise with its backlash compensation (``rank-poses --backlash-comp``).
     Returns the summary (:func:`simulate.compensation_report.summary`) with the files.
     """
     from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
@@ -285,14 +289,15 @@ def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_
     cs.validate()
     setup, job, placement, rob = compensation_job(program, robot, pose, name, spacing_mm=spacing_mm,
                                                   probe_spacing_mm=probe_spacing_mm, size=size,
-                                                  friction=friction or {}, ff_friction=ff_friction)
+                                                  friction=friction or {}, ff_friction=ff_friction,
+                                                  backlash_comp=backlash_comp)
     scales = sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
     from simulate.evaluation.cutter import robot_cutter
 
     sim = pipeline_simulator(job, advance=advance)
     res = compensate(setup, sim, cs, checks=scales, require_spindle=True, tool_radius=robot_cutter(rob).radius,
                      header=f"compensated by greybench for robot {rob.name}, pose {placement.name}")
-    title = f"{program.name}, robot {rob.name}, pose {placement.name}" + (
-        ", NC friction feed-forward on" if ff_friction else "")
+    nc = [n for n, on in (("friction feed-forward", ff_friction), ("backlash compensation", backlash_comp)) if on]
+    title = f"{program.name}, robot {rob.name}, pose {placement.name}" + (f", NC {' and '.join(nc)} on" if nc else "")
     return write_outputs(res, out_dir, robot=rob, placement=placement, title=title, scale=float(stiffness_scale),
-                         ff_friction=ff_friction)
+                         ff_friction=ff_friction, backlash_comp=backlash_comp)

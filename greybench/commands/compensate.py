@@ -82,6 +82,10 @@ def compensate_cmd(
                                      help="Run both programs with the NC's friction feed-forward (feedforward.csv "
                                           "[Nm]: each joint's static friction curve at the commanded velocity), in "
                                           "the iteration and every evaluation; compare with rank-poses --ff-friction."),
+    backlash_comp: bool = typer.Option(False, "--backlash-comp",
+                                       help="Run both programs with the NC's backlash compensation: each drive's "
+                                            "setpoint moved by half its play [rad] towards the flank the predicted "
+                                            "gear torque loads; compare with rank-poses --backlash-comp."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (deviations in mm)."),
 ) -> None:
     """Pre-compensate a program from the simulation: correct the commanded path against the predicted
@@ -98,7 +102,8 @@ def compensate_cmd(
         info = run_compensation(program, resolve_robot(robot), pose, name, out_dir, iterations=iterations,
                                 stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
                                 spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
-                                friction=_friction(friction), ff_friction=ff_friction, advance=adv)
+                                friction=_friction(friction), ff_friction=ff_friction,
+                                backlash_comp=backlash_comp, advance=adv)
     if as_json:
         emit_json(info)
         return

@@ -85,6 +85,9 @@ def rank_poses_cmd(
                                                       "keep the robot file's."),
     ff_friction: bool = typer.Option(False, "--ff-friction", help="The NC's friction feed-forward: each joint's "
                                      "static friction curve [Nm] at the commanded velocity added to the motor torque."),
+    backlash_comp: bool = typer.Option(False, "--backlash-comp", help="The NC's backlash compensation: each drive's "
+                                       "setpoint moved by half its play [rad] towards the flank the predicted gear "
+                                       "torque loads."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object: ranking (score [-]) and feature "
                                                        "rows (nominal_mm, tolerance_mm, deviation_mm per pose)."),
 ) -> None:
@@ -113,7 +116,8 @@ def rank_poses_cmd(
             raise InputError("output must be a folder", source=str(out_dir))
         out_dir.mkdir(parents=True, exist_ok=True)
     settings = RankSettings(spacing=spacing * MM, probe_spacing=probe_spacing * MM, stiffness_scale=stiffness_scale,
-                            size=size, ff_friction=ff_friction)
+                            size=size, ff_friction=ff_friction,
+                            backlash_comp=backlash_comp)
     comps = Components(deflection=False, servo=False) if ideal else Components()
     n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
     with progress("simulating poses", total=n_jobs) as advance:
