@@ -46,7 +46,8 @@ def circle(
 
     Writes circle.csv (angle_deg, radial_deviation_um, q1_rad..q6_rad), circle.png (polar plot,
     deviation magnified, reversal spikes marked with the joint) and summary.json, prints roundness_um,
-    radius_error_um and reversal_spikes (angle [deg], joint, height [µm]).
+    radius_error_um and reversal_spikes (angle [deg], joint, excursion height [µm], and as a ballbar
+    analysis splits it: spike beyond the settled trace [µm], lost motion step [µm]).
     """
     from simulate.evaluation.circle import CircleSpec, evaluate_run, simulate_circle, write_outputs
     from simulate.robot.model import load_robot
@@ -73,14 +74,17 @@ def circle(
         emit_json(summary)
         return
     print_summary("circle", {"roundness_um": result.roundness_um, "radius_error_um": result.radius_error_um,
-                             "largest_spike_um": result.largest_spike_um, "csv": str(csv), "png": str(png)})
+                             "largest_spike_um": result.largest_spike_um,
+                             "largest_reversal_spike_um": result.largest_reversal_spike_um,
+                             "largest_lost_motion_um": result.largest_lost_motion_um, "csv": str(csv), "png": str(png)})
     from rich.table import Table
 
     table = Table(title="reversal spikes")
-    for col in ("angle [deg]", "joint", "height [µm]"):
+    for col in ("angle [deg]", "joint", "excursion [µm]", "spike [µm]", "lost motion [µm]"):
         table.add_column(col, justify="right")
     for s in result.spikes:
-        table.add_row(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}")
+        table.add_row(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}", f"{s.spike_um:+.1f}",
+                      f"{s.lost_motion_um:+.1f}")
     out.print(table)
     if not result.spikes:
         err.print("no joint reverses along this circle")

@@ -17,10 +17,26 @@ circle's plane:
 - **roundness** ``max F - min F``, the circular deviation G of ISO 230-4 (smallest radial gap of
   two concentric circles about the least-squares centre that enclose the trace);
 - **radius error** ``R_LS - R`` (the trace's least-squares radius minus the nominal one);
-- **reversal spikes**: where a joint's commanded velocity changes sign along the circle (on a
-  robot these are the angles where glitches appear, not the Cartesian quadrants), the height is
-  the extreme of ``F - F(reversal)`` within the next ``SPIKE_WINDOW_DEG`` of the circle, signed
-  (a lost-motion step that persists counts with its full height).
+- **reversals**: where a joint's commanded velocity changes sign along the circle (on a robot
+  these are the angles where glitches appear, not the Cartesian quadrants). Each reversal is
+  split as a ballbar analysis splits it (Renishaw QC20-W ballbar system manual, diagnostics
+  "backlash" and "reversal spikes"; ISO 230-4:2005 Annex; Knapp, Precision Engineering 5(2), 1983;
+  Kakino et al., 1993; ``docs/drive-model.md``):
+
+  * **lost motion** ``s = L_a(a_r) - L_b(a_r)``: the step between the settled trace before and
+    after the reversal, each a least-squares line in the travelled angle, ``L_b`` over the
+    ``BEFORE_WINDOW_DEG`` before the reversal angle ``a_r``, ``L_a`` over the
+    ``SETTLE_WINDOW_DEG`` that follow the spike window, both evaluated at ``a_r``;
+  * **reversal spike** ``h``: the transient peak beyond the settled trace within
+    ``SPIKE_WINDOW_DEG`` after the reversal, i.e. how far ``F`` leaves the band between ``L_b``
+    and ``L_a`` (beyond ``max(L_a, L_b)`` positive, below ``min(L_a, L_b)`` negative; 0 for a
+    clean step). A pure step gives ``h = 0``, a spike that returns to the trace ``s = 0``.
+
+  The windows shrink in proportion where another joint reverses closer than they reach, and
+  the trace is treated as closed (a full circle), so a reversal near the start has its before
+  window at the trace's end. The former single figure, the extreme of ``F - F(reversal)`` in the
+  spike window (``height_um``: lost motion and spike together), is kept as the reversal's
+  *excursion*.
 """
 from __future__ import annotations
 
@@ -40,6 +56,10 @@ _PLANES = {"xy": (17, (0, 1), 2), "zx": (18, (2, 0), 1), "yz": (19, (1, 2), 0)}
 LEAD_DEG = 90.0
 #: Window after a joint reversal in which its spike is measured [deg of the circle].
 SPIKE_WINDOW_DEG = 15.0
+#: Window after the spike window where the settled trace after a reversal is fitted [deg].
+SETTLE_WINDOW_DEG = 10.0
+#: Window before a reversal where the settled trace before it is fitted [deg].
+BEFORE_WINDOW_DEG = 10.0
 #: A joint reverses only where its commanded speed exceeds this share of its peak on both sides [-] ...
 REVERSAL_DEADBAND = 1e-3
 #: ... and this absolute speed [rad/s] (a joint the circle does not move only shows round-off of the IK).
@@ -112,7 +132,8 @@ def circle_gcode(spec: CircleSpec) -> str:
 
     def arc(p_from, p_to):
         off = c - p_from
-        return f"{'G3' if spec.ccw else 'G2'} {words(p_to)} {centre_words[a1]}{off[a1]:.6f} {centre_words[a2]}{off[a2]:.6f}"
+        return (f"{'G3' if spec.ccw else 'G2'} {words(p_to)} "
+                f"{centre_words[a1]}{off[a1]:.6f} {centre_words[a2]}{off[a2]:.6f}")
 
     p0, p1 = point(0.0), point(sgn * LEAD_DEG)
     lines = [f"(virtual circular test: R {R:g} mm, F {spec.feed * 6e4:g} mm/min, plane {spec.plane.value})",
@@ -240,16 +261,30 @@ class ReversalSpike:
     joint : int
         The reversing joint, 1..6 (A1..A6).
     height_um : float
-        Extreme of the radial deviation relative to its value at the reversal, within
-        ``SPIKE_WINDOW_DEG`` after it [µm], outward positive.
+        Excursion: extreme of the radial deviation relative to its value at the reversal, within
+        ``SPIKE_WINDOW_DEG`` after it [µm], outward positive (lost motion and spike together).
     peak_angle_deg : float
         Angle of that extreme [deg].
+    spike_um : float
+        Reversal spike: the transient peak beyond the settled trace before and after the
+        reversal [µm], outward positive (module docstring).
+    lost_motion_um : float
+        Lost motion: step of the settled trace across the reversal, after minus before [µm].
+    spike_angle_deg : float
+        Angle of the spike's peak [deg] (default ``peak_angle_deg``).
     """
 
     angle_deg: float
     joint: int
     height_um: float
     peak_angle_deg: float
+    spike_um: float = 0.0
+    lost_motion_um: float = 0.0
+    spike_angle_deg: float | None = None
+
+    def __post_init__(self):
+        if self.spike_angle_deg is None:
+            object.__setattr__(self, "spike_angle_deg", self.peak_angle_deg)
 
     @property
     def name(self) -> str:
@@ -293,15 +328,29 @@ class CircleResult:
 
     @property
     def largest_spike_um(self) -> float:
-        """Largest |height| of the reversal spikes [µm] (0 when no joint reverses)."""
+        """Largest |excursion| ``height_um`` at a reversal [µm] (lost motion and spike together; 0
+        when no joint reverses)."""
         return max((abs(s.height_um) for s in self.spikes), default=0.0)
+
+    @property
+    def largest_reversal_spike_um(self) -> float:
+        """Largest |spike| beyond the settled trace, ``spike_um`` [µm] (ballbar reversal spike)."""
+        return max((abs(s.spike_um) for s in self.spikes), default=0.0)
+
+    @property
+    def largest_lost_motion_um(self) -> float:
+        """Largest |lost motion| step at a reversal, ``lost_motion_um`` [µm] (ballbar backlash)."""
+        return max((abs(s.lost_motion_um) for s in self.spikes), default=0.0)
 
     def summary(self) -> dict:
         """Plain numbers for printing / JSON."""
         return {"roundness_um": self.roundness_um, "radius_error_um": self.radius_error_um,
                 "center_offset_um": [float(v) for v in self.center_offset_um],
                 "largest_spike_um": self.largest_spike_um,
-                "reversal_spikes": [{"angle_deg": s.angle_deg, "joint": s.name, "height_um": s.height_um}
+                "largest_reversal_spike_um": self.largest_reversal_spike_um,
+                "largest_lost_motion_um": self.largest_lost_motion_um,
+                "reversal_spikes": [{"angle_deg": s.angle_deg, "joint": s.name, "height_um": s.height_um,
+                                     "spike_um": s.spike_um, "lost_motion_um": s.lost_motion_um}
                                     for s in self.spikes]}
 
 
@@ -330,6 +379,75 @@ def joint_reversals(qd: np.ndarray, deadband: float = REVERSAL_DEADBAND,
     return sorted(out)
 
 
+@dataclass(frozen=True)
+class ReversalSplit:
+    """A reversal split into lost motion and spike (:func:`split_reversal`; units of the trace).
+
+    Attributes
+    ----------
+    lost_motion : float
+        Step of the settled trace, after minus before, at the reversal angle.
+    spike : float
+        Peak beyond the band between the settled traces before and after, signed (0 inside it).
+    index : int
+        Sample of the spike's peak (of the trace passed in).
+    """
+
+    lost_motion: float
+    spike: float
+    index: int
+
+
+def split_reversal(trav_deg, dev, at_deg: float, *, neighbours=(), spike_deg: float = SPIKE_WINDOW_DEG,
+                   settle_deg: float = SETTLE_WINDOW_DEG, before_deg: float = BEFORE_WINDOW_DEG) -> ReversalSplit:
+    """Lost motion and spike of a closed trace at one reversal (module docstring).
+
+    Parameters
+    ----------
+    trav_deg : array_like (N,)
+        Travelled angle of each sample [deg], increasing, within one turn (``0 <= trav < 360``).
+    dev : array_like (N,)
+        Radial deviation (any unit; the results are in the same unit).
+    at_deg : float
+        Travelled angle of the reversal [deg].
+    neighbours : array_like
+        Travelled angles of all reversals [deg]: the windows stop short of the next ones.
+    spike_deg, settle_deg, before_deg : float
+        Spike window after the reversal, settled-trace window after it, window before it [deg].
+    """
+    t = np.asarray(trav_deg, float)
+    d = np.asarray(dev, float)
+    n = t.size
+    # the trace is closed: one turn either side gives every window its samples
+    te = np.concatenate([t - 360.0, t, t + 360.0])
+    de = np.concatenate([d, d, d])
+    others = np.asarray(neighbours, float) % 360.0
+    gaps = (others - at_deg) % 360.0
+    gaps = gaps[gaps > 1e-9]
+    ahead = float(gaps.min()) if gaps.size else 360.0
+    behind = float((360.0 - gaps).min()) if gaps.size else 360.0
+    # shrink the windows in proportion where another reversal is closer than they reach
+    fa = min(1.0, ahead / (spike_deg + settle_deg))
+    fb = min(1.0, behind / before_deg)
+    s_end, a_end = at_deg + fa * spike_deg, at_deg + fa * (spike_deg + settle_deg)
+
+    def line(lo, hi):
+        sel = (te >= lo) & (te < hi)
+        if np.count_nonzero(sel) < 2:
+            return np.poly1d([float(np.mean(de[np.argmin(np.abs(te - lo))]))])
+        return np.poly1d(np.polyfit(te[sel] - at_deg, de[sel], 1))
+
+    lb = line(at_deg - fb * before_deg, at_deg)
+    la = line(s_end, a_end)
+    sel = np.nonzero((te >= at_deg) & (te <= s_end))[0]
+    x = te[sel] - at_deg
+    hi = np.maximum(la(x), lb(x))
+    lo = np.minimum(la(x), lb(x))
+    excess = np.where(de[sel] > hi, de[sel] - hi, np.where(de[sel] < lo, de[sel] - lo, 0.0))
+    m = int(np.argmax(np.abs(excess)))
+    return ReversalSplit(lost_motion=float(la(0.0) - lb(0.0)), spike=float(excess[m]), index=int(sel[m] % n))
+
+
 def evaluate_circle(xyz, q, qd_cmd, spec: CircleSpec, *, window_deg: float = SPIKE_WINDOW_DEG) -> CircleResult:
     """Evaluate one trace of the full circle.
 
@@ -356,15 +474,20 @@ def evaluate_circle(xyz, q, qd_cmd, spec: CircleSpec, *, window_deg: float = SPI
     # travelled angle along the path (unwrapped, increasing) for the spike windows
     trav = np.degrees(np.abs(np.unwrap(np.radians(ang)) - math.radians(ang[0])))
     spikes = []
-    for k, j in joint_reversals(qd_cmd):
+    reversals = joint_reversals(qd_cmd)
+    at = np.unique([trav[k] for k, _ in reversals])
+    for k, j in reversals:
         sel = np.nonzero((trav >= trav[k]) & (trav <= trav[k] + window_deg))[0]
         rel = dev[sel] - dev[k]
         m = int(np.argmax(np.abs(rel)))
+        split = split_reversal(trav, dev, trav[k], neighbours=at, spike_deg=window_deg)
         spikes.append(ReversalSpike(angle_deg=float(ang[k]), joint=j + 1, height_um=float(rel[m]),
-                                    peak_angle_deg=float(ang[sel[m]])))
+                                    peak_angle_deg=float(ang[sel[m]]), spike_um=split.spike,
+                                    lost_motion_um=split.lost_motion, spike_angle_deg=float(ang[split.index])))
     c_nom = np.array(spec.center)[[a1, a2]]
     return CircleResult(angle_deg=ang, deviation_um=dev, q=np.asarray(q, float),
-                        roundness_um=float(dev.max() - dev.min()), radius_error_um=float((fit.radius - spec.radius) * 1e6),
+                        roundness_um=float(dev.max() - dev.min()),
+                        radius_error_um=float((fit.radius - spec.radius) * 1e6),
                         center_offset_um=(fit.center - c_nom) * 1e6, spikes=tuple(spikes), radius_m=spec.radius,
                         feed_m_s=spec.feed, plane=spec.plane.value)
 
@@ -419,20 +542,22 @@ def polar_plot(result: CircleResult, path: str | Path, title: str = "") -> str:
     groups: dict[tuple, list] = {}
     for s in result.spikes:
         groups.setdefault((round(s.angle_deg, 6), round(s.peak_angle_deg, 6)), []).append(s)
-    for (a_rev, a_peak), group in groups.items():
+    for (a_rev, _), group in groups.items():
         colour = colours(group[0].joint - 1)
-        k, kr = nearest(a_peak), nearest(a_rev)
+        k, kr = nearest(group[0].spike_angle_deg), nearest(a_rev)
         ax.plot([th[kr]], [dev[kr]], marker="|", ms=14, mew=2, color=colour)
         ax.plot([th[k]], [dev[k]], marker="o", ms=6, color=colour)
-        ax.annotate(f"{'+'.join(s.name for s in group)} {group[0].height_um:+.1f} µm", (th[k], dev[k]),
-                    textcoords="offset points", xytext=(6, 6), fontsize=9, color=colour)
+        ax.annotate(f"{'+'.join(s.name for s in group)} spike {group[0].spike_um:+.1f} µm, "
+                    f"lost motion {group[0].lost_motion_um:+.1f} µm", (th[k], dev[k]),
+                    textcoords="offset points", xytext=(6, 6), fontsize=8, color=colour)
     ax.set_rlabel_position(22.5)
     ax.set_ylabel("radial deviation [µm]", labelpad=28)
-    ax.set_title(title + (f"\n" if title else "") +
+    ax.set_title(title + ("\n" if title else "") +
                  f"R {result.radius_m * 1e3:g} mm, F {result.feed_m_s * 6e4:g} mm/min, plane {result.plane}: "
                  f"roundness {result.roundness_um:.1f} µm, radius error {result.radius_error_um:+.1f} µm", fontsize=10)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.12), fontsize=8)
-    fig.text(0.98, 0.02, "o spike peak, | joint reversal; label: joint, height [µm]", ha="right", fontsize=8)
+    fig.text(0.98, 0.02, "| joint reversal, o spike peak; label: joint, spike beyond the settled trace,\n"
+             "lost motion (step of the settled trace across the reversal) [µm]", ha="right", fontsize=8)
     return _save(fig, Path(path))
 
 

@@ -349,6 +349,41 @@ def substeps_for(p: DriveParams, jl, T: float = CYCLE, flags: int = int(DriveFla
     return np.maximum(1, np.ceil(w * T / OMEGA_H)).astype(np.int64)
 
 
+def linear_modes(p: DriveParams, jl: float, j: int) -> list[tuple[float, float]]:
+    """Poles of joint ``j``'s (0-based) closed drive loop, linearised: no friction, no play.
+
+    The feed-forward and the windup compensation act on the reference only and leave the poles
+    alone. States ``(theta, omega, q, qd, integ)`` of the equations in the module docstring with
+    ``u = kp (kv (r - theta) - omega) + integ``, ``integ_d = ki (kv (r - theta) - omega)``.
+
+    Parameters
+    ----------
+    p : DriveParams
+    jl : float
+        Link inertia [kg m^2].
+    j : int
+        Joint, 0-based.
+
+    Returns
+    -------
+    list of (float, float)
+        Per pole pair (and per real pole) its natural frequency ``|s| / 2 pi`` [Hz] and damping
+        ratio ``-Re s / |s|`` [-], by frequency.
+    """
+    jm, c, d = float(p.jm[j]), float(p.c[j]), float(p.d[j])
+    kv, kp, ki = float(p.kv[j]), float(p.kp[j]), float(p.ki[j])
+    a = np.zeros((5, 5))
+    a[0, 1] = 1.0
+    a[1] = [-(kp * kv + c) / jm, -(kp + d) / jm, c / jm, d / jm, 1.0 / jm]
+    a[2, 3] = 1.0
+    a[3] = [c / jl, d / jl, -c / jl, -d / jl, 0.0]
+    a[4] = [-ki * kv, -ki, 0.0, 0.0, 0.0]
+    ev = np.linalg.eigvals(a)
+    # the integrator-free limit has a pole at 0 (the position of the whole drive when kv = 0)
+    return sorted((float(abs(e) / (2 * math.pi)), float(-e.real / abs(e)) if abs(e) > 0 else 1.0)
+                  for e in ev if e.imag >= 0.0)
+
+
 def as_substeps(substeps) -> np.ndarray:
     """Substeps per joint (6,) int64 from an int or six ints; ``ValueError`` below 1."""
     n = np.broadcast_to(np.asarray(substeps), (N_AXES,))

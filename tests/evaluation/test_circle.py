@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import json
-import re
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +11,15 @@ import pytest
 from typer.testing import CliRunner
 
 from greybench.cli import app
-from simulate.evaluation.circle import (CircleSpec, Plane, circle_program, evaluate_circle, evaluate_run,
-                                        joint_reversals, simulate_circle)
+from simulate.evaluation.circle import (
+    CircleSpec,
+    Plane,
+    circle_program,
+    evaluate_circle,
+    evaluate_run,
+    joint_reversals,
+    simulate_circle,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 POSES = ROOT / "data" / "poses" / "iso320.json"
@@ -61,6 +68,64 @@ def test_reversal_spikes_angle_joint_and_height():
     assert a[0].height_um == pytest.approx(25.0, rel=0.01) and a[1].height_um == pytest.approx(-40.0, rel=0.01)
     assert a[0].peak_angle_deg == pytest.approx(94.0, abs=0.2)
     assert res.largest_spike_um == pytest.approx(40.0, rel=0.01)
+
+
+def stepped(spec: CircleSpec, step: float, bumps, n=7200, at=(92.0, 272.0), width=0.5, lag=2.5):
+    """Trace with a lost-motion step: radius R - step/2, R + step/2 between the reversals ``at``
+    (tanh transitions of ``width`` deg centred ``lag`` deg after them: the play is crossed after the
+    reversal), plus Gaussian bumps (angle_deg, height_m, width_deg); joint 1 reverses at ``at``.
+    Returns (points, commanded joint velocities)."""
+    th = np.arange(n) * 360.0 / n
+    r = spec.radius + 0.5 * step * (np.tanh((th - at[0] - lag) / width) - np.tanh((th - at[1] - lag) / width) - 1.0)
+    for a, h, w in bumps:
+        r = r + h * np.exp(-0.5 * (((th - a + 180.0) % 360.0 - 180.0) / w) ** 2)
+    p = np.zeros((n, 3))
+    p[:, 0], p[:, 1] = r * np.cos(np.radians(th)), r * np.sin(np.radians(th))
+    qd = np.zeros((n, 6))
+    qd[:, 0] = np.cos(np.radians(th - at[0] + 90.0))
+    return p, qd
+
+
+def test_reversal_split_into_lost_motion_and_spike():
+    """Closed form: a known step s at each reversal (up at 92 deg, down at 272 deg) and a known spike
+    beyond the settled trace 6 deg after each (+12 um, -20 um): lost motion +-s and the spikes come
+    out; the excursion (former height) lumps them."""
+    spec = CircleSpec(radius=0.05, feed=2000 / 6e4)
+    s = 40e-6
+    p, qd = stepped(spec, s, bumps=[(98.0, 12e-6, 1.0), (278.0, -20e-6, 1.0)])
+    res = evaluate_circle(p, np.zeros((len(p), 6)), qd, spec)
+    up, down = sorted(res.spikes, key=lambda x: x.angle_deg)
+    assert up.angle_deg == pytest.approx(92.0, abs=0.3) and down.angle_deg == pytest.approx(272.0, abs=0.3)
+    assert up.lost_motion_um == pytest.approx(40.0, abs=0.4) and down.lost_motion_um == pytest.approx(-40.0, abs=0.4)
+    assert up.spike_um == pytest.approx(12.0, abs=0.3) and down.spike_um == pytest.approx(-20.0, abs=0.3)
+    assert up.spike_angle_deg == pytest.approx(98.0, abs=0.2)
+    assert up.height_um == pytest.approx(40.0 + 12.0, abs=3.0)          # lumped (less the trace slope)
+    assert res.largest_reversal_spike_um == pytest.approx(20.0, abs=0.3)
+    assert res.largest_lost_motion_um == pytest.approx(40.0, abs=0.4)
+
+
+def test_reversal_split_pure_step_and_pure_spike():
+    """A clean step has no spike; a spike that returns to the trace has no lost motion."""
+    spec = CircleSpec(radius=0.05, feed=2000 / 6e4)
+    p, qd = stepped(spec, 40e-6, bumps=[])
+    res = evaluate_circle(p, np.zeros((len(p), 6)), qd, spec)
+    assert all(abs(x.spike_um) < 0.3 and abs(abs(x.lost_motion_um) - 40.0) < 0.4 for x in res.spikes)
+    p, qd = stepped(spec, 0.0, bumps=[(96.0, 15e-6, 1.5), (276.0, 15e-6, 1.5)])
+    res = evaluate_circle(p, np.zeros((len(p), 6)), qd, spec)
+    assert all(abs(x.lost_motion_um) < 0.3 and x.spike_um == pytest.approx(15.0, abs=0.3) for x in res.spikes)
+
+
+def test_reversal_windows_stop_short_of_the_next_reversal():
+    """Two reversals 12 deg apart (steps up and back down): each one's windows shrink so the other's
+    step does not enter its settled trace: lost motions +s and -s, no spikes."""
+    spec = CircleSpec(radius=0.05, feed=2000 / 6e4)
+    p, qd = stepped(spec, 40e-6, bumps=[], at=(92.0, 104.0), width=0.3, lag=1.5)
+    qd[:, 0] = np.where((np.arange(len(p)) * 360.0 / len(p) - 92.0) % 360.0 < 12.0, -1.0, 1.0)
+    res = evaluate_circle(p, np.zeros((len(p), 6)), qd, spec)
+    lm = sorted((x.angle_deg, x.lost_motion_um, x.spike_um) for x in res.spikes)
+    assert [a for a, _, _ in lm] == pytest.approx([92.0, 104.0], abs=0.3)
+    assert lm[0][1] == pytest.approx(40.0, abs=1.0) and lm[1][1] == pytest.approx(-40.0, abs=1.0)
+    assert all(abs(h) < 1.0 for _, _, h in lm)
 
 
 def test_joint_reversals_deadband():
@@ -139,6 +204,11 @@ def test_friction_makes_the_reversal_spikes(runs):
     base = runs["base"][1].largest_spike_um
     assert base >= 3 * runs["no_friction"][1].largest_spike_um
     assert runs["friction_x2"][1].largest_spike_um >= 1.3 * base
+    # as a ballbar analysis splits it: the spike beyond the settled trace and the lost motion step
+    spike = runs["base"][1].largest_reversal_spike_um
+    assert spike >= 3 * runs["no_friction"][1].largest_reversal_spike_um
+    assert runs["friction_x2"][1].largest_reversal_spike_um >= 1.5 * spike
+    assert runs["base"][1].largest_lost_motion_um >= 3 * runs["no_friction"][1].largest_lost_motion_um
     # the spikes sit where joints reverse: A1 twice on a full circle in front of the robot
     assert sum(s.joint == 1 for s in runs["base"][1].spikes) == 2
 
@@ -196,7 +266,10 @@ def test_cli_writes_csv_png_and_json(tmp_path):
     doc = json.loads(r.stdout)
     assert {"roundness_um", "radius_error_um", "reversal_spikes"} <= set(doc)
     assert doc["roundness_um"] > 0 and doc["reversal_spikes"]
-    assert {"angle_deg", "joint", "height_um"} == set(doc["reversal_spikes"][0])
+    # keys added for the ballbar split (spike beyond the settled trace, lost motion); the former stay
+    assert {"angle_deg", "joint", "height_um", "spike_um", "lost_motion_um"} == set(doc["reversal_spikes"][0])
+    assert doc["largest_reversal_spike_um"] == max(abs(s["spike_um"]) for s in doc["reversal_spikes"])
+    assert doc["largest_lost_motion_um"] == max(abs(s["lost_motion_um"]) for s in doc["reversal_spikes"])
     import pandas as pd
 
     df = pd.read_csv(out / "circle.csv")
