@@ -853,29 +853,17 @@ def ramp_in(path: NominalPath, corr: Correction, s: CompensationSettings, limits
     return Correction(corr.grids, out)
 
 
-def slow_grid(path: NominalPath, written: WrittenProgram, setup: ProgramSetup, s: CompensationSettings,
-              tool_radius: float | None = None) -> list:
+def slow_grid(path: NominalPath, written: WrittenProgram, setup: ProgramSetup, s: CompensationSettings) -> list:
     """Per feed run a mask over its grid: within ``s.smoothing`` of a cycle where the written program
-    runs below ``SPEED_KEEP`` of the original's speed at the same nominal arc length, where the
-    original cruises (at ``SPEED_KEEP`` of its feed or above) within ``s.ramp`` on both sides: where it
-    speeds up or slows down itself, the pieces' ramp rule of :func:`plan_pieces` applies, and a
-    chain of pieces, each junction at zero acceleration, follows the original's speed change late.)
-    Arcs of radius at most ``tool_radius`` [m] are left out: there the tool turns round a corner of
-    the part and cuts no surface of its own (:func:`blend_corners`)."""
+    runs below ``SPEED_KEEP`` of the original's speed at the same nominal arc length. Where the
+    original slows down itself (a corner, a run's start) the mask marks the corrected program's
+    slower recovery after it too: a chain of short pieces, each junction at zero acceleration,
+    speeds up slowly (:mod:`simulate.toolpath.interpolation`), and a smoother correction there
+    needs fewer pieces."""
     it0 = path.setup.interp
-    s0, v0 = np.asarray(it0.s, float), np.asarray(it0.v, float)
-    feed = np.array([min(seg.feed, PathLimits().max_speed) for seg in path.segments])[np.asarray(it0.segment)]
-    cruise = (v0 >= SPEED_KEEP * feed).astype(float)
     runs, sigma, _ = path_deviation(path, written, SimulationRun(setup, np.asarray(setup.interp.xyz)))
-    v_orig = np.interp(sigma, s0, v0)
-    cruising = np.ones(len(sigma), bool)
-    for d in (-s.ramp, 0.0, s.ramp):
-        cruising &= np.interp(sigma + d, s0, cruise) >= 1.0
-    slow = (runs >= 0) & cruising & (np.asarray(setup.interp.v) < SPEED_KEEP * v_orig)
-    if tool_radius:
-        for i, seg in enumerate(path.segments):
-            if path.run[i] >= 0 and isinstance(seg, Arc) and seg.radius <= tool_radius * (1 + 1e-3):
-                slow &= ~((sigma >= path.sigma0[i]) & (sigma <= path.sigma0[i] + seg.length))
+    v_orig = np.interp(sigma, np.asarray(it0.s, float), np.asarray(it0.v, float))
+    slow = (runs >= 0) & (np.asarray(setup.interp.v) < SPEED_KEEP * v_orig)
     out = []
     for r, g in enumerate(Correction.zero(path).grids):
         sg = np.sort(sigma[slow & (runs == r)])
@@ -889,7 +877,7 @@ def slow_grid(path: NominalPath, written: WrittenProgram, setup: ProgramSetup, s
 
 
 def keep_speed(path: NominalPath, corr: Correction, s: CompensationSettings, header: str, file: Path, load,
-               t_nom: float, tool_radius: float | None = None):
+               t_nom: float):
     """Write the correction as a program that keeps the original's feed: ``(setup, written, correction)``.
 
     The curvature limit (:func:`limit_curvature`) is the interpolator's junction rule at the edge;
@@ -901,7 +889,7 @@ def keep_speed(path: NominalPath, corr: Correction, s: CompensationSettings, hea
     correction was computed for; on iso160 the program ran below 90 % of its feed on 43 % of the cutting
     cycles and the square's walls got 100-200 µm gouges where it slowed. If the program then still
     runs longer than the time contract, the share is lowered everywhere (``CURVATURE_SHARES``).
-    ``load(file) -> ProgramSetup`` reads a written program; ``tool_radius`` [m] for :func:`slow_grid`.
+    ``load(file) -> ProgramSetup`` reads a written program.
     """
     for share in CURVATURE_SHARES:
         local = [np.full(len(g), share) for g in corr.grids]
@@ -913,7 +901,7 @@ def keep_speed(path: NominalPath, corr: Correction, s: CompensationSettings, hea
             setup = load(file)
             if rnd == rounds:
                 break
-            slow = slow_grid(path, wp, setup, s, tool_radius)
+            slow = slow_grid(path, wp, setup, s)
             if not any(m.any() for m in slow):
                 break
             for r, m in enumerate(slow):
@@ -1085,7 +1073,7 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
             blended = blend_corners(path, new, tool_radius) if tool_radius else new
             # written so that the program keeps the original's feed (interpolation only, no simulation)
             setup, wp, corr = keep_speed(path, blended, s, f"{header} iteration {k}".strip(),
-                                         Path(tmp) / f"iteration{k}.nc", load, t_nom, tool_radius)
+                                         Path(tmp) / f"iteration{k}.nc", load, t_nom)
             run = simulate(setup, 1.0)
             raw = deviation_field(path, wp, run, GRID)
             dev = deviation_field(path, wp, run, s.smoothing)
