@@ -46,19 +46,18 @@ Choices where the method is vague (stated so they can be replaced):
 from __future__ import annotations
 
 import math
-import shutil
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from identify.errors import InputError
 from simulate.pipeline import MachiningJob, ProgramSetup, load_program, run_job
 from simulate.toolpath.gcode import Arc, Linear, _words
-from simulate.toolpath.interpolation import PathLimits, interpolate
+from simulate.toolpath.interpolation import PathLimits
 
 #: Grid of the correction along the nominal path [m].
 GRID = 1e-4
@@ -198,7 +197,7 @@ class NominalPath:
     runs: list
 
     @classmethod
-    def of(cls, setup: ProgramSetup) -> "NominalPath":
+    def of(cls, setup: ProgramSetup) -> NominalPath:
         segs = setup.parsed.segments
         first = _first_index(segs)
         sigma0 = np.zeros(len(segs))
@@ -269,7 +268,7 @@ class Correction:
     values: list
 
     @classmethod
-    def zero(cls, path: NominalPath) -> "Correction":
+    def zero(cls, path: NominalPath) -> Correction:
         grids = [np.linspace(a, b, max(2, int(math.ceil((b - a) / GRID)) + 1)) for a, b in path.runs]
         return cls(grids, [np.zeros((len(g), 3)) for g in grids])
 
@@ -363,8 +362,8 @@ def _split(seg, target: Callable, ua: float, ub: float, s: CompensationSettings,
     """Split [ua, ub] of a nominal segment until the piece is within ``fit_tolerance`` of the target
     (not below ``shortest(ua, ub)`` [m])."""
     L = seg.length * (ub - ua)
-    long = L > s.max_piece or (isinstance(seg, Arc) and abs(seg.sweep) * (ub - ua) > math.pi / 4)
-    if L >= 2 * shortest(ua, ub) or long:
+    long = s.max_piece < L or (isinstance(seg, Arc) and abs(seg.sweep) * (ub - ua) > math.pi / 4)
+    if 2 * shortest(ua, ub) <= L or long:
         n = max(3, int(math.ceil(L / GRID)))
         uu = np.linspace(ua, ub, n + 1)[1:-1]
         a, b = target(np.array([ua]))[0], target(np.array([ub]))[0]
@@ -526,7 +525,7 @@ def write_program(path: NominalPath, correction: Correction, settings: Compensat
     header_done = not header
     for lineno, raw in enumerate(lines, start=1):
         words = _words(raw, src, lineno) if raw.strip() != "%" else []
-        for letter, value, wtext, col in words:
+        for letter, value, _wtext, col in words:
             if letter == "G" and int(value) in (20, 21):
                 unit = 0.0254 if int(value) == 20 else 1e-3
             if letter == "G" and int(value) == 91:
@@ -830,10 +829,10 @@ def ramp_in(path: NominalPath, corr: Correction, s: CompensationSettings, limits
     A correction ``c`` there would be taken up by the first pieces, which stay at least ``s.ramp``
     long while the original speeds up (:func:`plan_pieces`), as kinks the interpolator slows down for.
     The correction is zero until ``2 s.ramp`` after the original first cruises at the run's largest
-    feed (past the last such piece), then rises as a smoothstep ``3 w^2 - 2 w^3`` over ``L = sqrt(6 c / k)``, whose largest
-    curvature ``6 c / L^2`` is the curvature limit ``k`` at that feed (:func:`curvature_limit`), ``c``
-    the largest correction within 20 mm after the ramp's start. The test piece's runs begin with a
-    plunge and a lead-in arc in the air, which take the ramp.
+    feed (past the last such piece), then rises as a smoothstep ``3 w^2 - 2 w^3`` over
+    ``L = sqrt(6 c / k)``, whose largest curvature ``6 c / L^2`` is the curvature limit ``k`` at that
+    feed (:func:`curvature_limit`), ``c`` the largest correction within 20 mm after the ramp's start.
+    The test piece's runs begin with a plunge and a lead-in arc in the air, which take the ramp.
     """
     lim = limits or PathLimits()
     it0 = path.setup.interp

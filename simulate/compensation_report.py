@@ -22,7 +22,6 @@ import shutil
 import tempfile
 from dataclasses import replace
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import pandas as pd
@@ -38,7 +37,7 @@ UM = 1e-6
 def worse_rows(before, after) -> list[str]:
     """Rows whose |deviation| grew by more than max(10 %, 2 um)."""
     out = []
-    for rb, ra in zip(before.rows, after.rows):
+    for rb, ra in zip(before.rows, after.rows, strict=True):
         if abs(ra.deviation) > abs(rb.deviation) + max(0.1 * abs(rb.deviation), 2 * UM):
             out.append(rb.name)
     return out
@@ -63,7 +62,7 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
                 "ratio": sa / sb if sb > 0 else None, "score_before": b.table.score, "score_after": a.table.score,
                 "rows_worse": worse_rows(b.table, a.table),
                 "rows_mm": [{"name": rb.name, "tolerance": rb.tolerance / 1e-3, "before": rb.deviation / 1e-3,
-                             "after": ra.deviation / 1e-3} for rb, ra in zip(b.table.rows, a.table.rows)]}
+                             "after": ra.deviation / 1e-3} for rb, ra in zip(b.table.rows, a.table.rows, strict=True)]}
 
     best = result.iterations[result.best]
     return {"evaluation": pair(scale),
@@ -167,8 +166,9 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
                          f"| {c['ratio']:.3f} | {', '.join(c['rows_worse']) or 'none'} |")
         lines.append("")
     lines += ["## Iterations (model stiffness)", "",
-              "| iteration | sum of abs. deviation [µm] | score | path RMS [µm] | path max [µm] | max offset [µm] | time ratio "
-              "| peak speed ratio | pieces | wall [s] |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              "| iteration | sum of abs. deviation [µm] | score | path RMS [µm] | path max [µm] | max offset [µm] "
+              "| time ratio | peak speed ratio | pieces | wall [s] |",
+              "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for it in info["iterations"]:
         s = "-" if it["table_sum_mm"] is None else f"{it['table_sum_mm'] * 1e3:.1f}"
         sc = "-" if it["score"] is None else f"{it['score']:.2f}"
@@ -221,8 +221,8 @@ def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optional[str], *, spacing_mm: float,
-                     probe_spacing_mm: float, size: Optional[int], friction: dict, ff_friction: bool = False,
+def compensation_job(program: Path, robot: str | Path, pose: Path, name: str | None, *, spacing_mm: float,
+                     probe_spacing_mm: float, size: int | None, friction: dict, ff_friction: bool = False,
                      backlash_comp: bool = False):
     """The loaded program, the :class:`simulate.pipeline.MachiningJob` (ranking settings: trimmed stock,
     Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates, with
@@ -260,11 +260,11 @@ def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optiona
     return setup, job, placement, rob
 
 
-def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_dir: Path, *,
+def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir: Path, *,
                      iterations: int = 4, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
                      spacing_mm: float = DEFAULTS.RANKING_DEXEL_SPACING * 1e3,
-                     probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: Optional[int] = None,
-                     friction: Optional[dict] = None, ff_friction: bool = False, backlash_comp: bool = False,
+                     probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: int | None = None,
+                     friction: dict | None = None, ff_friction: bool = False, backlash_comp: bool = False,
                      advance=None) -> dict:
     """Compensate, evaluate and write every output (``greybench compensate``'s work; the service's
     compensation jobs call it too). ``robot``: robot TOML path or a loaded robot; ``advance(n)``:

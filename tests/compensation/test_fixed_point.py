@@ -13,8 +13,15 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from simulate.compensation import (CompensationSettings, Correction, NominalPath, SimulationRun, compensate,
-                                   path_deviation, write_program)
+from simulate.compensation import (
+    CompensationSettings,
+    Correction,
+    NominalPath,
+    SimulationRun,
+    compensate,
+    path_deviation,
+    write_program,
+)
 from simulate.pipeline import load_program
 from simulate.toolpath.gcode import parse_program
 
@@ -99,7 +106,7 @@ def test_written_program_keeps_feed_words_and_stays_on_the_corrected_path(small)
     out = parse_program(wp.text)
     assert sum(seg.length for seg in out.segments) == pytest.approx(setup.parsed.length, rel=1e-3)
     # every written end point is the nominal point plus the correction there (to the print precision)
-    for line_no, (i, ua, ub) in wp.pieces.items():
+    for line_no, (i, _ua, ub) in wp.pieces.items():
         seg = [x for x in out.segments if x.line == line_no][0]
         nominal = path.segments[i]
         from simulate.compensation import _seg_point
