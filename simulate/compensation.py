@@ -107,7 +107,9 @@ class CompensationSettings:
         (:func:`plan_pieces`).
     keep_speed : bool
         Smooth the correction further where the written program would run slower than the original
-        (:func:`keep_speed`); off: only the time contract lowers the curvature share.
+        (:func:`keep_speed`); off (default): only the time contract lowers the curvature share. On
+        iso160 it kept the feed (time 1.01-1.04x instead of 1.21-1.24x) but lost more correction than
+        it gained (near: sum ratio 0.58 instead of 0.31; ``docs/compensation.md``).
     """
 
     iterations: int = 4
@@ -120,7 +122,7 @@ class CompensationSettings:
     min_piece: float = 0.25e-3
     max_correction: float = 0.5e-3
     ramp: float = 1e-3
-    keep_speed: bool = True
+    keep_speed: bool = False
 
     def validate(self) -> None:
         """Raise ``InputError`` naming the setting (as the CLI option) that is out of range."""
