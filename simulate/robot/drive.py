@@ -82,7 +82,7 @@ class DriveFlags(IntFlag):
     WINDUP = 32        #: gear windup compensation of the motor setpoint by the model torque
 
     @classmethod
-    def default(cls) -> "DriveFlags":
+    def default(cls) -> DriveFlags:
         """Friction and backlash on; velocity, torque feed-forward and windup compensation on."""
         return cls.FRICTION | cls.BACKLASH | cls.FF_VEL | cls.FF_TAU | cls.WINDUP
 
@@ -307,8 +307,8 @@ def _run_kernel(p, fp, st, fst, ref, load, model, jl, t, n_sub, flags, out_f, ou
     drive_init(p, st, fst, r[0], v[0], load[0], model[0], jl[0], flags)
     for k in range(m):
         if k > 0:
-            cy = CycleInput(r[k - 1], r[k], v[k - 1], v[k], a[k - 1], a[k], load[k - 1], load[k], model[k - 1], model[k],
-                            0.5 * (jl[k - 1] + jl[k]))
+            cy = CycleInput(r[k - 1], r[k], v[k - 1], v[k], a[k - 1], a[k], load[k - 1], load[k], model[k - 1],
+                            model[k], 0.5 * (jl[k - 1] + jl[k]))
             drive_step(p, fp, st, fst, cy, t[k] - t[k - 1], n_sub, flags)
         for j in range(N_AXES):
             out_f[0, k, j] = st.q[j]
@@ -437,7 +437,7 @@ def drive_flags(*, friction: bool = True, backlash: bool = True, ff_friction: bo
     return flags
 
 
-def drive_friction(robot, friction=None, *, scale: float = 1.0, flags: DriveFlags = DriveFlags.default()):
+def drive_friction(robot, friction=None, *, scale: float = 1.0, flags: DriveFlags | None = None):
     """The LoopFriction the drives use: ``friction`` or the robot file's, levels times ``scale``.
 
     Raises ``InputError`` (``friction-scale``) for a scale of an LSTM model's level, and
@@ -446,6 +446,7 @@ def drive_friction(robot, friction=None, *, scale: float = 1.0, flags: DriveFlag
     from simulate.robot.friction import loop_friction
     from simulate.robot.loop_friction import FrictionKind, scale_levels
 
+    flags = DriveFlags.default() if flags is None else flags
     fp = friction if friction is not None else loop_friction(robot)[0]
     try:
         fp = scale_levels(fp, float(scale))
