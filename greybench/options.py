@@ -32,6 +32,12 @@ Workers = Annotated[int, typer.Option("--workers", help="Simulations at once [-]
 Friction = Annotated[list[str] | None, typer.Option(
     "--friction", help="AXIS=MODEL: friction model reference for a joint (saved folder, runs:/<id>/model, "
                        "models:/<name>@<alias>), repeatable; others keep the robot file's.")]
+FfFriction = Annotated[bool, typer.Option(
+    "--ff-friction", help="The NC's friction feed-forward: each joint's static friction curve [Nm] at the commanded "
+                          "velocity added to the motor torque (compensate: in the iteration and every evaluation).")]
+BacklashComp = Annotated[bool, typer.Option(
+    "--backlash-comp", help="The NC's backlash compensation: each drive's setpoint moved by half its play [rad] "
+                            "towards the flank the predicted gear torque loads.")]
 Seed = Annotated[int, typer.Option("--seed", help="Random seed [-].")]
 #: Defaults in mm, from :mod:`simulate.defaults`.
 PART_SPACING_MM = defaults.DEXEL_SPACING * MM_PER_M

@@ -101,8 +101,10 @@ def atomic_files(folder: str | os.PathLike) -> Iterator[Path]:
     """Write several files into ``folder`` all or none: yields an empty staging folder inside it;
     when the block ends without an error every file written there gets the mode of a new file and
     is renamed into ``folder`` (replacing a file of the same name, other files stay), otherwise
-    nothing in ``folder`` changes. The renames are atomic one by one, not as a set."""
+    nothing in ``folder`` changes (a folder this call created is removed again). The renames are
+    atomic one by one, not as a set."""
     target = Path(folder)
+    created = not target.exists()
     target.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=".staging.", dir=target))
     try:
@@ -110,6 +112,10 @@ def atomic_files(folder: str | os.PathLike) -> Iterator[Path]:
         for f in sorted(staging.iterdir()):
             as_created(f)
             os.replace(f, target / f.name)
+    except BaseException:
+        if created:
+            shutil.rmtree(target, ignore_errors=True)
+        raise
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 

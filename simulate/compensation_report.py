@@ -10,27 +10,26 @@ Files in the output folder:
   ``dq1_rad .. dq6_rad`` (the joint offsets that realise it with the tool orientation kept, from the
   inverse kinematics of the corrected points minus that of the nominal points);
 - ``feedforward.csv``: one row per cycle of the *compensated* program: ``t_s, line`` and
-  ``tau_f1_Nm .. tau_f6_Nm``, the friction torque of each joint's friction model along the
-  compensated motion (the servo simulation's friction torque), for a drive's torque feed-forward;
+  ``tau_f1_Nm .. tau_f6_Nm``, each joint's static friction curve at the commanded velocity, the
+  torque the NC's friction feed-forward adds (``--ff-friction`` runs the programs with it);
 - ``report.md`` and ``deviation.png`` (normal deviation along the path before and after).
 """
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import tempfile
 from dataclasses import replace
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import pandas as pd
 
 from identify.errors import InputError
-from identify.records import write_table
+from identify.files import atomic_files
+from identify.records import markdown_table, write_table
 from simulate import defaults as DEFAULTS
 from simulate.compensation import MAX_OFFSET, TIME_RATIO, CompensationResult, table_sum
+from simulate.figures import save_png
 
 UM = 1e-6
 
@@ -38,7 +37,7 @@ UM = 1e-6
 def worse_rows(before, after) -> list[str]:
     """Rows whose |deviation| grew by more than max(10 %, 2 um)."""
     out = []
-    for rb, ra in zip(before.rows, after.rows):
+    for rb, ra in zip(before.rows, after.rows, strict=True):
         if abs(ra.deviation) > abs(rb.deviation) + max(0.1 * abs(rb.deviation), 2 * UM):
             out.append(rb.name)
     return out
@@ -63,7 +62,7 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
                 "ratio": sa / sb if sb > 0 else None, "score_before": b.table.score, "score_after": a.table.score,
                 "rows_worse": worse_rows(b.table, a.table),
                 "rows_mm": [{"name": rb.name, "tolerance": rb.tolerance / 1e-3, "before": rb.deviation / 1e-3,
-                             "after": ra.deviation / 1e-3} for rb, ra in zip(b.table.rows, a.table.rows)]}
+                             "after": ra.deviation / 1e-3} for rb, ra in zip(b.table.rows, a.table.rows, strict=True)]}
 
     best = result.iterations[result.best]
     return {"evaluation": pair(scale),
@@ -95,17 +94,21 @@ def offsets_table(result: CompensationResult, robot, placement) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def feedforward_table(result: CompensationResult, robot, components, substeps: int | None) -> pd.DataFrame:
-    """Per cycle of the compensated program: t_s, line, tau_f1_Nm..tau_f6_Nm (friction torque of the
-    joints' friction models along the compensated motion, from the drive simulation)."""
-    from simulate.robot.drive import simulate_drive
+def feedforward_table(result: CompensationResult, robot) -> pd.DataFrame:
+    """Per cycle of the compensated program: t_s, line, tau_f1_Nm..tau_f6_Nm, each joint's static
+    friction curve [Nm] at the commanded joint velocity: what the NC's friction feed-forward
+    (``--ff-friction``, :data:`simulate.robot.drive.DriveFlags.FF_FRICTION`) adds to the motor torque
+    when it runs the compensated program (the drive evaluates the same curve at its substeps)."""
+    from simulate.robot.drive import command_velocity, drive_friction
+    from simulate.robot.loop_friction import static_friction
 
     jt = result.after.trajectory
-    sv = simulate_drive(robot, jt.t, jt.q, friction=bool(components.friction), backlash=bool(components.switching),
-                        substeps=substeps)
+    assert jt is not None  # the pipeline simulator records every run's joints
+    fp = drive_friction(robot)
+    v = command_velocity(np.asarray(jt.t, float), np.asarray(jt.q, float))
     cols = {"t_s": jt.t, "line": jt.line}
     for j in range(6):
-        cols[f"tau_f{j + 1}_Nm"] = sv.tau_friction[:, j]
+        cols[f"tau_f{j + 1}_Nm"] = np.array([static_friction(fp, j, float(x)) for x in v[:, j]])
     return pd.DataFrame(cols)
 
 
@@ -135,8 +138,7 @@ def plot(result: CompensationResult, path: Path) -> None:
     ax.legend(loc="upper right")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path, dpi=110)
 
 
 def report_text(result: CompensationResult, info: dict, title: str, scale: float) -> str:
@@ -145,34 +147,31 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
     lines += ["Mirror compensation from the machining simulation, iterated (simulate/compensation.py, "
               "docs/compensation.md). Deviations: ISO 10791-7 Table-2 rows of the virtual CMM, µm.", ""]
     if ev is not None:
-        lines += [f"## Table 2 before / after (robot stiffness x{scale:g} against the model)", "",
-                  "| row | tol [µm] | before [µm] | after [µm] | after/before |", "|---|---:|---:|---:|---:|"]
-        for r in ev["rows_mm"]:
-            ratio = abs(r["after"]) / abs(r["before"]) if r["before"] else float("nan")
-            lines.append(f"| {r['name']} | {r['tolerance'] * 1e3:.0f} | {r['before'] * 1e3:+.1f} | "
-                         f"{r['after'] * 1e3:+.1f} | {ratio:.2f} |")
+        lines += [f"## Table 2 before / after (robot stiffness x{scale:g} against the model)", ""]
+        lines += markdown_table(
+            ("row", "tol [µm]", "before [µm]", "after [µm]", "after/before"),
+            [(r["name"], f"{r['tolerance'] * 1e3:.0f}", f"{r['before'] * 1e3:+.1f}", f"{r['after'] * 1e3:+.1f}",
+              f"{abs(r['after']) / abs(r['before']) if r['before'] else float('nan'):.2f}") for r in ev["rows_mm"]])
         lines += ["", f"Sum of |deviation|: before {ev['sum_before_mm'] * 1e3:.1f} µm, after "
                       f"{ev['sum_after_mm'] * 1e3:.1f} µm, **ratio {ev['ratio']:.3f}**; score "
                       f"{ev['score_before']:.2f} -> {ev['score_after']:.2f}. Rows worse than before by more than "
                       f"max(10 %, 2 µm): {', '.join(ev['rows_worse']) or 'none'}.", ""]
     if info["checks"]:
-        lines += ["## Robustness: the robot stiffer or softer than the compensating model", "",
-                  "| stiffness scale | sum before [µm] | sum after [µm] | ratio | rows worse |",
-                  "|---:|---:|---:|---:|---|"]
-        for c in info["checks"]:
-            lines.append(f"| {c['stiffness_scale']:g} | {c['sum_before_mm'] * 1e3:.1f} | {c['sum_after_mm'] * 1e3:.1f} "
-                         f"| {c['ratio']:.3f} | {', '.join(c['rows_worse']) or 'none'} |")
+        lines += ["## Robustness: the robot stiffer or softer than the compensating model", ""]
+        lines += markdown_table(
+            ("stiffness scale", "sum before [µm]", "sum after [µm]", "ratio", "rows worse"),
+            [(f"{c['stiffness_scale']:g}", f"{c['sum_before_mm'] * 1e3:.1f}", f"{c['sum_after_mm'] * 1e3:.1f}",
+              f"{c['ratio']:.3f}", ", ".join(c["rows_worse"]) or "none") for c in info["checks"]])
         lines.append("")
-    lines += ["## Iterations (model stiffness)", "",
-              "| iteration | sum of abs. deviation [µm] | score | path RMS [µm] | path max [µm] | max offset [µm] | time ratio "
-              "| peak speed ratio | pieces | wall [s] |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for it in info["iterations"]:
-        s = "-" if it["table_sum_mm"] is None else f"{it['table_sum_mm'] * 1e3:.1f}"
-        sc = "-" if it["score"] is None else f"{it['score']:.2f}"
-        mark = " (chosen)" if it["index"] == info["best_iteration"] else ""
-        lines.append(f"| {it['index']}{mark} | {s} | {sc} | {it['path_rms_um']:.1f} | {it['path_max_um']:.1f} | "
-                     f"{it['max_offset_um']:.1f} | {it['time_ratio']:.3f} | {it['speed_ratio']:.3f} | {it['pieces']} | "
-                     f"{it['wall_time_s']:.1f} |")
+    lines += ["## Iterations (model stiffness)", ""]
+    lines += markdown_table(
+        ("iteration", "sum of abs. deviation [µm]", "score", "path RMS [µm]", "path max [µm]", "max offset [µm]",
+         "time ratio", "peak speed ratio", "pieces", "wall [s]"),
+        [(f"{it['index']}{' (chosen)' if it['index'] == info['best_iteration'] else ''}",
+          "-" if it["table_sum_mm"] is None else f"{it['table_sum_mm'] * 1e3:.1f}",
+          "-" if it["score"] is None else f"{it['score']:.2f}", f"{it['path_rms_um']:.1f}",
+          f"{it['path_max_um']:.1f}", f"{it['max_offset_um']:.1f}", f"{it['time_ratio']:.3f}",
+          f"{it['speed_ratio']:.3f}", it["pieces"], f"{it['wall_time_s']:.1f}") for it in info["iterations"]])
     lines += ["", "## The corrected program", "",
               f"- largest offset from the nominal path {info['max_offset_mm'] * 1e3:.1f} µm "
               f"(contract <= {MAX_OFFSET * 1e3:g} mm);",
@@ -187,38 +186,35 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
     return "\n".join(lines)
 
 
-def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement, components, substeps: int,
-                  title: str, scale: float = 1.0) -> dict:
+def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement, title: str,
+                  scale: float = 1.0, ff_friction: bool = False, backlash_comp: bool = False) -> dict:
     """Write every file (module docstring) into ``out_dir``: staged in a temporary folder and moved
-    in only when all succeeded. Returns the summary (:func:`summary`) with the file paths."""
+    in only when all succeeded. Returns the summary (:func:`summary`) with the file paths,
+    ``ff_friction`` and ``backlash_comp`` (the NC functions the programs were simulated with)."""
     out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out_dir.parent, prefix=f".{out_dir.name}.compensate-"))
-    try:
+    with atomic_files(out_dir) as tmp:
         info = summary(result, scale)
+        info["ff_friction"] = bool(ff_friction)
+        info["backlash_comp"] = bool(backlash_comp)
         (tmp / "compensated.nc").write_text(result.program.text, encoding="utf-8")
+        assert result.path.setup.stock is not None  # load_program refuses a program without its stock
         shutil.copyfile(result.path.setup.stock, tmp / "compensated.stock.json")
         write_table(offsets_table(result, robot, placement), tmp / "offsets.csv")
-        write_table(feedforward_table(result, robot, components, substeps), tmp / "feedforward.csv")
+        write_table(feedforward_table(result, robot), tmp / "feedforward.csv")
         plot(result, tmp / "deviation.png")
         (tmp / "report.md").write_text(report_text(result, info, title, scale), encoding="utf-8")
         (tmp / "summary.json").write_text(json.dumps(info, indent=1), encoding="utf-8")
-        out_dir.mkdir(exist_ok=True)
-        files = []
-        for f in sorted(tmp.iterdir()):
-            dest = out_dir / f.name
-            os.replace(f, dest)
-            files.append(str(dest))
-        info["files"] = files
-        return info
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        names = sorted(f.name for f in tmp.iterdir())
+    info["files"] = [str(out_dir / n) for n in names]
+    return info
 
 
-def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optional[str], *, spacing_mm: float,
-                     probe_spacing_mm: float, size: Optional[int], friction: dict):
+def compensation_job(program: Path, robot: str | Path, pose: Path, name: str | None, *, spacing_mm: float,
+                     probe_spacing_mm: float, size: int | None, friction: dict, ff_friction: bool = False,
+                     backlash_comp: bool = False):
     """The loaded program, the :class:`simulate.pipeline.MachiningJob` (ranking settings: trimmed stock,
-    Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates) and the placement."""
+    Table-2 rows scored, spindle speed required, exactly as ``rank-poses`` simulates, with
+    ``--ff-friction`` and ``--backlash-comp`` as ``ff_friction``, ``backlash_comp`` say) and the placement."""
     from simulate.evaluation.ranking import RankSettings
     from simulate.pipeline import MachiningJob, load_program, piece_size
     from simulate.robot.model import Robot, load_robot
@@ -231,7 +227,8 @@ def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optiona
     rob = robot if isinstance(robot, Robot) else load_robot(robot)
     setup = load_program(program, require_spindle=True)
     sz = piece_size(setup, size)
-    rs = RankSettings(spacing=spacing_mm * 1e-3, probe_spacing=probe_spacing_mm * 1e-3, size=sz or 0)
+    rs = RankSettings(spacing=spacing_mm * 1e-3, probe_spacing=probe_spacing_mm * 1e-3, size=sz or 0,
+                      ff_friction=bool(ff_friction), backlash_comp=bool(backlash_comp))
     settings = rs.machining()
     if sz is None:
         from dataclasses import replace
@@ -251,17 +248,21 @@ def compensation_job(program: Path, robot: str | Path, pose: Path, name: Optiona
     return setup, job, placement, rob
 
 
-def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_dir: Path, *,
+def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir: Path, *,
                      iterations: int = 4, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
                      spacing_mm: float = DEFAULTS.RANKING_DEXEL_SPACING * 1e3,
-                     probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: Optional[int] = None,
-                     friction: Optional[dict] = None, advance=None) -> dict:
+                     probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: int | None = None,
+                     friction: dict | None = None, ff_friction: bool = False, backlash_comp: bool = False,
+                     advance=None) -> dict:
     """Compensate, evaluate and write every output (``greybench compensate``'s work; the service's
     compensation jobs call it too). ``robot``: robot TOML path or a loaded robot; ``advance(n)``:
     progress in simulated 2 ms steps.
 
     ``stiffness_scale`` [-]: the robot the *evaluation* simulates is that much stiffer than the model
     the compensation iterates with (both programs); ``check_scales`` add more such evaluations.
+    ``ff_friction``: the NC runs with its friction feed-forward (``feedforward.csv``) in the
+    iteration and in every evaluation, of both programs (``rank-poses --ff-friction``);
+    ``backlash_comp`` likewise with its backlash compensation (``rank-poses --backlash-comp``).
     Returns the summary (:func:`simulate.compensation_report.summary`) with the files.
     """
     from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
@@ -276,13 +277,15 @@ def run_compensation(program: Path, robot, pose: Path, name: Optional[str], out_
     cs.validate()
     setup, job, placement, rob = compensation_job(program, robot, pose, name, spacing_mm=spacing_mm,
                                                   probe_spacing_mm=probe_spacing_mm, size=size,
-                                                  friction=friction or {})
+                                                  friction=friction or {}, ff_friction=ff_friction,
+                                                  backlash_comp=backlash_comp)
     scales = sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
     from simulate.evaluation.cutter import robot_cutter
 
     sim = pipeline_simulator(job, advance=advance)
     res = compensate(setup, sim, cs, checks=scales, require_spindle=True, tool_radius=robot_cutter(rob).radius,
                      header=f"compensated by greybench for robot {rob.name}, pose {placement.name}")
-    title = f"{program.name}, robot {rob.name}, pose {placement.name}"
-    return write_outputs(res, out_dir, robot=rob, placement=placement, components=job.components,
-                         substeps=job.settings.substeps, title=title, scale=float(stiffness_scale))
+    nc = [n for n, on in (("friction feed-forward", ff_friction), ("backlash compensation", backlash_comp)) if on]
+    title = f"{program.name}, robot {rob.name}, pose {placement.name}" + (f", NC {' and '.join(nc)} on" if nc else "")
+    return write_outputs(res, out_dir, robot=rob, placement=placement, title=title, scale=float(stiffness_scale),
+                         ff_friction=ff_friction, backlash_comp=backlash_comp)

@@ -92,6 +92,9 @@ class MachiningSettings:
         Factor on every joint's Coulomb and static friction levels [-] (1: as fitted).
     ff_friction : bool
         The NC's friction feed-forward (off: the controller does not know the friction).
+    backlash_comp : bool
+        The NC's load-dependent backlash compensation (:mod:`simulate.robot.backlash`): the drives'
+        reference moved by half the play towards the flank the predicted gear torque loads.
     stock_floor : float or None
         Leave out the stock this far [m] below the lowest programmed cutting height; None: whole stock.
     capacity : tuple of int or None
@@ -112,6 +115,7 @@ class MachiningSettings:
     substeps: int | None = None
     friction_scale: float = 1.0
     ff_friction: bool = False
+    backlash_comp: bool = False
     stock_floor: float | None = None
     capacity: tuple | None = None
     size: int | None = None
@@ -410,11 +414,20 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
         flags = drive_flags(friction=comp.friction, backlash=comp.switching, ff_friction=s.ff_friction)
         fp, fr = loop_friction(robot, job.friction, enabled=comp.friction)
         fp = drive_friction(robot, fp, scale=s.friction_scale, flags=flags)
-        drive = loop_drive(robot, jt.q, jt.t, R, fp, substeps=s.substeps, flags=flags)
+        q_ref = jt.q
+        if s.backlash_comp and comp.switching:
+            from simulate.robot.backlash import nc_backlash_offset
+
+            q_bl = nc_backlash_offset(robot, jt.t, jt.q, fp)
+            q_ref = jt.q + q_bl
+        drive = loop_drive(robot, q_ref, jt.t, R, fp, substeps=s.substeps, flags=flags)
     else:
         fr = [{"joint": j, "kind": "none", "source": "no drives"} for j in range(1, 7)]
     n = len(jt.t)
     offset = np.zeros((n, 3)) if job.offset is None else np.broadcast_to(np.asarray(job.offset, float), (n, 3))
+    if drive is not None and q_ref is not jt.q:
+        # the loop's error is J (q_link - q_ref); the tool's is against the program's q: add J (q_ref - q)
+        offset = offset + np.einsum("nij,nj->ni", drive.jac, q_ref - jt.q)
     timings["robot (compliance, drive setup)"] = time.perf_counter() - c0
     c0 = time.perf_counter()
     wp = stock_workpiece(prog, s)

@@ -55,6 +55,8 @@ def compensate_cmd(
     probe_spacing: o.ProbeSpacing = o.PROBE_SPACING_MM,
     size: o.Size = None,
     friction: o.Friction = None,
+    ff_friction: o.FfFriction = False,
+    backlash_comp: o.BacklashComp = False,
     as_json: o.Json = False,
 ) -> None:
     """Pre-compensate a program from the simulation: correct the commanded path against the predicted
@@ -66,7 +68,8 @@ def compensate_cmd(
         info = run_compensation(program, resolve_robot(robot), pose, name, out_dir, iterations=iterations,
                                 stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
                                 spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
-                                friction=o.friction_refs(friction), advance=adv)
+                                friction=o.friction_refs(friction), ff_friction=ff_friction,
+                                backlash_comp=backlash_comp, advance=adv)
     if as_json:
         emit_json(info)
         return

@@ -61,13 +61,16 @@ def rank_poses_cmd(
     size: Annotated[int, typer.Option("--size", help="Test piece size [mm]: 160 or 320.")] = 320,
     workers: o.Workers = 2,
     friction: o.Friction = None,
+    ff_friction: o.FfFriction = False,
+    backlash_comp: o.BacklashComp = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object: ranking (score [-]) and feature "
                                                          "rows (nominal_mm, tolerance_mm, deviation_mm per "
                                                          "pose).")] = False,
 ) -> None:
     """Simulate the program in every pose, measure the virtual parts (ISO 10791-7 features) and rank the poses."""
     settings = RankSettings(spacing=spacing * MM, probe_spacing=probe_spacing * MM, stiffness_scale=stiffness_scale,
-                            size=size)
+                            size=size, ff_friction=ff_friction,
+                            backlash_comp=backlash_comp)
     comps = Components(deflection=False, servo=False) if ideal else Components()
     r = rank_program(program, resolve_robot(robot), poses, settings=settings, components=comps, shares=shares,
                      out_dir=out_dir, workers=workers, friction=o.friction_refs(friction), progress=progress)

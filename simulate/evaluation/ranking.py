@@ -68,6 +68,11 @@ class RankSettings:
         Multiplies every joint stiffness (10 = ten times stiffer).
     size : int
         Test piece size, mm (160 or 320): which nominal geometry is measured.
+    ff_friction : bool
+        The NC's friction feed-forward on (each joint's static friction curve at the commanded
+        velocity, :data:`simulate.robot.drive.DriveFlags.FF_FRICTION`); off: the NC does not know the friction.
+    backlash_comp : bool
+        The NC's load-dependent backlash compensation (:mod:`simulate.robot.backlash`).
     """
 
     spacing: float = defaults.RANKING_DEXEL_SPACING
@@ -76,13 +81,16 @@ class RankSettings:
     spindle_rpm: float | None = None
     stiffness_scale: float = 1.0
     size: int = 320
+    ff_friction: bool = False
+    backlash_comp: bool = False
 
     def machining(self) -> MachiningSettings:
         """The pipeline's settings: trimmed stock (:data:`simulate.defaults.STOCK_FLOOR`), features scored."""
         return MachiningSettings(spacing=self.spacing, probe_spacing=self.probe_spacing, material=self.material,
                                  spindle_rpm=self.spindle_rpm, require_spindle=True,
                                  stiffness_scale=self.stiffness_scale, stock_floor=defaults.STOCK_FLOOR,
-                                 size=self.size, features=True)
+                                 size=self.size, features=True, ff_friction=self.ff_friction,
+                                 backlash_comp=self.backlash_comp)
 
     def validate(self) -> None:
         self.machining().validate()

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -11,10 +13,13 @@ from scipy.spatial import cKDTree
 from typer.testing import CliRunner
 
 from greybench.cli import app
+from simulate.robot.model import load_robot
 from simulate.toolpath.gcode import read_program
 from simulate.toolpath.interpolation import interpolate
+from simulate.toolpath.placement import joint_trajectory, load_poses, select_pose
 
 runner = CliRunner()
+ROBOT = Path(__file__).resolve().parents[2] / "data" / "robots" / "max100.toml"
 FILES = ["compensated.nc", "compensated.stock.json", "deviation.png", "feedforward.csv", "offsets.csv", "report.md",
          "summary.json"]
 
@@ -68,6 +73,15 @@ def test_outputs_keep_the_contract(small, tmp_path):
     assert list(ff.columns) == ["t_s", "line"] + [f"tau_f{j}_Nm" for j in range(1, 7)]
     assert len(ff) == len(it_c.t)
     assert np.all(np.isfinite(ff.to_numpy())) and np.abs(ff.iloc[:, 2:].to_numpy()).max() > 0
+    # what the NC's friction feed-forward adds: the robot file's LuGre static curve at the commanded
+    # joint velocity of the compensated program (closed form, parameters read from the file)
+    jt = joint_trajectory(load_robot(ROBOT), it_c, select_pose(load_poses(pose), "near"))
+    v = np.gradient(jt.q, jt.t, axis=0, edge_order=2)
+    doc = tomllib.loads(ROBOT.read_text())
+    for j, joint in enumerate(doc["joint"]):
+        f = joint["friction"]
+        g = np.sign(v[:, j]) * (f["fc"] + (f["fs"] - f["fc"]) * np.exp(-np.abs(v[:, j] / f["vs"]) ** f["delta"]))
+        np.testing.assert_allclose(ff[f"tau_f{j + 1}_Nm"], g + f["nu"] * v[:, j], rtol=1e-9, atol=1e-9)
     assert (out / "deviation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "Iterations" in (out / "report.md").read_text()
 

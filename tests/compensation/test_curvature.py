@@ -10,8 +10,10 @@ from simulate.compensation import (
     CompensationSettings,
     Correction,
     NominalPath,
+    SimulationRun,
     curvature_limit,
     limit_curvature,
+    path_deviation,
 )
 from simulate.pipeline import load_program
 from simulate.toolpath.interpolation import PathLimits
@@ -104,10 +106,17 @@ def test_a_drive_oscillation_is_not_written_into_the_program(small, monkeypatch,
         monkeypatch.setattr(comp, "CURVATURE_SHARES", shares)
     prog, _ = small
     setup = load_program(prog)
-    res = compensate(setup, _rattling(60e-6, 5.0), CompensationSettings(iterations=1, secant=False))
+    res = compensate(setup, _rattling(60e-6, 5.0), CompensationSettings(iterations=1, secant=False, keep_speed=True))
     ratio = res.iterations[1].time_ratio
     if shares is None:
         assert res.best == 1 and ratio <= 1.25
         assert res.iterations[1].path_rms < 0.8 * res.iterations[0].path_rms
+        # and it keeps the original's feed: where the original cruises at F1200, no cycle below 95 % of it
+        it0, it1 = setup.interp, res.after.setup.interp
+        runs, sigma, _ = path_deviation(res.path, res.program, SimulationRun(res.after.setup, it1.xyz))
+        v0 = np.interp(sigma, it0.s, it0.v)
+        cruise = (runs >= 0) & (v0 >= 0.999 * 0.02)
+        assert cruise.sum() > 0.5 * (runs >= 0).sum()
+        assert np.all(np.asarray(it1.v)[cruise] >= 0.95 * v0[cruise])
     else:
         assert ratio > 1.25 and res.best == 0

@@ -13,17 +13,25 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from simulate.compensation import (CompensationSettings, Correction, NominalPath, SimulationRun, compensate,
-                                   path_deviation, write_program)
+from simulate.compensation import (
+    CompensationSettings,
+    Correction,
+    NominalPath,
+    SimulationRun,
+    compensate,
+    path_deviation,
+    write_program,
+)
 from simulate.pipeline import load_program
 from simulate.toolpath.gcode import parse_program
 
 D = np.array([40e-6, -25e-6, 15e-6])   # m, C F of the synthetic robot
 
 
-def _interior_rms(path, written, run, skip=3e-3):
+def _interior_rms(path, written, run, skip=6.5e-3):
     """RMS normal deviation [m] over the feed runs, leaving out ``skip`` after each run start (the
-    first piece starts at the uncorrected end of the rapid)."""
+    first piece starts at the uncorrected end of the rapid, and the correction is ramped in after it:
+    zero until 2 mm after the original cruises, then over ``sqrt(6 c / k)``: 4.5-5 mm for this D at F1200)."""
     runs, sigma, dev = path_deviation(path, written, run)
     starts = np.array([a for a, _ in path.runs])
     keep = runs >= 0
@@ -39,7 +47,8 @@ def _constant(setup, scale=1.0):
 def test_constant_deflection_is_cancelled_and_a_wrong_stiffness_leaves_eps_over_1_plus_eps(small, scale):
     prog, _ = small
     setup = load_program(prog)
-    res = compensate(setup, _constant, CompensationSettings(iterations=1), checks=(scale,))
+    # the update rule alone: without the writer's further smoothing where the program would run slower
+    res = compensate(setup, _constant, CompensationSettings(iterations=1, keep_speed=False), checks=(scale,))
     path = res.path
     assert res.best == 1
     before = _interior_rms(path, None, res.before)
@@ -71,8 +80,8 @@ def test_secant_step_reaches_the_fixed_point_where_the_plain_mirror_contracts_by
     prog, _ = small
     setup = load_program(prog)
     k = 0.4
-    plain = compensate(setup, _growing(k), CompensationSettings(iterations=2, secant=False))
-    newton = compensate(setup, _growing(k), CompensationSettings(iterations=2, secant=True))
+    plain = compensate(setup, _growing(k), CompensationSettings(iterations=2, secant=False, keep_speed=False))
+    newton = compensate(setup, _growing(k), CompensationSettings(iterations=2, secant=True, keep_speed=False))
     p0 = _interior_rms(plain.path, None, plain.before)
     assert len(plain.iterations) == 3 and len(newton.iterations) == 3
     r_plain = [it.path_rms for it in plain.iterations]
@@ -97,7 +106,7 @@ def test_written_program_keeps_feed_words_and_stays_on_the_corrected_path(small)
     out = parse_program(wp.text)
     assert sum(seg.length for seg in out.segments) == pytest.approx(setup.parsed.length, rel=1e-3)
     # every written end point is the nominal point plus the correction there (to the print precision)
-    for line_no, (i, ua, ub) in wp.pieces.items():
+    for line_no, (i, _ua, ub) in wp.pieces.items():
         seg = [x for x in out.segments if x.line == line_no][0]
         nominal = path.segments[i]
         from simulate.compensation import _seg_point

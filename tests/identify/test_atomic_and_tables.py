@@ -90,3 +90,13 @@ def test_atomic_files_write_all_or_none_and_keep_other_files(tmp_path):
         (staging / "b.txt").write_text("new b")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt", "keep.txt"]
     assert (tmp_path / "a.txt").read_text() == "new a" and (tmp_path / "keep.txt").read_text() == "mine"
+
+
+def test_atomic_files_removes_a_folder_it_created_when_it_fails(tmp_path):
+    from identify.files import atomic_files
+
+    target = tmp_path / "new" / "out"
+    with pytest.raises(RuntimeError), atomic_files(target) as staging:
+        (staging / "a.txt").write_text("a")
+        raise RuntimeError("fails")
+    assert not target.exists()
