@@ -46,6 +46,11 @@ class CompensationOptions(Strict):
                                                                   "the before/after evaluation simulates")
     check_scales: list[float] = Field(default_factory=list, max_length=4,
                                       description="further stiffness multipliers [-] to evaluate both programs with")
+    ff_friction: bool = Field(False, description="run both programs with the NC's friction feed-forward (each "
+                                                 "joint's static friction curve [Nm] at the commanded velocity)")
+    backlash_comp: bool = Field(False, description="run both programs with the NC's backlash compensation (each "
+                                                   "drive's setpoint moved by half its play [rad] towards the "
+                                                   "flank the predicted gear torque loads)")
 
 
 class CompensationRequest(SinglePoseJob):
@@ -145,7 +150,8 @@ def run(request: dict, job_dir: Path, progress) -> dict:
                                     stiffness_scale=float(opts.get("stiffness_scale", 1.0)),
                                     check_scales=tuple(opts.get("check_scales", [])),
                                     spacing_mm=float(opts.get("spacing_mm", RANKING_DEXEL_SPACING * 1e3)),
-                                    friction=_model_folders(task), advance=advance)
+                                    friction=_model_folders(task), ff_friction=bool(opts.get("ff_friction", False)),
+                                    backlash_comp=bool(opts.get("backlash_comp", False)), advance=advance)
         except InputError as exc:   # name the program as the client knows it
             if exc.source == str(program):
                 exc = InputError(exc.message, source=task.program_source, field=exc.field, row=exc.row,

@@ -75,7 +75,8 @@ def test_job_body_passes_robot_file_and_models(tmp_path, monkeypatch):
     seen = {}
 
     def fake(program, robot, poses, name, out, **kw):
-        seen.update(robot=robot, friction=kw["friction"], program=program.read_text())
+        seen.update(robot=robot, friction=kw["friction"], program=program.read_text(),
+                    nc=(kw["ff_friction"], kw["backlash_comp"]))
         return {"evaluation": {}}
 
     monkeypatch.setattr(compensation_report, "run_compensation", fake)
@@ -88,4 +89,8 @@ def test_job_body_passes_robot_file_and_models(tmp_path, monkeypatch):
     info = compensation.run(req, tmp_path, lambda *a: None)
     assert Path(seen["robot"]).is_file() and Path(seen["robot"]).suffix == ".toml"
     assert seen["friction"] == {} and seen["program"] == gcode
+    assert seen["nc"] == (False, False)     # the NC options are off unless asked for
     assert "compensated.nc" in info["files"]
+    compensation.run({**req, "options": {"iterations": 1, "ff_friction": True, "backlash_comp": True}}, tmp_path,
+                     lambda *a: None)
+    assert seen["nc"] == (True, True)
