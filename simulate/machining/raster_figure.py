@@ -245,19 +245,9 @@ def raster_triangles(xy: np.ndarray, depth: np.ndarray, rgb: np.ndarray, width: 
 
 
 def save_png(image, path) -> None:
-    """Write a Pillow image as PNG to ``path`` through a temporary file and a rename (nothing half
-    written), with the umask's mode."""
-    import os
-    from pathlib import Path
+    """Write a Pillow image as PNG to ``path`` atomically (:func:`identify.files.atomic_file`: nothing
+    half written, the umask's mode)."""
+    from identify.files import atomic_file
 
-    from identify.files import as_created
-
-    p = Path(path)
-    tmp = p.with_name(p.stem + ".tmp.png")
-    try:
+    with atomic_file(path) as tmp:
         image.save(tmp, format="PNG", compress_level=3)
-        as_created(tmp)
-        os.replace(tmp, p)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
