@@ -87,6 +87,14 @@ def emit_json(obj: Any) -> None:
     sys.stdout.flush()
 
 
+def show(as_json: bool, obj: Any, human: Callable[[], object]) -> None:
+    """A command's result: with ``--json`` the one JSON object ``obj``, otherwise ``human()`` prints it."""
+    if as_json:
+        emit_json(obj)
+    else:
+        human()
+
+
 def _bar_on_stderr() -> bool:
     """A live bar only where stderr really is a terminal: rich also says "terminal" under
     FORCE_COLOR (set by many CI systems), where a bar would fill the log with cursor codes."""

@@ -8,7 +8,7 @@ and reports progress to an :class:`identify.progress.Advance` (silent by default
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -74,6 +74,17 @@ def synth_record(trajectory: Path, out_file: Path, *, config: Path | None = None
     return res
 
 
+def parse_joints(text: str, field: str = "--axes") -> list[int]:
+    """Comma-separated joint numbers (``1,2,3``), sorted and without repeats; ``InputError`` naming ``field``."""
+    try:
+        axes = sorted({int(a) for a in text.split(",") if a.strip()})
+    except ValueError:
+        raise InputError(f"not a list of joint numbers: {text!r}", field=field) from None
+    if not axes:
+        raise InputError("no axis given", field=field)
+    return axes
+
+
 def load_pair(train: Path, test: Path | None, axis: int | None, *, linear: bool = False,
               cutoff: float | None = None) -> tuple[AxisRecord, AxisRecord | None]:
     """A training and an optional test record (joint ``axis`` of robot logs, errors naming ``--axis``);
@@ -97,6 +108,15 @@ class FitOutcome:
     fit_time: float
     metrics: dict[str, Metrics] = field(default_factory=dict)
     run: FitRun | None = None
+
+    def to_dict(self, model: str, est: FrictionModel, train: AxisRecord, warnings: Sequence[str] = (),
+                out_dir: Path | None = None) -> dict[str, Any]:
+        """The ``fit --json`` object: the fitted parameters with their units, fit time [s], the
+        record's derivative cut-off [Hz], the run and the metrics per record (``train``, ``test``)."""
+        return {"model": model, "params": est.params_, "units": est.param_units(), "fit_time": self.fit_time,
+                "n_parameters": est.n_parameters(), "warnings": list(warnings), "derivative_cutoff_hz": train.cutoff_hz,
+                "linear": train.linear, "out": str(out_dir) if out_dir else None,
+                "run": self.run.to_dict() if self.run else None, **{k: v.to_dict() for k, v in self.metrics.items()}}
 
 
 def fit_model(est: FrictionModel, train: AxisRecord, test: AxisRecord | None = None, *, out_dir: Path | None = None,

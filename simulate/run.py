@@ -9,6 +9,7 @@ Heavy modules are imported inside the functions: the CLI imports this module at 
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -24,6 +25,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from identify.models import FrictionModel
+    from simulate.evaluation.circle import CircleResult
     from simulate.evaluation.ranking import Components as RankComponents
     from simulate.evaluation.ranking import Ranking, RankSettings
     from simulate.evaluation.trace import Trace
@@ -291,6 +293,17 @@ class PlacementOutcome:
     info: dict[str, Any]
     size: int
 
+    def summary(self) -> dict[str, Any]:
+        """The search in (item, value) rows for a summary table: best pose [mm, deg], scores [-],
+        improvement [%], candidates, stop reason and wall time [s] (rich markup: ``\\[mm]``)."""
+        info, b = self.info, self.info["best"]
+        return {"best pose": f"{b['name']} ({b['origin']})",
+                "best xyz \\[mm]": ", ".join(f"{v / MM:.1f}" for v in b["xyz_m"]),
+                "best yaw \\[deg]": f"{math.degrees(b['rpy_rad'][2]):.1f}", "best score \\[-]": b["score"],
+                **{f"given {g['name']} score \\[-]": g["score"] for g in info["given"]},
+                "improvement \\[%]": 100 * info["improvement"], "candidates": json.dumps(info["candidates"]),
+                "stopped": info["stop_reason"], "wall time \\[s]": info["wall_time_s"]}
+
 
 def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *, budget_s: float, workers: int = 2,
                        seed: int = 0, spacing_mm: float = defaults.RANKING_DEXEL_SPACING / MM,
@@ -537,6 +550,48 @@ def inverse_table(rob: Robot, in_file: Path, out_file: Path, *, q_start: Sequenc
     cols["status"] = [IKStatus(s).name for s in res.status]
     write_table(pd.DataFrame(cols), out_file)
     return int(res.ok.sum()), {s.name: int(np.sum(res.status == s)) for s in IKStatus}
+
+
+def circle_test(robot: Path, pose: Path, name: str | None, out_dir: Path, *, radius_mm: float = 50.0,
+                feed_mm_min: float = 2000.0, plane: str = "xy", center_mm: Sequence[float] = (0.0, 0.0, 0.0),
+                cw: bool = False, friction: bool = True, backlash: bool = True, friction_scale: float = 1.0,
+                ff_friction: bool = False, progress: Progress = quiet) -> tuple[CircleResult, dict[str, Any]]:
+    """The virtual circular test (ISO 230-4) at a pose: simulate the circle of ``radius_mm`` [mm] at
+    ``feed_mm_min`` [mm/min] about ``center_mm`` [mm, workpiece frame]
+    (:func:`simulate.evaluation.circle.simulate_circle`), evaluate it and, only then, write circle.csv,
+    circle.png and summary.json into ``out_dir``; gives the result and the summary."""
+    from typing import cast
+
+    from simulate.evaluation.circle import CircleSpec, Plane, evaluate_run, simulate_circle, write_outputs
+    from simulate.robot.model import load_robot
+    from simulate.toolpath.placement import load_poses, select_pose
+
+    # CircleSpec checks the plane and makes it a Plane
+    spec = CircleSpec(radius=radius_mm * MM, feed=feed_mm_min / 6e4, plane=cast(Plane, plane.lower()),
+                      center=tuple(v * MM for v in center_mm), ccw=not cw)
+    placement = select_pose(load_poses(pose), name, source=str(pose))
+    rob = load_robot(robot)
+    with progress("circle: simulating", None) as advance:
+        run = simulate_circle(rob, placement, spec, friction=friction, backlash=backlash,
+                              friction_scale=friction_scale, ff_friction=ff_friction, advance=advance)
+        result = evaluate_run(run)
+    title = (f"{rob.name}, pose {placement.name}" + ("" if friction else ", no friction") + ("" if backlash else
+             ", no backlash") + (f", friction x{friction_scale:g}" if friction_scale != 1 else ""))
+    return result, write_outputs(result, out_dir, title=title, info={
+        "robot": rob.name, "pose": placement.name, "radius_mm": radius_mm, "feed_mm_min": feed_mm_min,
+        "plane": spec.plane.value, "friction": friction, "backlash": backlash, "friction_scale": friction_scale,
+        "friction_models": run.friction})
+
+
+def trace_json(tr: Trace, point_mm: Sequence[float], radius_mm: float) -> dict[str, Any]:
+    """The ``trace --json`` object: the point [mm], the radius [mm] and per program line its times [s],
+    dexel ends, largest deflection [m] and force [N] and the switching axes (1-based)."""
+    from simulate.toolpath.switching import axes_of
+
+    return {"point_mm": list(point_mm), "radius_mm": radius_mm, "n_ends": tr.n_ends,
+            "lines": [{"line": ln.line, "text": ln.text, "t_first_s": ln.t_first, "t_last_s": ln.t_last,
+                       "n_ends": ln.n_ends, "max_deflection_m": ln.max_deflection, "max_force_n": ln.max_force,
+                       "switching_axes": axes_of(ln.switching)} for ln in tr.lines]}
 
 
 def trace_workpiece(workpiece: Path, point: Sequence[float], radius: float, program: Path | None = None) -> Trace:

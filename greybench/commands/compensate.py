@@ -8,7 +8,7 @@ from typing import Annotated, Any
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, out, print_table, progress, resolve_robot
+from greybench.support import out, print_table, progress, resolve_robot, show
 from simulate.run import compensation_steps
 
 
@@ -67,10 +67,7 @@ def compensate_cmd(
                                 stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
                                 spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
                                 friction=o.friction_refs(friction), advance=adv)
-    if as_json:
-        emit_json(info)
-        return
-    print_info(info)
+    show(as_json, info, lambda: print_info(info))
 
 
 COMMANDS = {"compensate": compensate_cmd}

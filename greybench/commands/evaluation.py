@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, out, print_table, progress, resolve_robot
+from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
 from simulate.evaluation.features import MM, FeatureRow
 from simulate.evaluation.ranking import COMPONENTS, Components, Ranking, RankSettings, ranking_json
 from simulate.run import rank_program
@@ -27,7 +27,7 @@ def _cells(devs: list[FeatureRow]) -> list[str]:
             for i, d in enumerate(devs)]
 
 
-def print_ranking(r: Ranking) -> None:
+def print_ranking(r: Ranking, out_dir: Path | None = None) -> None:
     poses = [p.name for p in r.placements]
     print_table("Feature deviations \\[mm] (ISO 10791-7, paper Table 2); green best .. red worst per row, bold: in "
                 "tolerance", ("feature", "nominal \\[mm]", "tolerance \\[mm]", *poses),
@@ -41,6 +41,8 @@ def print_ranking(r: Ranking) -> None:
         print_table("Component share of the score (re-run with the component switched off)", ("pose", *COMPONENTS),
                     [(p, *[f"{100 * r.shares(p).get('score', {}).get(c, 0.0):.0f}%" for c in COMPONENTS])
                      for p in poses])
+    if out_dir is not None:
+        out.print(f"report: {out_dir / 'report.md'}")
 
 
 def rank_poses_cmd(
@@ -71,12 +73,7 @@ def rank_poses_cmd(
     comps = Components(deflection=False, servo=False) if ideal else Components()
     r = rank_program(program, resolve_robot(robot), poses, settings=settings, components=comps, shares=shares,
                      out_dir=out_dir, workers=workers, friction=o.friction_refs(friction), progress=progress)
-    if as_json:
-        emit_json(ranking_json(r))
-        return
-    print_ranking(r)
-    if out_dir is not None:
-        out.print(f"report: {out_dir / 'report.md'}")
+    show(as_json, ranking_json(r), lambda: print_ranking(r, out_dir))
 
 
 def trace_cmd(
@@ -89,17 +86,13 @@ def trace_cmd(
     as_json: o.Json = False,
 ) -> None:
     """Time stamps and program lines that machined the surface near a point (paper 3.8)."""
-    from simulate.run import trace_workpiece
+    from simulate.run import trace_json, trace_workpiece
     from simulate.toolpath.switching import axes_of
 
     xyz = o.numbers(point, 3, "point", "mm")
     tr = trace_workpiece(workpiece, [v * MM for v in xyz], radius * MM, program)
     if as_json:
-        emit_json({"point_mm": list(xyz), "radius_mm": radius, "n_ends": tr.n_ends,
-                   "lines": [{"line": ln.line, "text": ln.text, "t_first_s": ln.t_first, "t_last_s": ln.t_last,
-                              "n_ends": ln.n_ends, "max_deflection_m": ln.max_deflection,
-                              "max_force_n": ln.max_force, "switching_axes": axes_of(ln.switching)}
-                             for ln in tr.lines]})
+        emit_json(trace_json(tr, xyz, radius))
         return
     print_table(f"{tr.n_ends} machined dexel ends within {radius:g} mm of ({point}) mm",
                 ("line", "program", "t \\[s]", "ends", "max deflection \\[µm]", "max force \\[N]", "switching"),

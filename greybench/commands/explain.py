@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, out, print_table, progress, resolve_robot
+from greybench.support import out, print_table, progress, resolve_robot, show
 from simulate.run import explain_measured
 
 if TYPE_CHECKING:
@@ -42,10 +42,7 @@ def explain(
     re-simulating and report the RMS before and after [m]."""
     ex = explain_measured(measured, program, resolve_robot(robot), pose, name, out_dir=out_dir, spacing_mm=spacing,
                           size=size, max_sims=max_sims, progress=progress)
-    if as_json:
-        emit_json(ex.as_json())
-    else:
-        print_explanation(ex, out_dir)
+    show(as_json, ex.as_json(), lambda: print_explanation(ex, out_dir))
 
 
 def print_explanation(ex: Explanation, out_dir: Path | None = None) -> None:

@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, guarded, out, print_summary, print_table, resolve_robot
+from greybench.support import guarded, out, print_summary, print_table, resolve_robot, show
 from identify.errors import InputError
 from simulate.robot.model import load_robot
 
@@ -32,10 +32,7 @@ def fk_cmd(
     n = forward_table(r, in_file, out_file, flange=flange)
     info = {"robot": r.name, "in": str(in_file), "out": str(out_file), "poses": n,
             "frame": "flange" if flange else "tcp"}
-    if as_json:
-        emit_json(info)
-        return
-    print_summary(f"robot fk ({r.name})", info)
+    show(as_json, info, lambda: print_summary(f"robot fk ({r.name})", info))
 
 
 def ik_cmd(
@@ -57,11 +54,8 @@ def ik_cmd(
     ok, counts = inverse_table(r, in_file, out_file, q_start=q0, independent=independent)
     info = {"robot": r.name, "in": str(in_file), "out": str(out_file), "poses": sum(counts.values()),
             "ok": ok, "mode": "independent" if independent else "path", "status": counts}
-    if as_json:
-        emit_json(info)
-        return
-    print_summary(f"robot ik ({r.name}, {info['mode']}): poses per status", counts)
-    out.print(f"wrote {out_file}")
+    show(as_json, info, lambda: (print_summary(f"robot ik ({r.name}, {info['mode']}): poses per status", counts),
+                                 out.print(f"wrote {out_file}")))
 
 
 def prepare(
@@ -81,11 +75,9 @@ def prepare(
     res = prepare_log(r, log, out_dir, window_s=window)
     info = {"robot": r.name, "log": str(log), "records": [str(p) for p in res.paths], "samples": res.n_samples,
             "dt_s": res.dt, "savgol_window_samples": res.window}
-    if as_json:
-        emit_json(info)
-        return
-    print_table(f"prepare ({r.name}): {res.n_samples} samples at {res.dt * 1e3:.3g} ms", ("axis", "record"),
-                [(f"A{i + 1}", p) for i, p in enumerate(res.paths)], left=2)
+    show(as_json, info, lambda: print_table(f"prepare ({r.name}): {res.n_samples} samples at {res.dt * 1e3:.3g} ms",
+                                            ("axis", "record"), [(f"A{i + 1}", p) for i, p in enumerate(res.paths)],
+                                            left=2))
 
 
 robot_app.command("fk")(guarded(fk_cmd))
