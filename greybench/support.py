@@ -135,8 +135,9 @@ def progress(description: str, total: float | None = None, enabled: bool = True)
 
 
 def print_table(title: str, columns: Sequence[str], rows: Iterable[Sequence[object]], left: int = 1) -> None:
-    """A table on stdout: the first ``left`` columns left-aligned, the others right; floats with 6
-    significant digits. Titles and cells are rich markup (``\\[s]`` for a literal ``[s]``)."""
+    """A table on stdout (``print_table(*table)`` for an :class:`identify.workflows.Table`): the first
+    ``left`` columns left-aligned, the others right; floats with 6 significant digits. Titles and
+    cells are rich markup (``\\[s]`` for a literal ``[s]``)."""
     from rich.table import Table
 
     table = Table(title=title)

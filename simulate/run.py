@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from identify.models import FrictionModel
+    from identify.workflows import Table
     from simulate.evaluation.circle import CircleResult
     from simulate.evaluation.ranking import Components as RankComponents
     from simulate.evaluation.ranking import Ranking, RankSettings
@@ -515,25 +516,26 @@ def _table_out(path: Path) -> None:
         raise InputError("output folder does not exist", source=str(path.parent))
 
 
-def forward_table(rob: Robot, in_file: Path, out_file: Path, *, flange: bool = False) -> int:
+def forward_table(rob: Robot, in_file: Path, out_file: Path, *, flange: bool = False) -> dict[str, Any]:
     """Forward kinematics of a joint table (q1..q6 [rad]) into a pose table (x, y, z [m], qw, qx, qy,
-    qz) of the TCP, or of the flange; gives the number of poses."""
+    qz) of the TCP, or of the flange; gives the run's summary (robot, files, number of poses, frame)."""
     from simulate.robot.kinematics import fk
     from simulate.robot.tables import JOINT_COLUMNS, frame_from_poses, numeric_columns, read_table, write_table
 
     _table_out(out_file)
     q = numeric_columns(read_table(in_file), JOINT_COLUMNS, str(in_file))
     write_table(frame_from_poses(fk(rob, q, tool=not flange)), out_file)
-    return len(q)
+    return {"robot": rob.name, "in": str(in_file), "out": str(out_file), "poses": len(q),
+            "frame": "flange" if flange else "tcp"}
 
 
 def inverse_table(rob: Robot, in_file: Path, out_file: Path, *, q_start: Sequence[float] | None = None,
-                  independent: bool = False) -> tuple[int, dict[str, int]]:
+                  independent: bool = False) -> dict[str, Any]:
     """Inverse kinematics (analytic) of a pose table (x, y, z [m], qw, qx, qy, qz) into a joint table
     (q1..q6 [rad], ok, status; unreachable rows NaN), along a continuous path from ``q_start`` [rad]
     (default: mid of the limits for axes 2, 3, 5, 0 for 1, 4, 6) or each pose nearest it
-    (``independent``); gives the number of poses with a valid solution and the number per
-    :class:`simulate.robot.kinematics.IKStatus`."""
+    (``independent``); gives the run's summary: robot, files, number of poses, ``ok`` (with a valid
+    solution), ``mode`` and ``status`` (number per :class:`simulate.robot.kinematics.IKStatus`)."""
     import numpy as np
     import pandas as pd
 
@@ -549,7 +551,9 @@ def inverse_table(rob: Robot, in_file: Path, out_file: Path, *, q_start: Sequenc
     cols["ok"] = res.ok
     cols["status"] = [IKStatus(s).name for s in res.status]
     write_table(pd.DataFrame(cols), out_file)
-    return int(res.ok.sum()), {s.name: int(np.sum(res.status == s)) for s in IKStatus}
+    return {"robot": rob.name, "in": str(in_file), "out": str(out_file), "poses": len(res.ok), "ok": int(res.ok.sum()),
+            "mode": "independent" if independent else "path",
+            "status": {s.name: int(np.sum(res.status == s)) for s in IKStatus}}
 
 
 def circle_test(robot: Path, pose: Path, name: str | None, out_dir: Path, *, radius_mm: float = 50.0,
@@ -592,6 +596,28 @@ def trace_json(tr: Trace, point_mm: Sequence[float], radius_mm: float) -> dict[s
             "lines": [{"line": ln.line, "text": ln.text, "t_first_s": ln.t_first, "t_last_s": ln.t_last,
                        "n_ends": ln.n_ends, "max_deflection_m": ln.max_deflection, "max_force_n": ln.max_force,
                        "switching_axes": axes_of(ln.switching)} for ln in tr.lines]}
+
+
+def trace_table(tr: Trace, point: str, radius_mm: float) -> Table:
+    """Per program line near ``point`` (as typed, mm): times [s], dexel ends, largest deflection [µm]
+    and force [N], switching axes."""
+    from identify.workflows import Table
+    from simulate.toolpath.switching import axes_of
+
+    return Table(f"{tr.n_ends} machined dexel ends within {radius_mm:g} mm of ({point}) mm",
+                 ("line", "program", "t \\[s]", "ends", "max deflection \\[µm]", "max force \\[N]", "switching"),
+                 [(ln.line, ln.text, f"{ln.t_first:.3f}..{ln.t_last:.3f}", ln.n_ends,
+                   f"{ln.max_deflection / 1e-6:.1f}", f"{ln.max_force:.1f}",
+                   ",".join(f"A{a}" for a in axes_of(ln.switching)) or "-") for ln in tr.lines], left=7)
+
+
+def spike_table(result: CircleResult) -> Table:
+    """The circle's reversal spikes: angle [deg], joint, excursion, spike and lost motion [µm]."""
+    from identify.workflows import Table
+
+    return Table("reversal spikes", ("angle [deg]", "joint", "excursion [µm]", "spike [µm]", "lost motion [µm]"),
+                 [(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}", f"{s.spike_um:+.1f}",
+                   f"{s.lost_motion_um:+.1f}") for s in result.spikes], left=0)
 
 
 def trace_workpiece(workpiece: Path, point: Sequence[float], radius: float, program: Path | None = None) -> Trace:

@@ -36,7 +36,7 @@ def circle(
     radius_error_um and reversal_spikes (angle [deg], joint, excursion height [µm], and as a ballbar
     analysis splits it: spike beyond the settled trace [µm], lost motion step [µm]).
     """
-    from simulate.run import circle_test
+    from simulate.run import circle_test, spike_table
 
     centre = o.numbers(center_mm, 3, "center-mm", "mm") if center_mm is not None else (0.0, 0.0, 0.0)
     result, summary = circle_test(resolve_robot(robot), pose, name, out_dir, radius_mm=radius_mm,
@@ -51,9 +51,7 @@ def circle(
                              "largest_reversal_spike_um": result.largest_reversal_spike_um,
                              "largest_lost_motion_um": result.largest_lost_motion_um, "csv": str(summary["csv"]),
                              "png": str(summary["png"])})
-    print_table("reversal spikes", ("angle [deg]", "joint", "excursion [µm]", "spike [µm]", "lost motion [µm]"),
-                [(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}", f"{s.spike_um:+.1f}", f"{s.lost_motion_um:+.1f}")
-                 for s in result.spikes], left=0)
+    print_table(*spike_table(result))
     if not result.spikes:
         err.print("no joint reverses along this circle")
 

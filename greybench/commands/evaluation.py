@@ -86,19 +86,14 @@ def trace_cmd(
     as_json: o.Json = False,
 ) -> None:
     """Time stamps and program lines that machined the surface near a point (paper 3.8)."""
-    from simulate.run import trace_json, trace_workpiece
-    from simulate.toolpath.switching import axes_of
+    from simulate.run import trace_json, trace_table, trace_workpiece
 
     xyz = o.numbers(point, 3, "point", "mm")
     tr = trace_workpiece(workpiece, [v * MM for v in xyz], radius * MM, program)
     if as_json:
         emit_json(trace_json(tr, xyz, radius))
         return
-    print_table(f"{tr.n_ends} machined dexel ends within {radius:g} mm of ({point}) mm",
-                ("line", "program", "t \\[s]", "ends", "max deflection \\[µm]", "max force \\[N]", "switching"),
-                [(ln.line, ln.text, f"{ln.t_first:.3f}..{ln.t_last:.3f}", ln.n_ends, f"{ln.max_deflection / 1e-6:.1f}",
-                  f"{ln.max_force:.1f}", ",".join(f"A{a}" for a in axes_of(ln.switching)) or "-") for ln in tr.lines],
-                left=7)
+    print_table(*trace_table(tr, point, radius))
     if not tr.lines:
         err.print("no machined surface near that point (stock surface or empty space)")
 

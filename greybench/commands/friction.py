@@ -11,8 +11,8 @@ import typer
 
 from greybench import options as o
 from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
+from identify import workflows as wf
 from identify.axis_limits import load_axis_limits
-from identify.metrics import Metrics
 from identify.models import MODELS, FrictionModel, make_seeded, parse_model_names
 from identify.plant import Effect
 from identify.records import derivative_note
@@ -24,12 +24,6 @@ class TrajectoryKind(str, Enum):
     test = "test"
     stribeck = "stribeck"
     presliding = "presliding"
-
-
-def _print_metrics(title: str, rows: dict[str, Metrics], unit: str) -> None:
-    print_table(title, ("record", f"RMSE [{unit}]", "R^2", "NRMSE", f"max error [{unit}]", "samples"),
-                [(k, f"{m.rmse:.4f}", f"{m.r2:.5f}", f"{m.nrmse:.4f}", f"{m.max_error:.4f}", m.n)
-                 for k, m in rows.items()])
 
 
 def trajectory(
@@ -135,11 +129,9 @@ def fit(
     if as_json:
         emit_json(res.to_dict(model, est, train_rec, warnings, out_dir))
         return
-    units = est.param_units()
-    print_table(f"{est.name} parameters", ("parameter", "value", "unit"),
-                [(k, f"{v:.6g}", units.get(k, "")) for k, v in est.params_.items()])
+    print_table(*wf.params_table(est))
     where = f", saved to {out_dir}" if out_dir else ""
-    _print_metrics(f"{model}: fit in {res.fit_time:.2f} s{where}", res.metrics, train_rec.units["tau"])
+    print_table(*wf.metrics_table(f"{model}: fit in {res.fit_time:.2f} s{where}", res.metrics, train_rec.units["tau"]))
     if run:
         reg = f"; registered {run.registered} v{run.version} as {run.alias}" if run.registered else ""
         out.print(f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}")
@@ -176,7 +168,8 @@ def predict(
     _, m = predict_record(est, rec, out_file, source=str(data))
     show(as_json, {"model": est.name, "out": str(out_file), "metrics": m.to_dict(),
                    "derivative_cutoff_hz": rec.cutoff_hz}, lambda: (out.print(derivative_note(rec), highlight=False),
-                  _print_metrics(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"])))
+                  print_table(*wf.metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m},
+                                                rec.units["tau"]))))
 
 
 def compare(
@@ -214,12 +207,7 @@ def compare(
         emit_json({"experiment": experiment if track else None, "parent_run_id": parent, "axis": axis or 1,
                    "rows": rows})
         return
-    u = train_rec.units["tau"]  # units escaped: rich would read "[s]" as markup
-    print_table(f"compare on {test} (axis {axis or 1}), sorted by test RMSE",
-                ("rank", "model", f"test RMSE \\[{u}]", "test R^2", f"train RMSE \\[{u}]", "fit time \\[s]",
-                 "parameters"),
-                [(i, r["model"], f"{r['test_rmse']:.4f}", f"{r['test_r2']:.5f}", f"{r['train_rmse']:.4f}",
-                  f"{r['fit_time_s']:.1f}", r["n_parameters"]) for i, r in enumerate(rows, 1)], left=2)
+    print_table(*wf.compare_table(rows, test, axis or 1, train_rec.units["tau"]))
     if parent:
         out.print(f"MLflow experiment '{experiment}', parent run {parent}; open it with: greybench ui")
 
@@ -248,12 +236,7 @@ def train_robot(
     rows, parent = fit_robot(log, robot_file, lambda: _make(model, seed, epochs), axis_list, test=test,
                              experiment=experiment, register=register, model_name=model, progress=progress)
     show(as_json, {"parent_run_id": parent, "experiment": experiment, "model": model, "robot": robot_file.stem,
-                   "axes": rows}, lambda: print_table(
-        f"train-robot {robot_file.stem}: {model} per axis (parent run {parent})",
-        ("axis", "train RMSE [Nm]", "train R^2", "test RMSE [Nm]", "fit time \\[s]", "registered", "run"),
-        [(r["axis"], f"{r['train_rmse']:.4f}", f"{r['train_r2']:.4f}", f"{r['test_rmse']:.4f}" if "test_rmse" in r
-          else "-", f"{r['fit_time_s']:.1f}", f"{r['registered']} v{r['version']} ({r['alias']})" if r["registered"]
-          else "-", r["run_id"]) for r in rows]))
+                   "axes": rows}, lambda: print_table(*wf.train_robot_table(rows, robot_file.stem, model, parent)))
 
 
 def promote(

@@ -12,7 +12,6 @@ from identify.errors import InputError
 from simulate.robot.model import load_robot
 
 robot_app = typer.Typer(no_args_is_help=True, help="Robot kinematics: poses (m, unit quaternion) <-> joints (rad).")
-JsonRun = Annotated[bool, typer.Option("--json", help="Print one JSON object summarising the run.")]
 #: The two table formats fk and ik read and write.
 JOINT_TABLE = "Joint table (.csv/.parquet): q1..q6 (rad); ik adds ok, status."
 POSE_TABLE = "Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, qz."
@@ -23,16 +22,13 @@ def fk_cmd(
     out_file: Annotated[Path, typer.Option("--out", help=POSE_TABLE)],
     robot: o.Robot = "max100",
     flange: Annotated[bool, typer.Option("--flange", help="Flange pose instead of the TCP pose (m).")] = False,
-    as_json: JsonRun = False,
+    as_json: o.Json = False,
 ) -> None:
     """Forward kinematics: joints (rad) -> TCP poses in the robot base frame (m, unit quaternion)."""
     from simulate.run import forward_table
 
-    r = load_robot(resolve_robot(robot))
-    n = forward_table(r, in_file, out_file, flange=flange)
-    info = {"robot": r.name, "in": str(in_file), "out": str(out_file), "poses": n,
-            "frame": "flange" if flange else "tcp"}
-    show(as_json, info, lambda: print_summary(f"robot fk ({r.name})", info))
+    info = forward_table(load_robot(resolve_robot(robot)), in_file, out_file, flange=flange)
+    show(as_json, info, lambda: print_summary(f"robot fk ({info['robot']})", info))
 
 
 def ik_cmd(
@@ -44,18 +40,15 @@ def ik_cmd(
                                                                   "6).")] = None,
     independent: Annotated[bool, typer.Option("--independent", help="Each pose nearest --q-start (rad) (default: a "
                                                                     "continuous path).")] = False,
-    as_json: JsonRun = False,
+    as_json: o.Json = False,
 ) -> None:
     """Inverse kinematics (analytic, paper 3.2): TCP poses -> joints; unreachable rows get ok=false and NaN."""
     from simulate.run import inverse_table
 
-    r = load_robot(resolve_robot(robot))
     q0 = o.numbers(q_start, 6, "q-start", "rad") if q_start is not None else None
-    ok, counts = inverse_table(r, in_file, out_file, q_start=q0, independent=independent)
-    info = {"robot": r.name, "in": str(in_file), "out": str(out_file), "poses": sum(counts.values()),
-            "ok": ok, "mode": "independent" if independent else "path", "status": counts}
-    show(as_json, info, lambda: (print_summary(f"robot ik ({r.name}, {info['mode']}): poses per status", counts),
-                                 out.print(f"wrote {out_file}")))
+    info = inverse_table(load_robot(resolve_robot(robot)), in_file, out_file, q_start=q0, independent=independent)
+    show(as_json, info, lambda: (print_summary(f"robot ik ({info['robot']}, {info['mode']}): poses per status",
+                                               info["status"]), out.print(f"wrote {out_file}")))
 
 
 def prepare(
@@ -64,7 +57,7 @@ def prepare(
                                                             "log).")],
     robot: o.Robot = "max100",
     window: Annotated[float, typer.Option("--window", help="Savitzky-Golay window for qd, qdd (s).")] = 0.021,
-    as_json: JsonRun = False,
+    as_json: o.Json = False,
 ) -> None:
     """Split a six-axis log into axis records with tau_rb (RNEA) and tau_load (gravity/payload), in Nm."""
     from simulate.robot.prepare import prepare_log
