@@ -598,6 +598,57 @@ def trace_json(tr: Trace, point_mm: Sequence[float], radius_mm: float) -> dict[s
                        "switching_axes": axes_of(ln.switching)} for ln in tr.lines]}
 
 
+def explanation_tables(ex: Explanation) -> list[Table]:
+    """The causes ranked by score (dBIC [-]) with the held-out gain [%] and the fitted change, and
+    the RMS measured - simulated [µm] per feature before and after the calibration."""
+    from identify.workflows import Table
+
+    return [Table(f"explain: cause {ex.cause} (score = dBIC vs no discrepancy; named above 10)",
+                  ("cause", "score", "held-out gain \\[%]", "fitted change"),
+                  [(f.cause, f"{f.score:.1f}", f"{f.heldout_gain * 100:.1f}", ", ".join(f"{v:.3g}" for v in f.theta))
+                   for f in ex.choice.ranking[:8]]),
+            Table("RMS measured - simulated \\[µm]", ("feature", "before", "after"),
+                  [*[(k, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}") for k, (b, a) in ex.rms_by_feature().items()],
+                   ("all", f"{ex.rms_before * 1e6:.2f}", f"{ex.rms_after * 1e6:.2f}")])]
+
+
+_COLOURS = ("green", "chartreuse3", "yellow", "dark_orange", "red")
+
+
+def _colour(rank: int, n: int) -> str:
+    return _COLOURS[round(rank * (len(_COLOURS) - 1) / (n - 1))] if n > 1 else _COLOURS[0]
+
+
+def ranking_tables(r: Ranking) -> list[Table]:
+    """The feature deviations [mm] per pose (coloured green, smallest |deviation| of a row, .. red,
+    largest; bold in tolerance), the pose ranking (score [-]) and, with variants, each component's
+    share of the score [%]."""
+    from identify.workflows import Table
+    from simulate.evaluation.ranking import COMPONENTS
+
+    poses = [p.name for p in r.placements]
+
+    def cells(row: str) -> list[str]:
+        devs = [r.results[p].table[row] for p in poses]
+        rank = {i: k for k, i in enumerate(sorted(range(len(devs)), key=lambda i: abs(devs[i].deviation)))}
+        return [f"[{_colour(rank[i], len(devs))}{' bold' if d.in_tolerance else ''}]{d.deviation / MM:+.4f}[/]"
+                for i, d in enumerate(devs)]
+
+    tables = [Table("Feature deviations \\[mm] (ISO 10791-7, paper Table 2); green best .. red worst per row, bold: "
+                    "in tolerance", ("feature", "nominal \\[mm]", "tolerance \\[mm]", *poses),
+                    [(row.name, row.nominal_text(), f"{row.tolerance / MM:.3f}", *cells(row.name))
+                     for row in r.results[poses[0]].table.rows]),
+              Table("Pose ranking (score = sum |deviation|/tolerance, lower is better)",
+                    ("rank", "pose", "score", "in tolerance"),
+                    [(e.rank, f"[{_colour(e.rank - 1, len(poses))}]{e.pose}[/]", f"{e.score:.2f}",
+                      f"{e.in_tolerance}/10") for e in r.entries], left=0)]
+    if r.variants:
+        tables.append(Table("Component share of the score (re-run with the component switched off)",
+                            ("pose", *COMPONENTS), [(p, *[f"{100 * r.shares(p).get('score', {}).get(c, 0.0):.0f}%"
+                                                          for c in COMPONENTS]) for p in poses]))
+    return tables
+
+
 def trace_table(tr: Trace, point: str, radius_mm: float) -> Table:
     """Per program line near ``point`` (as typed, mm): times [s], dexel ends, largest deflection [µm]
     and force [N], switching axes."""

@@ -8,39 +8,14 @@ import typer
 
 from greybench import options as o
 from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
-from simulate.evaluation.features import MM, FeatureRow
-from simulate.evaluation.ranking import COMPONENTS, Components, Ranking, RankSettings, ranking_json
-from simulate.run import rank_program
-
-_COLOURS = ["green", "chartreuse3", "yellow", "dark_orange", "red"]
-
-
-def _colour(rank: int, n: int) -> str:
-    return _COLOURS[round(rank * (len(_COLOURS) - 1) / (n - 1))] if n > 1 else _COLOURS[0]
-
-
-def _cells(devs: list[FeatureRow]) -> list[str]:
-    """Deviations [mm] coloured green (smallest |deviation|) .. red (largest), bold when in tolerance."""
-    order = sorted(range(len(devs)), key=lambda i: abs(devs[i].deviation))
-    rank = {i: k for k, i in enumerate(order)}
-    return [f"[{_colour(rank[i], len(devs))}{' bold' if d.in_tolerance else ''}]{d.deviation / MM:+.4f}[/]"
-            for i, d in enumerate(devs)]
+from simulate.evaluation.features import MM
+from simulate.evaluation.ranking import Components, Ranking, RankSettings, ranking_json
+from simulate.run import rank_program, ranking_tables
 
 
 def print_ranking(r: Ranking, out_dir: Path | None = None) -> None:
-    poses = [p.name for p in r.placements]
-    print_table("Feature deviations \\[mm] (ISO 10791-7, paper Table 2); green best .. red worst per row, bold: in "
-                "tolerance", ("feature", "nominal \\[mm]", "tolerance \\[mm]", *poses),
-                [(row.name, row.nominal_text(), f"{row.tolerance / MM:.3f}",
-                  *_cells([r.results[p].table[row.name] for p in poses])) for row in r.results[poses[0]].table.rows])
-    print_table("Pose ranking (score = sum |deviation|/tolerance, lower is better)",
-                ("rank", "pose", "score", "in tolerance"),
-                [(e.rank, f"[{_colour(e.rank - 1, len(poses))}]{e.pose}[/]", f"{e.score:.2f}", f"{e.in_tolerance}/10")
-                 for e in r.entries], left=0)
-    if r.variants:
-        print_table("Component share of the score (re-run with the component switched off)", ("pose", *COMPONENTS),
-                    [(p, *[f"{100 * r.shares(p).get('score', {}).get(c, 0.0):.0f}%" for c in COMPONENTS])
-                     for p in poses])
+    for table in ranking_tables(r):
+        print_table(*table)
     if out_dir is not None:
         out.print(f"report: {out_dir / 'report.md'}")
 

@@ -9,7 +9,7 @@ import typer
 
 from greybench import options as o
 from greybench.support import out, print_table, progress, resolve_robot, show
-from simulate.run import explain_measured
+from simulate.run import explain_measured, explanation_tables
 
 if TYPE_CHECKING:
     from simulate.explain.pipeline import Explanation
@@ -46,13 +46,8 @@ def explain(
 
 
 def print_explanation(ex: Explanation, out_dir: Path | None = None) -> None:
-    print_table(f"explain: cause {ex.cause} (score = dBIC vs no discrepancy; named above 10)",
-                ("cause", "score", "held-out gain \\[%]", "fitted change"),
-                [(f.cause, f"{f.score:.1f}", f"{f.heldout_gain * 100:.1f}", ", ".join(f"{v:.3g}" for v in f.theta))
-                 for f in ex.choice.ranking[:8]])
-    print_table("RMS measured - simulated \\[µm]", ("feature", "before", "after"),
-                [*[(k, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}") for k, (b, a) in ex.rms_by_feature().items()],
-                 ("all", f"{ex.rms_before * 1e6:.2f}", f"{ex.rms_after * 1e6:.2f}")])
+    for table in explanation_tables(ex):
+        print_table(*table)
     if ex.calibration is not None:
         cal = ex.calibration
         out.print(f"calibrated {cal.before.param}: {cal.before.value:.6g} -> {cal.after.value:.6g} {cal.before.unit}")
