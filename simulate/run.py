@@ -516,6 +516,40 @@ def _table_out(path: Path) -> None:
         raise InputError("output folder does not exist", source=str(path.parent))
 
 
+def prepare_records(rob: Robot, log: Path, out_dir: Path, window_s: float) -> tuple[dict[str, Any], Table]:
+    """Split a six-axis log into axis records with tau_rb and tau_load [Nm]
+    (:func:`simulate.robot.prepare.prepare_log`, Savitzky-Golay window ``window_s`` [s]); gives the
+    run's summary (records, samples, sampling period [s]) and the table of records per axis."""
+    from identify.workflows import Table
+    from simulate.robot.prepare import prepare_log
+
+    if not window_s > 0:
+        raise InputError("must be > 0 [s]", field="window")
+    res = prepare_log(rob, log, out_dir, window_s=window_s)
+    return ({"robot": rob.name, "log": str(log), "records": [str(p) for p in res.paths], "samples": res.n_samples,
+             "dt_s": res.dt, "savgol_window_samples": res.window},
+            Table(f"prepare ({rob.name}): {res.n_samples} samples at {res.dt * 1e3:.3g} ms", ("axis", "record"),
+                  [(f"A{i + 1}", p) for i, p in enumerate(res.paths)], left=2))
+
+
+def test_piece(out_file: Path, size: int = 320, tool_diameter_mm: float = 10.0, allowance_mm: float = 0.5,
+               feed_mm_min: float = 2000.0, spindle_rpm: float = 12000.0) -> tuple[dict[str, Any], dict[str, str]]:
+    """Write the finishing program of the ISO 10791-7 style test piece of ``size`` [mm] and its stock
+    (:func:`simulate.toolpath.testpiece.write_test_piece`); gives the run's summary and the piece's
+    dimensions for a summary table (circle diameter, square side [mm], slope [deg])."""
+    from simulate.toolpath.testpiece import Technology, iso_test_piece, write_test_piece
+
+    tech = Technology(tool_diameter=tool_diameter_mm / 1e3, allowance=allowance_mm / 1e3, feed=feed_mm_min,
+                      spindle=spindle_rpm)
+    prog, stock = write_test_piece(out_file, size=size, tech=tech)
+    piece = iso_test_piece(size)
+    return ({"program": str(prog), "stock": str(stock), "size_mm": size, "tool_diameter_mm": tool_diameter_mm,
+             "allowance_mm": allowance_mm, "lines": len(prog.read_text().splitlines())},
+            {"program": str(prog), "stock": str(stock),
+             "circle diameter \\[mm]": f"{piece.circle_diameter * 1e3:g}", "square side \\[mm]":
+             f"{piece.square_side * 1e3:g}", "slope \\[deg]": f"{math.degrees(piece.slope_angle):g}"})
+
+
 def forward_table(rob: Robot, in_file: Path, out_file: Path, *, flange: bool = False) -> dict[str, Any]:
     """Forward kinematics of a joint table (q1..q6 [rad]) into a pose table (x, y, z [m], qw, qx, qy,
     qz) of the TCP, or of the flange; gives the run's summary (robot, files, number of poses, frame)."""

@@ -8,7 +8,6 @@ import typer
 
 from greybench import options as o
 from greybench.support import guarded, out, print_summary, print_table, resolve_robot, show
-from identify.errors import InputError
 from simulate.robot.model import load_robot
 
 robot_app = typer.Typer(no_args_is_help=True, help="Robot kinematics: poses (m, unit quaternion) <-> joints (rad).")
@@ -60,17 +59,10 @@ def prepare(
     as_json: o.Json = False,
 ) -> None:
     """Split a six-axis log into axis records with tau_rb (RNEA) and tau_load (gravity/payload), in Nm."""
-    from simulate.robot.prepare import prepare_log
+    from simulate.run import prepare_records
 
-    r = load_robot(resolve_robot(robot))
-    if not window > 0:
-        raise InputError("must be > 0 [s]", field="window")
-    res = prepare_log(r, log, out_dir, window_s=window)
-    info = {"robot": r.name, "log": str(log), "records": [str(p) for p in res.paths], "samples": res.n_samples,
-            "dt_s": res.dt, "savgol_window_samples": res.window}
-    show(as_json, info, lambda: print_table(f"prepare ({r.name}): {res.n_samples} samples at {res.dt * 1e3:.3g} ms",
-                                            ("axis", "record"), [(f"A{i + 1}", p) for i, p in enumerate(res.paths)],
-                                            left=2))
+    info, table = prepare_records(load_robot(resolve_robot(robot)), log, out_dir, window)
+    show(as_json, info, lambda: print_table(*table))
 
 
 robot_app.command("fk")(guarded(fk_cmd))

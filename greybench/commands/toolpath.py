@@ -22,21 +22,10 @@ def testpiece(
     as_json: o.Json = False,
 ) -> None:
     """Write the finishing program of the ISO 10791-7 style test piece and its semi-finished stock."""
-    import math
+    from simulate.run import test_piece
 
-    from simulate.toolpath.testpiece import Technology, iso_test_piece, write_test_piece
-
-    tech = Technology(tool_diameter=tool_diameter / o.MM_PER_M, allowance=allowance / o.MM_PER_M, feed=feed,
-                      spindle=spindle)
-    prog, stock = write_test_piece(out_file, size=size, tech=tech)
-    piece = iso_test_piece(size)
-    show(as_json, {"program": str(prog), "stock": str(stock), "size_mm": size, "tool_diameter_mm": tool_diameter,
-                   "allowance_mm": allowance, "lines": len(prog.read_text().splitlines())},
-         lambda: print_summary(f"test piece {size}", {
-             "program": str(prog), "stock": str(stock),
-             "circle diameter \\[mm]": f"{piece.circle_diameter * o.MM_PER_M:g}",
-             "square side \\[mm]": f"{piece.square_side * o.MM_PER_M:g}",
-             "slope \\[deg]": f"{math.degrees(piece.slope_angle):g}"}))
+    info, rows = test_piece(out_file, size, tool_diameter, allowance, feed, spindle)
+    show(as_json, info, lambda: print_summary(f"test piece {size}", rows))
 
 
 def interpolate_cmd(
