@@ -93,6 +93,16 @@ def make_trajectory(kind: str, limits: AxisLimits, duration: float = 60.0, rate:
         raise InputError(str(exc), field="--duration") from None
 
 
+def trajectory_text(traj: Trajectory, limits: AxisLimits, out_file: Path) -> str:
+    """Samples, duration [s] and the peaks of position [rad], velocity [rad/s], acceleration
+    [rad/s^2] and jerk [rad/s^3] of a trajectory against the axis's limits."""
+    p = traj.peaks()
+    return (f"{traj.t.size} samples over {traj.t[-1]:.1f} s -> {out_file}\n"
+            f"  position {p['q_min']:.4f}..{p['q_max']:.4f} rad, |qd| <= {p['qd']:.3f} rad/s "
+            f"(limit {limits.vmax:.3f}), |qdd| <= {p['qdd']:.3f} rad/s^2 (limit {limits.amax:.3f}), "
+            f"|jerk| <= {p['qddd']:.2f} rad/s^3 (limit {limits.jmax:.2f})")
+
+
 def synth_record(trajectory: Path, out_file: Path, *, config: Path | None = None, static_curve: str | None = None,
                  noise: float | None = None, effect: Effect | str = "none", magnitude: float = 1.0, seed: int = 0,
                  positions_only: bool = False) -> SynthResult:

@@ -149,6 +149,11 @@ class MachiningSummary(TypedDict):
     peak_deflection: float  # [m]
 
 
+#: The unit of each :class:`MachiningSummary` number, for labels.
+MACHINING_UNITS = {"simulated_time": "s", "wall_time": "s", "removed_volume": "m^3", "peak_force": "N",
+                   "peak_deflection": "m"}
+
+
 def machine_part(job: MachiningJob, out_dir: Path, variable: str = "deflection",
                  progress: Progress = quiet) -> MachiningSummary:
     """Simulate one part and write its outputs (:func:`write_machining_outputs`) into ``out_dir``.
@@ -619,6 +624,14 @@ def circle_test(robot: Path, pose: Path, name: str | None, out_dir: Path, *, rad
         "robot": rob.name, "pose": placement.name, "radius_mm": radius_mm, "feed_mm_min": feed_mm_min,
         "plane": spec.plane.value, "friction": friction, "backlash": backlash, "friction_scale": friction_scale,
         "friction_models": run.friction})
+
+
+def circle_rows(result: CircleResult, summary: dict[str, Any]) -> dict[str, Any]:
+    """The circle's figures [µm] and files, for a summary table."""
+    return {"roundness_um": result.roundness_um, "radius_error_um": result.radius_error_um,
+            "largest_spike_um": result.largest_spike_um, "largest_reversal_spike_um": result.largest_reversal_spike_um,
+            "largest_lost_motion_um": result.largest_lost_motion_um, "csv": str(summary["csv"]),
+            "png": str(summary["png"])}
 
 
 def trace_json(tr: Trace, point_mm: Sequence[float], radius_mm: float) -> dict[str, Any]:

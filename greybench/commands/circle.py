@@ -36,7 +36,7 @@ def circle(
     radius_error_um and reversal_spikes (angle [deg], joint, excursion height [µm], and as a ballbar
     analysis splits it: spike beyond the settled trace [µm], lost motion step [µm]).
     """
-    from simulate.run import circle_test, spike_table
+    from simulate.run import circle_rows, circle_test, spike_table
 
     centre = o.numbers(center_mm, 3, "center-mm", "mm") if center_mm is not None else (0.0, 0.0, 0.0)
     result, summary = circle_test(resolve_robot(robot), pose, name, out_dir, radius_mm=radius_mm,
@@ -46,11 +46,7 @@ def circle(
     if as_json:
         emit_json(summary)
         return
-    print_summary("circle", {"roundness_um": result.roundness_um, "radius_error_um": result.radius_error_um,
-                             "largest_spike_um": result.largest_spike_um,
-                             "largest_reversal_spike_um": result.largest_reversal_spike_um,
-                             "largest_lost_motion_um": result.largest_lost_motion_um, "csv": str(summary["csv"]),
-                             "png": str(summary["png"])})
+    print_summary("circle", circle_rows(result, summary))
     print_table(*spike_table(result))
     if not result.spikes:
         err.print("no joint reverses along this circle")

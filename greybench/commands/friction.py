@@ -45,13 +45,9 @@ def trajectory(
     limits = load_axis_limits(resolve_robot(robot), axis)
     traj = make_trajectory(kind.value, limits, duration, rate)
     write_table(traj.to_frame(), out_file)
-    p = traj.peaks()
     show(as_json, {"kind": kind.value, "axis": axis, "samples": int(traj.t.size), "duration": float(traj.t[-1]),
-                   "peaks": p, "limits": limits.__dict__, "out": str(out_file)}, lambda: out.print(
-              f"{kind.value} trajectory, axis {axis}: {traj.t.size} samples over {traj.t[-1]:.1f} s -> {out_file}\n"
-              f"  position {p['q_min']:.4f}..{p['q_max']:.4f} rad, |qd| <= {p['qd']:.3f} rad/s "
-              f"(limit {limits.vmax:.3f}), |qdd| <= {p['qdd']:.3f} rad/s^2 (limit {limits.amax:.3f}), "
-              f"|jerk| <= {p['qddd']:.2f} rad/s^3 (limit {limits.jmax:.2f})"))
+                   "peaks": traj.peaks(), "limits": limits.__dict__, "out": str(out_file)},
+         lambda: out.print(f"{kind.value} trajectory, axis {axis}: {wf.trajectory_text(traj, limits, out_file)}"))
 
 
 def synth(
@@ -267,12 +263,9 @@ def ui(
     if print_only:
         out.print(" ".join(shlex.quote(c) for c in ui_command(host, port)), highlight=False, soft_wrap=True)
         return
-
-    def ready(url: str) -> None:  # stdout carries only the URL
-        out.print(f"MLflow UI: {url}", highlight=False, soft_wrap=True)
-        sys.stdout.flush()
-
-    run = run_ui(host, port, ready, progress=progress)
+    # stdout carries only the URL
+    run = run_ui(host, port, lambda url: (out.print(f"MLflow UI: {url}", highlight=False, soft_wrap=True),
+                                          sys.stdout.flush()), progress=progress)
     if not run.answered:
         err.print(f"error: the MLflow UI did not answer at {run.url} (exit code {run.code}; is the port taken?)",
                   highlight=False, markup=False, soft_wrap=True)
