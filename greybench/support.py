@@ -87,12 +87,12 @@ def emit_json(obj: Any) -> None:
     sys.stdout.flush()
 
 
-def show(as_json: bool, obj: Any, human: Callable[[], object]) -> None:
-    """A command's result: with ``--json`` the one JSON object ``obj``, otherwise ``human()`` prints it."""
+def show(as_json: bool, obj: Any, *human: Callable[[], object]) -> None:
+    """A command's result: with ``--json`` the one JSON object ``obj``, otherwise the ``human()`` print it."""
     if as_json:
         emit_json(obj)
-    else:
-        human()
+    for h in () if as_json else human:
+        h()
 
 
 def _bar_on_stderr() -> bool:

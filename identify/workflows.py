@@ -162,6 +162,14 @@ class FitOutcome:
     metrics: dict[str, Metrics] = field(default_factory=dict)
     run: FitRun | None = None
 
+    def run_text(self) -> str:
+        """The MLflow run, its model and, when registered, the version and alias ('' without a run)."""
+        run = self.run
+        if run is None:
+            return ""
+        reg = f"; registered {run.registered} v{run.version} as {run.alias}" if run.registered else ""
+        return f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}"
+
     def to_dict(self, model: str, est: FrictionModel, train: AxisRecord, warnings: Sequence[str] = (),
                 out_dir: Path | None = None) -> dict[str, Any]:
         """The ``fit --json`` object: the fitted parameters with their units, fit time [s], the

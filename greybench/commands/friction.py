@@ -129,8 +129,7 @@ def fit(
     where = f", saved to {out_dir}" if out_dir else ""
     print_table(*wf.metrics_table(f"{model}: fit in {res.fit_time:.2f} s{where}", res.metrics, train_rec.units["tau"]))
     if run:
-        reg = f"; registered {run.registered} v{run.version} as {run.alias}" if run.registered else ""
-        out.print(f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}")
+        out.print(res.run_text())
 
 
 def predict(
@@ -163,9 +162,8 @@ def predict(
                        cutoff=cutoff or getattr(est, "cutoff_hz_", None))
     _, m = predict_record(est, rec, out_file, source=str(data))
     show(as_json, {"model": est.name, "out": str(out_file), "metrics": m.to_dict(),
-                   "derivative_cutoff_hz": rec.cutoff_hz}, lambda: (out.print(derivative_note(rec), highlight=False),
-                  print_table(*wf.metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m},
-                                                rec.units["tau"]))))
+                   "derivative_cutoff_hz": rec.cutoff_hz}, lambda: out.print(derivative_note(rec), highlight=False),
+         lambda: print_table(*wf.metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"])))
 
 
 def compare(
@@ -263,9 +261,12 @@ def ui(
     if print_only:
         out.print(" ".join(shlex.quote(c) for c in ui_command(host, port)), highlight=False, soft_wrap=True)
         return
-    # stdout carries only the URL
-    run = run_ui(host, port, lambda url: (out.print(f"MLflow UI: {url}", highlight=False, soft_wrap=True),
-                                          sys.stdout.flush()), progress=progress)
+
+    def ready(url: str) -> None:  # stdout carries only the URL
+        out.print(f"MLflow UI: {url}", highlight=False, soft_wrap=True)
+        sys.stdout.flush()
+
+    run = run_ui(host, port, ready, progress=progress)
     if not run.answered:
         err.print(f"error: the MLflow UI did not answer at {run.url} (exit code {run.code}; is the port taken?)",
                   highlight=False, markup=False, soft_wrap=True)

@@ -46,8 +46,8 @@ def ik_cmd(
 
     q0 = o.numbers(q_start, 6, "q-start", "rad") if q_start is not None else None
     info = inverse_table(load_robot(resolve_robot(robot)), in_file, out_file, q_start=q0, independent=independent)
-    show(as_json, info, lambda: (print_summary(f"robot ik ({info['robot']}, {info['mode']}): poses per status",
-                                               info["status"]), out.print(f"wrote {out_file}")))
+    show(as_json, info, lambda: print_summary(f"robot ik ({info['robot']}, {info['mode']}): poses per status",
+                                              info["status"]), lambda: out.print(f"wrote {out_file}"))
 
 
 def prepare(
