@@ -713,7 +713,7 @@ def spike_table(result: CircleResult) -> Table:
     """The circle's reversal spikes: angle [deg], joint, excursion, spike and lost motion [µm]."""
     from identify.workflows import Table
 
-    return Table("reversal spikes", ("angle [deg]", "joint", "excursion [µm]", "spike [µm]", "lost motion [µm]"),
+    return Table("reversal spikes", ("angle \\[deg]", "joint", "excursion [µm]", "spike [µm]", "lost motion [µm]"),
                  [(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}", f"{s.spike_um:+.1f}",
                    f"{s.lost_motion_um:+.1f}") for s in result.spikes], left=0)
 
