@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, out, print_table, progress
+from greybench.support import out, print_table, progress, show
 from identify.diagnosis import SCORE_THRESHOLD
 from identify.records import derivative_note
 from identify.workflows import diagnose_files
@@ -40,12 +40,9 @@ def diagnose(
     with progress("diagnosing (baseline fit, held-out tests, extended refit)", total=None) as advance:
         d = diagnose_files(train, test, out_dir, seed=seed, generations=generations, threshold=threshold, track=track,
                            linear=linear, cutoff=cutoff, advance=advance)
-    if as_json:
-        emit_json(d.result.to_json())  # the diagnosis JSON contract; the cut-off is in MLflow
-        return
-    out.print(derivative_note(d.train), highlight=False)
-    print_table(*d.table(threshold))
-    out.print(d.gain_text())
+    # the JSON object is the diagnosis JSON contract; the cut-off is in MLflow
+    show(as_json, d.result.to_json(), lambda: out.print(derivative_note(d.train), highlight=False),
+         lambda: print_table(*d.table(threshold)), lambda: out.print(d.gain_text()))
 
 
 COMMANDS = {"diagnose": diagnose}

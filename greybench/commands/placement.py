@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, out, print_summary, progress, resolve_robot
+from greybench.support import out, print_summary, progress, resolve_robot, show
 from simulate.run import optimize_placement
 
 
@@ -37,12 +37,9 @@ def optimize_pose_cmd(
     res = optimize_placement(program, resolve_robot(robot), poses, out_dir, budget_s=budget_s, workers=workers,
                              seed=seed, spacing_mm=spacing, size=size, xy_margin_mm=xy_margin, z_margin_mm=z_margin,
                              max_simulations=max_simulations, robot_name=robot, progress=progress)
-    if as_json:
-        emit_json(res.info)
-        return
-    print_summary("placement search", res.summary())
-    out.print(f"report: {out_dir / 'report.md'}; check: greybench rank-poses --program {program} --robot {robot} "
-              f"--poses {out_dir / 'best.json'} --size {res.size} --spacing {spacing:g}")
+    show(as_json, res.info, lambda: print_summary("placement search", res.summary()), lambda: out.print(
+              f"report: {out_dir / 'report.md'}; check: greybench rank-poses --program {program} --robot {robot} "
+              f"--poses {out_dir / 'best.json'} --size {res.size} --spacing {spacing:g}"))
 
 
 COMMANDS = {"optimize-pose": optimize_pose_cmd}
