@@ -49,21 +49,20 @@ app = typer.Typer(no_args_is_help=True, pretty_exceptions_enable=False, add_comp
 app.add_typer(typer.Typer(cls=_LazyBench, no_args_is_help=True, rich_markup_mode=None,
                           help="Benchmarks: tables with ratios measured in one run."), name="bench")
 
-# Areas, in the order of the workflow. Each module defines COMMANDS: name -> command function or sub-app.
-_AREAS = ["friction", "diagnose", "robot", "toolpath", "machining", "evaluation", "placement", "circle", "compensate",
-          "explain", "serve"]
+# Areas, in the order of the workflow, with their commands. Each module defines COMMANDS: name ->
+# command function or sub-app.
+_AREA_COMMANDS = {
+    "friction": "trajectory synth fit predict compare train-robot promote ui", "diagnose": "diagnose",
+    "robot": "robot prepare", "toolpath": "testpiece interpolate", "machining": "machine",
+    "evaluation": "rank-poses trace", "placement": "optimize-pose", "circle": "circle", "compensate": "compensate",
+    "explain": "explain", "serve": "serve"}
+_AREAS = list(_AREA_COMMANDS)
 #: The area of each command: a console run of one command loads only its own area, so ``greybench
 #: machine`` does not import torch, pandas or scipy.signal for the friction commands (seconds of
 #: start-up); ``bench`` loads none (greybench_bench is imported when a benchmark is asked for).
 #: ``tests/cli/test_lazy_areas.py`` checks it against what every area registers; a command missing
 #: here still works (every area is loaded).
-COMMAND_AREAS = {
-    "trajectory": "friction", "synth": "friction", "fit": "friction", "predict": "friction", "compare": "friction",
-    "train-robot": "friction", "promote": "friction", "ui": "friction", "diagnose": "diagnose", "robot": "robot",
-    "prepare": "robot", "testpiece": "toolpath", "interpolate": "toolpath", "machine": "machining",
-    "rank-poses": "evaluation", "trace": "evaluation", "optimize-pose": "placement", "circle": "circle",
-    "compensate": "compensate", "explain": "explain", "serve": "serve",
-}
+COMMAND_AREAS = {name: area for area, names in _AREA_COMMANDS.items() for name in names.split()}
 
 
 def areas_for(argv: list[str]) -> list[str]:

@@ -86,3 +86,4 @@ def numbers(text: str, n: int, field: str, unit: str) -> tuple[float, ...]:
     if len(vals) != n or not all(math.isfinite(v) for v in vals):
         raise InputError(f"expected {n} finite comma-separated numbers [{unit}], got {text!r}", field=field)
     return vals
+

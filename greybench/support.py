@@ -87,6 +87,14 @@ def emit_json(obj: Any) -> None:
     sys.stdout.flush()
 
 
+def show(as_json: bool, obj: Any, *human: Callable[[], object]) -> None:
+    """A command's result: with ``--json`` the one JSON object ``obj``, otherwise the ``human()`` print it."""
+    if as_json:
+        emit_json(obj)
+    for h in () if as_json else human:
+        h()
+
+
 def _bar_on_stderr() -> bool:
     """A live bar only where stderr really is a terminal: rich also says "terminal" under
     FORCE_COLOR (set by many CI systems), where a bar would fill the log with cursor codes."""
@@ -127,8 +135,9 @@ def progress(description: str, total: float | None = None, enabled: bool = True)
 
 
 def print_table(title: str, columns: Sequence[str], rows: Iterable[Sequence[object]], left: int = 1) -> None:
-    """A table on stdout: the first ``left`` columns left-aligned, the others right; floats with 6
-    significant digits. Titles and cells are rich markup (``\\[s]`` for a literal ``[s]``)."""
+    """A table on stdout (``print_table(*table)`` for an :class:`identify.workflows.Table`): the first
+    ``left`` columns left-aligned, the others right; floats with 6 significant digits. Titles and
+    cells are rich markup (``\\[s]`` for a literal ``[s]``)."""
     from rich.table import Table
 
     table = Table(title=title)

@@ -8,10 +8,10 @@ and reports progress to an :class:`identify.progress.Advance` (silent by default
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from identify.errors import InputError
 from identify.progress import Advance, Progress, quiet
@@ -34,6 +34,49 @@ if TYPE_CHECKING:
 COMPARE_MODELS = ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox")
 
 
+class Table(NamedTuple):
+    """A result table for a command to print: title, column headers (units in brackets), rows and how
+    many leading columns are left-aligned (the others right). Rich markup: ``\\[s]`` is a literal ``[s]``."""
+
+    title: str
+    columns: Sequence[str]
+    rows: list[Sequence[object]]
+    left: int = 1
+
+
+def metrics_table(title: str, metrics: dict[str, Metrics], unit: str) -> Table:
+    """RMSE and max error [``unit``: the record's torque unit], R^2 [-], NRMSE [-] and samples per record."""
+    return Table(title, ("record", f"RMSE [{unit}]", "R^2", "NRMSE", f"max error [{unit}]", "samples"),
+                 [(k, f"{m.rmse:.4f}", f"{m.r2:.5f}", f"{m.nrmse:.4f}", f"{m.max_error:.4f}", m.n)
+                  for k, m in metrics.items()])
+
+
+def params_table(est: FrictionModel) -> Table:
+    """A fitted model's parameters with their units."""
+    units = est.param_units()
+    return Table(f"{est.name} parameters", ("parameter", "value", "unit"),
+                 [(k, f"{v:.6g}", units.get(k, "")) for k, v in est.params_.items()])
+
+
+def compare_table(rows: list[dict[str, Any]], test: Path, axis: int, unit: str) -> Table:
+    """The ranking of :func:`identify.tracking.compare_models`: RMSE [``unit``], R^2 [-], fit time [s]."""
+    return Table(f"compare on {test} (axis {axis}), sorted by test RMSE",
+                 ("rank", "model", f"test RMSE \\[{unit}]", "test R^2", f"train RMSE \\[{unit}]", "fit time \\[s]",
+                  "parameters"),
+                 [(i, r["model"], f"{r['test_rmse']:.4f}", f"{r['test_r2']:.5f}", f"{r['train_rmse']:.4f}",
+                   f"{r['fit_time_s']:.1f}", r["n_parameters"]) for i, r in enumerate(rows, 1)], left=2)
+
+
+def train_robot_table(rows: list[dict[str, Any]], robot: str, model: str, parent: str | None) -> Table:
+    """One row per axis of :func:`simulate.run.train_robot`: RMSE [Nm], R^2 [-], fit time [s], the run."""
+    return Table(f"train-robot {robot}: {model} per axis (parent run {parent})",
+                 ("axis", "train RMSE [Nm]", "train R^2", "test RMSE [Nm]", "fit time \\[s]", "registered", "run"),
+                 [(r["axis"], f"{r['train_rmse']:.4f}", f"{r['train_r2']:.4f}",
+                   f"{r['test_rmse']:.4f}" if "test_rmse" in r else "-", f"{r['fit_time_s']:.1f}",
+                   f"{r['registered']} v{r['version']} ({r['alias']})" if r["registered"] else "-", r["run_id"])
+                  for r in rows])
+
+
 def make_trajectory(kind: str, limits: AxisLimits, duration: float = 60.0, rate: float = 1000.0) -> Trajectory:
     """An excitation trajectory of ``kind`` (:data:`identify.trajectories.TRAJECTORIES`) within the
     axis's limits, ``duration`` [s] (not for ``stribeck``: its steps set it) sampled at ``rate`` [Hz]."""
@@ -48,6 +91,16 @@ def make_trajectory(kind: str, limits: AxisLimits, duration: float = 60.0, rate:
         return fn(limits, rate=rate) if kind == "stribeck" else fn(limits, duration=duration, rate=rate)
     except ValueError as exc:
         raise InputError(str(exc), field="--duration") from None
+
+
+def trajectory_text(traj: Trajectory, limits: AxisLimits, out_file: Path) -> str:
+    """Samples, duration [s] and the peaks of position [rad], velocity [rad/s], acceleration
+    [rad/s^2] and jerk [rad/s^3] of a trajectory against the axis's limits."""
+    p = traj.peaks()
+    return (f"{traj.t.size} samples over {traj.t[-1]:.1f} s -> {out_file}\n"
+            f"  position {p['q_min']:.4f}..{p['q_max']:.4f} rad, |qd| <= {p['qd']:.3f} rad/s "
+            f"(limit {limits.vmax:.3f}), |qdd| <= {p['qdd']:.3f} rad/s^2 (limit {limits.amax:.3f}), "
+            f"|jerk| <= {p['qddd']:.2f} rad/s^3 (limit {limits.jmax:.2f})")
 
 
 def synth_record(trajectory: Path, out_file: Path, *, config: Path | None = None, static_curve: str | None = None,
@@ -74,6 +127,17 @@ def synth_record(trajectory: Path, out_file: Path, *, config: Path | None = None
     return res
 
 
+def parse_joints(text: str, field: str = "--axes") -> list[int]:
+    """Comma-separated joint numbers (``1,2,3``), sorted and without repeats; ``InputError`` naming ``field``."""
+    try:
+        axes = sorted({int(a) for a in text.split(",") if a.strip()})
+    except ValueError:
+        raise InputError(f"not a list of joint numbers: {text!r}", field=field) from None
+    if not axes:
+        raise InputError("no axis given", field=field)
+    return axes
+
+
 def load_pair(train: Path, test: Path | None, axis: int | None, *, linear: bool = False,
               cutoff: float | None = None) -> tuple[AxisRecord, AxisRecord | None]:
     """A training and an optional test record (joint ``axis`` of robot logs, errors naming ``--axis``);
@@ -97,6 +161,23 @@ class FitOutcome:
     fit_time: float
     metrics: dict[str, Metrics] = field(default_factory=dict)
     run: FitRun | None = None
+
+    def run_text(self) -> str:
+        """The MLflow run, its model and, when registered, the version and alias ('' without a run)."""
+        run = self.run
+        if run is None:
+            return ""
+        reg = f"; registered {run.registered} v{run.version} as {run.alias}" if run.registered else ""
+        return f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}"
+
+    def to_dict(self, model: str, est: FrictionModel, train: AxisRecord, warnings: Sequence[str] = (),
+                out_dir: Path | None = None) -> dict[str, Any]:
+        """The ``fit --json`` object: the fitted parameters with their units, fit time [s], the
+        record's derivative cut-off [Hz], the run and the metrics per record (``train``, ``test``)."""
+        return {"model": model, "params": est.params_, "units": est.param_units(), "fit_time": self.fit_time,
+                "n_parameters": est.n_parameters(), "warnings": list(warnings), "derivative_cutoff_hz": train.cutoff_hz,
+                "linear": train.linear, "out": str(out_dir) if out_dir else None,
+                "run": self.run.to_dict() if self.run else None, **{k: v.to_dict() for k, v in self.metrics.items()}}
 
 
 def fit_model(est: FrictionModel, train: AxisRecord, test: AxisRecord | None = None, *, out_dir: Path | None = None,
@@ -212,6 +293,24 @@ class Diagnosed:
     train: AxisRecord
     result: DiagnosisResult
     saved: SavedDiagnosis
+
+    def table(self, threshold: float) -> Table:
+        """The causes ranked by held-out score and alone [m<torque unit>], and which were named;
+        ``threshold`` [-] as given (a share of the noise RMS)."""
+        res, a = self.result, self.result.analysis
+        mu = f"m{a.unit}"  # escaped: rich would read "[mNm]" as markup
+        return Table(f"diagnosis: {res.cause.value} (threshold {a.threshold * 1e3:.3g} {mu} held-out RMS = "
+                     f"{threshold:g} x noise RMS {a.noise * 1e3:.3g} {mu})",
+                     ("cause", f"score \\[{mu}]", f"alone \\[{mu}]", "named"),
+                     [(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", "yes" if s.selected else "no")
+                      for s in a.ranking])
+
+    def gain_text(self) -> str:
+        """Test RMSE [torque unit] of the baseline and the extended model, the gain [%], the report."""
+        res, unit = self.result, self.result.analysis.unit
+        return (f"baseline {res.baseline.name}: test RMSE {res.baseline_test.rmse:.5g} {unit}; extended "
+                f"{res.extended_label}: test RMSE {res.extended_test.rmse:.5g} {unit}; gain {res.gain * 100:+.1f} %\n"
+                f"report: {self.saved.report}")
 
 
 def diagnose_files(train: Path, test: Path, out_dir: Path, *, seed: int = 0, generations: int = 30,

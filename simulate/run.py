@@ -9,6 +9,7 @@ Heavy modules are imported inside the functions: the CLI imports this module at 
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -24,6 +25,8 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from identify.models import FrictionModel
+    from identify.workflows import Table
+    from simulate.evaluation.circle import CircleResult
     from simulate.evaluation.ranking import Components as RankComponents
     from simulate.evaluation.ranking import Ranking, RankSettings
     from simulate.evaluation.trace import Trace
@@ -146,6 +149,11 @@ class MachiningSummary(TypedDict):
     peak_deflection: float  # [m]
 
 
+#: The unit of each :class:`MachiningSummary` number, for labels.
+MACHINING_UNITS = {"simulated_time": "s", "wall_time": "s", "removed_volume": "m^3", "peak_force": "N",
+                   "peak_deflection": "m"}
+
+
 def machine_part(job: MachiningJob, out_dir: Path, variable: str = "deflection",
                  progress: Progress = quiet) -> MachiningSummary:
     """Simulate one part and write its outputs (:func:`write_machining_outputs`) into ``out_dir``.
@@ -179,19 +187,16 @@ def write_machining_outputs(mo: MachiningOutcome, out_dir: Path, variable: str =
 
     The npz is compressed in a second thread while the meshes and pictures are made (zlib releases
     the GIL), so on two cores its time is hidden."""
-    import shutil
-    import tempfile
     from concurrent.futures import ThreadPoolExecutor
 
+    from identify.files import atomic_files
     from simulate.machining.dexel import TriDexel
     from simulate.machining.virtual_workpiece import VirtualWorkpiece, export_meshes, render_mesh_png, render_png
 
     adv = advance if advance is not None else Advance()
     assert isinstance(mo.workpiece, TriDexel)  # the pipeline's stages are typed object
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".machine-"))
-    try:
+    with atomic_files(out_dir) as tmp:
         vw = VirtualWorkpiece(mo.workpiece, _result(mo).steps)
         with ThreadPoolExecutor(1, thread_name_prefix="greybench-npz") as pool:
             saved = pool.submit(vw.save, tmp / "virtual_workpiece.npz")
@@ -214,14 +219,8 @@ def write_machining_outputs(mo: MachiningOutcome, out_dir: Path, variable: str =
             adv.describe(OUTPUT_STAGES[0])
             saved.result()
             adv(1)
-        paths = []
-        for f in sorted(tmp.iterdir()):
-            dest = out_dir / f.name
-            os.replace(f, dest)
-            paths.append(dest)
-        return paths
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        names = sorted(f.name for f in tmp.iterdir())
+    return [out_dir / n for n in names]
 
 
 def _result(mo: MachiningOutcome) -> MachiningResult:
@@ -290,6 +289,17 @@ class PlacementOutcome:
 
     info: dict[str, Any]
     size: int
+
+    def summary(self) -> dict[str, Any]:
+        """The search in (item, value) rows for a summary table: best pose [mm, deg], scores [-],
+        improvement [%], candidates, stop reason and wall time [s] (rich markup: ``\\[mm]``)."""
+        info, b = self.info, self.info["best"]
+        return {"best pose": f"{b['name']} ({b['origin']})",
+                "best xyz \\[mm]": ", ".join(f"{v / MM:.1f}" for v in b["xyz_m"]),
+                "best yaw \\[deg]": f"{math.degrees(b['rpy_rad'][2]):.1f}", "best score \\[-]": b["score"],
+                **{f"given {g['name']} score \\[-]": g["score"] for g in info["given"]},
+                "improvement \\[%]": 100 * info["improvement"], "candidates": json.dumps(info["candidates"]),
+                "stopped": info["stop_reason"], "wall time \\[s]": info["wall_time_s"]}
 
 
 def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *, budget_s: float, workers: int = 2,
@@ -502,25 +512,60 @@ def _table_out(path: Path) -> None:
         raise InputError("output folder does not exist", source=str(path.parent))
 
 
-def forward_table(rob: Robot, in_file: Path, out_file: Path, *, flange: bool = False) -> int:
+def prepare_records(rob: Robot, log: Path, out_dir: Path, window_s: float) -> tuple[dict[str, Any], Table]:
+    """Split a six-axis log into axis records with tau_rb and tau_load [Nm]
+    (:func:`simulate.robot.prepare.prepare_log`, Savitzky-Golay window ``window_s`` [s]); gives the
+    run's summary (records, samples, sampling period [s]) and the table of records per axis."""
+    from identify.workflows import Table
+    from simulate.robot.prepare import prepare_log
+
+    if not window_s > 0:
+        raise InputError("must be > 0 [s]", field="window")
+    res = prepare_log(rob, log, out_dir, window_s=window_s)
+    return ({"robot": rob.name, "log": str(log), "records": [str(p) for p in res.paths], "samples": res.n_samples,
+             "dt_s": res.dt, "savgol_window_samples": res.window},
+            Table(f"prepare ({rob.name}): {res.n_samples} samples at {res.dt * 1e3:.3g} ms", ("axis", "record"),
+                  [(f"A{i + 1}", p) for i, p in enumerate(res.paths)], left=2))
+
+
+def test_piece(out_file: Path, size: int = 320, tool_diameter_mm: float = 10.0, allowance_mm: float = 0.5,
+               feed_mm_min: float = 2000.0, spindle_rpm: float = 12000.0) -> tuple[dict[str, Any], dict[str, str]]:
+    """Write the finishing program of the ISO 10791-7 style test piece of ``size`` [mm] and its stock
+    (:func:`simulate.toolpath.testpiece.write_test_piece`); gives the run's summary and the piece's
+    dimensions for a summary table (circle diameter, square side [mm], slope [deg])."""
+    from simulate.toolpath.testpiece import Technology, iso_test_piece, write_test_piece
+
+    tech = Technology(tool_diameter=tool_diameter_mm / 1e3, allowance=allowance_mm / 1e3, feed=feed_mm_min,
+                      spindle=spindle_rpm)
+    prog, stock = write_test_piece(out_file, size=size, tech=tech)
+    piece = iso_test_piece(size)
+    return ({"program": str(prog), "stock": str(stock), "size_mm": size, "tool_diameter_mm": tool_diameter_mm,
+             "allowance_mm": allowance_mm, "lines": len(prog.read_text().splitlines())},
+            {"program": str(prog), "stock": str(stock),
+             "circle diameter \\[mm]": f"{piece.circle_diameter * 1e3:g}", "square side \\[mm]":
+             f"{piece.square_side * 1e3:g}", "slope \\[deg]": f"{math.degrees(piece.slope_angle):g}"})
+
+
+def forward_table(rob: Robot, in_file: Path, out_file: Path, *, flange: bool = False) -> dict[str, Any]:
     """Forward kinematics of a joint table (q1..q6 [rad]) into a pose table (x, y, z [m], qw, qx, qy,
-    qz) of the TCP, or of the flange; gives the number of poses."""
+    qz) of the TCP, or of the flange; gives the run's summary (robot, files, number of poses, frame)."""
     from simulate.robot.kinematics import fk
     from simulate.robot.tables import JOINT_COLUMNS, frame_from_poses, numeric_columns, read_table, write_table
 
     _table_out(out_file)
     q = numeric_columns(read_table(in_file), JOINT_COLUMNS, str(in_file))
     write_table(frame_from_poses(fk(rob, q, tool=not flange)), out_file)
-    return len(q)
+    return {"robot": rob.name, "in": str(in_file), "out": str(out_file), "poses": len(q),
+            "frame": "flange" if flange else "tcp"}
 
 
 def inverse_table(rob: Robot, in_file: Path, out_file: Path, *, q_start: Sequence[float] | None = None,
-                  independent: bool = False) -> tuple[int, dict[str, int]]:
+                  independent: bool = False) -> dict[str, Any]:
     """Inverse kinematics (analytic) of a pose table (x, y, z [m], qw, qx, qy, qz) into a joint table
     (q1..q6 [rad], ok, status; unreachable rows NaN), along a continuous path from ``q_start`` [rad]
     (default: mid of the limits for axes 2, 3, 5, 0 for 1, 4, 6) or each pose nearest it
-    (``independent``); gives the number of poses with a valid solution and the number per
-    :class:`simulate.robot.kinematics.IKStatus`."""
+    (``independent``); gives the run's summary: robot, files, number of poses, ``ok`` (with a valid
+    solution), ``mode`` and ``status`` (number per :class:`simulate.robot.kinematics.IKStatus`)."""
     import numpy as np
     import pandas as pd
 
@@ -536,7 +581,132 @@ def inverse_table(rob: Robot, in_file: Path, out_file: Path, *, q_start: Sequenc
     cols["ok"] = res.ok
     cols["status"] = [IKStatus(s).name for s in res.status]
     write_table(pd.DataFrame(cols), out_file)
-    return int(res.ok.sum()), {s.name: int(np.sum(res.status == s)) for s in IKStatus}
+    return {"robot": rob.name, "in": str(in_file), "out": str(out_file), "poses": len(res.ok), "ok": int(res.ok.sum()),
+            "mode": "independent" if independent else "path",
+            "status": {s.name: int(np.sum(res.status == s)) for s in IKStatus}}
+
+
+def circle_test(robot: Path, pose: Path, name: str | None, out_dir: Path, *, radius_mm: float = 50.0,
+                feed_mm_min: float = 2000.0, plane: str = "xy", center_mm: Sequence[float] = (0.0, 0.0, 0.0),
+                cw: bool = False, friction: bool = True, backlash: bool = True, friction_scale: float = 1.0,
+                ff_friction: bool = False, progress: Progress = quiet) -> tuple[CircleResult, dict[str, Any]]:
+    """The virtual circular test (ISO 230-4) at a pose: simulate the circle of ``radius_mm`` [mm] at
+    ``feed_mm_min`` [mm/min] about ``center_mm`` [mm, workpiece frame]
+    (:func:`simulate.evaluation.circle.simulate_circle`), evaluate it and, only then, write circle.csv,
+    circle.png and summary.json into ``out_dir``; gives the result and the summary."""
+    from typing import cast
+
+    from simulate.evaluation.circle import CircleSpec, Plane, evaluate_run, simulate_circle, write_outputs
+    from simulate.robot.model import load_robot
+    from simulate.toolpath.placement import load_poses, select_pose
+
+    # CircleSpec checks the plane and makes it a Plane
+    spec = CircleSpec(radius=radius_mm * MM, feed=feed_mm_min / 6e4, plane=cast(Plane, plane.lower()),
+                      center=tuple(v * MM for v in center_mm), ccw=not cw)
+    placement = select_pose(load_poses(pose), name, source=str(pose))
+    rob = load_robot(robot)
+    with progress("circle: simulating", None) as advance:
+        run = simulate_circle(rob, placement, spec, friction=friction, backlash=backlash,
+                              friction_scale=friction_scale, ff_friction=ff_friction, advance=advance)
+        result = evaluate_run(run)
+    title = (f"{rob.name}, pose {placement.name}" + ("" if friction else ", no friction") + ("" if backlash else
+             ", no backlash") + (f", friction x{friction_scale:g}" if friction_scale != 1 else ""))
+    return result, write_outputs(result, out_dir, title=title, info={
+        "robot": rob.name, "pose": placement.name, "radius_mm": radius_mm, "feed_mm_min": feed_mm_min,
+        "plane": spec.plane.value, "friction": friction, "backlash": backlash, "friction_scale": friction_scale,
+        "friction_models": run.friction})
+
+
+def circle_rows(result: CircleResult, summary: dict[str, Any]) -> dict[str, Any]:
+    """The circle's figures [µm] and files, for a summary table."""
+    return {"roundness_um": result.roundness_um, "radius_error_um": result.radius_error_um,
+            "largest_spike_um": result.largest_spike_um, "largest_reversal_spike_um": result.largest_reversal_spike_um,
+            "largest_lost_motion_um": result.largest_lost_motion_um, "csv": str(summary["csv"]),
+            "png": str(summary["png"])}
+
+
+def trace_json(tr: Trace, point_mm: Sequence[float], radius_mm: float) -> dict[str, Any]:
+    """The ``trace --json`` object: the point [mm], the radius [mm] and per program line its times [s],
+    dexel ends, largest deflection [m] and force [N] and the switching axes (1-based)."""
+    from simulate.toolpath.switching import axes_of
+
+    return {"point_mm": list(point_mm), "radius_mm": radius_mm, "n_ends": tr.n_ends,
+            "lines": [{"line": ln.line, "text": ln.text, "t_first_s": ln.t_first, "t_last_s": ln.t_last,
+                       "n_ends": ln.n_ends, "max_deflection_m": ln.max_deflection, "max_force_n": ln.max_force,
+                       "switching_axes": axes_of(ln.switching)} for ln in tr.lines]}
+
+
+def explanation_tables(ex: Explanation) -> list[Table]:
+    """The causes ranked by score (dBIC [-]) with the held-out gain [%] and the fitted change, and
+    the RMS measured - simulated [µm] per feature before and after the calibration."""
+    from identify.workflows import Table
+
+    return [Table(f"explain: cause {ex.cause} (score = dBIC vs no discrepancy; named above 10)",
+                  ("cause", "score", "held-out gain \\[%]", "fitted change"),
+                  [(f.cause, f"{f.score:.1f}", f"{f.heldout_gain * 100:.1f}", ", ".join(f"{v:.3g}" for v in f.theta))
+                   for f in ex.choice.ranking[:8]]),
+            Table("RMS measured - simulated \\[µm]", ("feature", "before", "after"),
+                  [*[(k, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}") for k, (b, a) in ex.rms_by_feature().items()],
+                   ("all", f"{ex.rms_before * 1e6:.2f}", f"{ex.rms_after * 1e6:.2f}")])]
+
+
+_COLOURS = ("green", "chartreuse3", "yellow", "dark_orange", "red")
+
+
+def _colour(rank: int, n: int) -> str:
+    return _COLOURS[round(rank * (len(_COLOURS) - 1) / (n - 1))] if n > 1 else _COLOURS[0]
+
+
+def ranking_tables(r: Ranking) -> list[Table]:
+    """The feature deviations [mm] per pose (coloured green, smallest |deviation| of a row, .. red,
+    largest; bold in tolerance), the pose ranking (score [-]) and, with variants, each component's
+    share of the score [%]."""
+    from identify.workflows import Table
+    from simulate.evaluation.ranking import COMPONENTS
+
+    poses = [p.name for p in r.placements]
+
+    def cells(row: str) -> list[str]:
+        devs = [r.results[p].table[row] for p in poses]
+        rank = {i: k for k, i in enumerate(sorted(range(len(devs)), key=lambda i: abs(devs[i].deviation)))}
+        return [f"[{_colour(rank[i], len(devs))}{' bold' if d.in_tolerance else ''}]{d.deviation / MM:+.4f}[/]"
+                for i, d in enumerate(devs)]
+
+    tables = [Table("Feature deviations \\[mm] (ISO 10791-7, paper Table 2); green best .. red worst per row, bold: "
+                    "in tolerance", ("feature", "nominal \\[mm]", "tolerance \\[mm]", *poses),
+                    [(row.name, row.nominal_text(), f"{row.tolerance / MM:.3f}", *cells(row.name))
+                     for row in r.results[poses[0]].table.rows]),
+              Table("Pose ranking (score = sum |deviation|/tolerance, lower is better)",
+                    ("rank", "pose", "score", "in tolerance"),
+                    [(e.rank, f"[{_colour(e.rank - 1, len(poses))}]{e.pose}[/]", f"{e.score:.2f}",
+                      f"{e.in_tolerance}/10") for e in r.entries], left=0)]
+    if r.variants:
+        tables.append(Table("Component share of the score (re-run with the component switched off)",
+                            ("pose", *COMPONENTS), [(p, *[f"{100 * r.shares(p).get('score', {}).get(c, 0.0):.0f}%"
+                                                          for c in COMPONENTS]) for p in poses]))
+    return tables
+
+
+def trace_table(tr: Trace, point: str, radius_mm: float) -> Table:
+    """Per program line near ``point`` (as typed, mm): times [s], dexel ends, largest deflection [µm]
+    and force [N], switching axes."""
+    from identify.workflows import Table
+    from simulate.toolpath.switching import axes_of
+
+    return Table(f"{tr.n_ends} machined dexel ends within {radius_mm:g} mm of ({point}) mm",
+                 ("line", "program", "t \\[s]", "ends", "max deflection \\[µm]", "max force \\[N]", "switching"),
+                 [(ln.line, ln.text, f"{ln.t_first:.3f}..{ln.t_last:.3f}", ln.n_ends,
+                   f"{ln.max_deflection / 1e-6:.1f}", f"{ln.max_force:.1f}",
+                   ",".join(f"A{a}" for a in axes_of(ln.switching)) or "-") for ln in tr.lines], left=7)
+
+
+def spike_table(result: CircleResult) -> Table:
+    """The circle's reversal spikes: angle [deg], joint, excursion, spike and lost motion [µm]."""
+    from identify.workflows import Table
+
+    return Table("reversal spikes", ("angle \\[deg]", "joint", "excursion [µm]", "spike [µm]", "lost motion [µm]"),
+                 [(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}", f"{s.spike_um:+.1f}",
+                   f"{s.lost_motion_um:+.1f}") for s in result.spikes], left=0)
 
 
 def trace_workpiece(workpiece: Path, point: Sequence[float], radius: float, program: Path | None = None) -> Trace:
@@ -551,3 +721,29 @@ def trace_workpiece(workpiece: Path, point: Sequence[float], radius: float, prog
     f, meta = resolve_workpiece(workpiece)
     prog = str(program) if program is not None else meta.get("program")
     return trace_point(VirtualWorkpiece.load(f), np.asarray(point, float), radius, program=prog)
+
+
+def compensation_summary(info: dict) -> tuple[list[Table], list[str]]:
+    """``greybench compensate``'s summary of a run (:func:`simulate.compensation_report.run_compensation`'s
+    dict): the Table-2 rows [µm] before and after with their sums, and lines: the ratio and the rows
+    worse than max(10 %, 2 µm), each stiffness check's sums [µm] and ratio, the chosen iteration, the
+    largest offset [µm], time and peak speed ratios, the report's path."""
+    from identify.workflows import Table
+
+    tables, lines = [], []
+    ev = info.get("evaluation")
+    if ev is not None:
+        tables.append(Table(f"Table-2 deviations \\[µm] before / after compensation (robot stiffness "
+                            f"x{ev['stiffness_scale']:g})", ("row", "tol", "before", "after"),
+                            [*[(r["name"], f"{r['tolerance'] * 1e3:.0f}", f"{r['before'] * 1e3:+.1f}",
+                                f"{r['after'] * 1e3:+.1f}") for r in ev["rows_mm"]],
+                             ("sum |deviation|", "", f"{ev['sum_before_mm'] * 1e3:.1f}",
+                              f"{ev['sum_after_mm'] * 1e3:.1f}")]))
+        lines.append(f"ratio after/before: {ev['ratio']:.3f}; rows worse than max(10 %, 2 µm): "
+                     f"{', '.join(ev['rows_worse']) or 'none'}")
+    lines += [f"stiffness x{c['stiffness_scale']:g}: sum {c['sum_before_mm'] * 1e3:.1f} -> "
+              f"{c['sum_after_mm'] * 1e3:.1f} µm, ratio {c['ratio']:.3f}" for c in info.get("checks", []) if c]
+    lines.append(f"best iteration {info['best_iteration']}; largest offset {info['max_offset_mm'] * 1e3:.1f} µm; "
+                 f"time ratio {info['time_ratio']:.3f}; peak speed ratio {info['speed_ratio']:.3f}")
+    lines += [f"report: {f}" for f in info.get("files", []) if f.endswith("report.md")]
+    return tables, lines

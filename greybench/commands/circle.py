@@ -2,12 +2,11 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import cast
 
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, out, print_summary, progress, resolve_robot
+from greybench.support import emit_json, err, print_summary, print_table, progress, resolve_robot
 
 
 def circle(
@@ -37,45 +36,18 @@ def circle(
     radius_error_um and reversal_spikes (angle [deg], joint, excursion height [µm], and as a ballbar
     analysis splits it: spike beyond the settled trace [µm], lost motion step [µm]).
     """
-    from simulate.evaluation.circle import CircleSpec, Plane, evaluate_run, simulate_circle, write_outputs
-    from simulate.robot.model import load_robot
-    from simulate.toolpath.placement import load_poses, select_pose
+    from simulate.run import circle_rows, circle_test, spike_table
 
     centre = o.numbers(center_mm, 3, "center-mm", "mm") if center_mm is not None else (0.0, 0.0, 0.0)
-    # CircleSpec checks the plane and makes it a Plane
-    spec = CircleSpec(radius=radius_mm * 1e-3, feed=feed_mm_min / 6e4, plane=cast(Plane, plane.lower()),
-                      center=tuple(v * 1e-3 for v in centre), ccw=not cw)
-    placement = select_pose(load_poses(pose), name, source=str(pose))
-    rob = load_robot(resolve_robot(robot))
-    with progress("circle: simulating", total=None) as advance:
-        run = simulate_circle(rob, placement, spec, friction=not no_friction, backlash=not no_backlash,
-                              friction_scale=friction_scale, ff_friction=ff_friction, advance=advance)
-        result = evaluate_run(run)
-    # everything is computed: only now write
-    title = (f"{rob.name}, pose {placement.name}" + (", no friction" if no_friction else "")
-             + (", no backlash" if no_backlash else "")
-             + (f", friction x{friction_scale:g}" if friction_scale != 1 else ""))
-    summary = write_outputs(result, out_dir, title=title, info={
-        "robot": rob.name, "pose": placement.name, "radius_mm": radius_mm, "feed_mm_min": feed_mm_min,
-        "plane": spec.plane.value, "friction": not no_friction, "backlash": not no_backlash,
-        "friction_scale": friction_scale, "friction_models": run.friction})
-    csv, png = summary["csv"], summary["png"]
+    result, summary = circle_test(resolve_robot(robot), pose, name, out_dir, radius_mm=radius_mm,
+                                  feed_mm_min=feed_mm_min, plane=plane, center_mm=centre, cw=cw,
+                                  friction=not no_friction, backlash=not no_backlash, friction_scale=friction_scale,
+                                  ff_friction=ff_friction, progress=progress)
     if as_json:
         emit_json(summary)
         return
-    print_summary("circle", {"roundness_um": result.roundness_um, "radius_error_um": result.radius_error_um,
-                             "largest_spike_um": result.largest_spike_um,
-                             "largest_reversal_spike_um": result.largest_reversal_spike_um,
-                             "largest_lost_motion_um": result.largest_lost_motion_um, "csv": str(csv), "png": str(png)})
-    from rich.table import Table
-
-    table = Table(title="reversal spikes")
-    for col in ("angle [deg]", "joint", "excursion [µm]", "spike [µm]", "lost motion [µm]"):
-        table.add_column(col, justify="right")
-    for s in result.spikes:
-        table.add_row(f"{s.angle_deg:.1f}", s.name, f"{s.height_um:+.1f}", f"{s.spike_um:+.1f}",
-                      f"{s.lost_motion_um:+.1f}")
-    out.print(table)
+    print_summary("circle", circle_rows(result, summary))
+    print_table(*spike_table(result))
     if not result.spikes:
         err.print("no joint reverses along this circle")
 

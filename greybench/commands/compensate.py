@@ -8,29 +8,16 @@ from typing import Annotated, Any
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, out, print_table, progress, resolve_robot
-from simulate.run import compensation_steps
+from greybench.support import out, print_table, progress, resolve_robot, show
+from simulate.run import compensation_steps, compensation_summary
 
 
 def print_info(info: dict[str, Any]) -> None:
-    ev = info.get("evaluation")
-    if ev is not None:
-        um = [(r["name"], r["tolerance"], r["before"], r["after"]) for r in ev["rows_mm"]]
-        print_table(f"Table-2 deviations [µm] before / after compensation (robot stiffness x{ev['stiffness_scale']:g})",
-                    ("row", "tol", "before", "after"),
-                    [*[(n, f"{t * 1e3:.0f}", f"{b * 1e3:+.1f}", f"{a * 1e3:+.1f}") for n, t, b, a in um],
-                     ("sum |deviation|", "", f"{ev['sum_before_mm'] * 1e3:.1f}", f"{ev['sum_after_mm'] * 1e3:.1f}")])
-        out.print(f"ratio after/before: {ev['ratio']:.3f}; rows worse than max(10 %, 2 µm): "
-                  f"{', '.join(ev['rows_worse']) or 'none'}")
-    for c in info.get("checks", []):
-        if c is not None:
-            out.print(f"stiffness x{c['stiffness_scale']:g}: sum {c['sum_before_mm'] * 1e3:.1f} -> "
-                      f"{c['sum_after_mm'] * 1e3:.1f} µm, ratio {c['ratio']:.3f}")
-    out.print(f"best iteration {info['best_iteration']}; largest offset {info['max_offset_mm'] * 1e3:.1f} µm; "
-              f"time ratio {info['time_ratio']:.3f}; peak speed ratio {info['speed_ratio']:.3f}")
-    for f in info.get("files", []):
-        if f.endswith("report.md"):
-            out.print(f"report: {f}")
+    tables, lines = compensation_summary(info)
+    for t in tables:
+        print_table(*t)
+    for line in lines:
+        out.print(line)
 
 
 def compensate_cmd(
@@ -70,10 +57,7 @@ def compensate_cmd(
                                 spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
                                 friction=o.friction_refs(friction), ff_friction=ff_friction,
                                 backlash_comp=backlash_comp, advance=adv)
-    if as_json:
-        emit_json(info)
-        return
-    print_info(info)
+    show(as_json, info, lambda: print_info(info))
 
 
 COMMANDS = {"compensate": compensate_cmd}

@@ -5,10 +5,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.markup import escape
 
 from greybench import options as o
-from greybench.support import emit_json, out, print_table, progress
+from greybench.support import out, print_table, progress, show
 from identify.diagnosis import SCORE_THRESHOLD
 from identify.records import derivative_note
 from identify.workflows import diagnose_files
@@ -41,21 +40,9 @@ def diagnose(
     with progress("diagnosing (baseline fit, held-out tests, extended refit)", total=None) as advance:
         d = diagnose_files(train, test, out_dir, seed=seed, generations=generations, threshold=threshold, track=track,
                            linear=linear, cutoff=cutoff, advance=advance)
-    result = d.result
-    if as_json:
-        emit_json(result.to_json())  # the diagnosis JSON contract; the cut-off is in MLflow
-        return
-    out.print(derivative_note(d.train), highlight=False)
-    a = result.analysis
-    mu = f"m{a.unit}"
-    print_table(f"diagnosis: {result.cause.value} (threshold {a.threshold * 1e3:.3g} {mu} held-out RMS = "
-                f"{threshold:g} x noise RMS {a.noise * 1e3:.3g} {mu})",
-                ("cause", escape(f"score [{mu}]"), escape(f"alone [{mu}]"), "named"),
-                [(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", "yes" if s.selected else "no")
-                 for s in a.ranking])
-    out.print(f"baseline {result.baseline.name}: test RMSE {result.baseline_test.rmse:.5g} {a.unit}; "
-              f"extended {result.extended_label}: test RMSE {result.extended_test.rmse:.5g} {a.unit}; "
-              f"gain {result.gain * 100:+.1f} %\nreport: {d.saved.report}")
+    # the JSON object is the diagnosis JSON contract; the cut-off is in MLflow
+    show(as_json, d.result.to_json(), lambda: out.print(derivative_note(d.train), highlight=False),
+         lambda: print_table(*d.table(threshold)), lambda: out.print(d.gain_text()))
 
 
 COMMANDS = {"diagnose": diagnose}

@@ -7,40 +7,17 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, out, print_table, progress, resolve_robot
-from simulate.evaluation.features import MM, FeatureRow
-from simulate.evaluation.ranking import COMPONENTS, Components, Ranking, RankSettings, ranking_json
-from simulate.run import rank_program
-
-_COLOURS = ["green", "chartreuse3", "yellow", "dark_orange", "red"]
+from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
+from simulate.evaluation.features import MM
+from simulate.evaluation.ranking import Components, Ranking, RankSettings, ranking_json
+from simulate.run import rank_program, ranking_tables
 
 
-def _colour(rank: int, n: int) -> str:
-    return _COLOURS[round(rank * (len(_COLOURS) - 1) / (n - 1))] if n > 1 else _COLOURS[0]
-
-
-def _cells(devs: list[FeatureRow]) -> list[str]:
-    """Deviations [mm] coloured green (smallest |deviation|) .. red (largest), bold when in tolerance."""
-    order = sorted(range(len(devs)), key=lambda i: abs(devs[i].deviation))
-    rank = {i: k for k, i in enumerate(order)}
-    return [f"[{_colour(rank[i], len(devs))}{' bold' if d.in_tolerance else ''}]{d.deviation / MM:+.4f}[/]"
-            for i, d in enumerate(devs)]
-
-
-def print_ranking(r: Ranking) -> None:
-    poses = [p.name for p in r.placements]
-    print_table("Feature deviations \\[mm] (ISO 10791-7, paper Table 2); green best .. red worst per row, bold: in "
-                "tolerance", ("feature", "nominal \\[mm]", "tolerance \\[mm]", *poses),
-                [(row.name, row.nominal_text(), f"{row.tolerance / MM:.3f}",
-                  *_cells([r.results[p].table[row.name] for p in poses])) for row in r.results[poses[0]].table.rows])
-    print_table("Pose ranking (score = sum |deviation|/tolerance, lower is better)",
-                ("rank", "pose", "score", "in tolerance"),
-                [(e.rank, f"[{_colour(e.rank - 1, len(poses))}]{e.pose}[/]", f"{e.score:.2f}", f"{e.in_tolerance}/10")
-                 for e in r.entries], left=0)
-    if r.variants:
-        print_table("Component share of the score (re-run with the component switched off)", ("pose", *COMPONENTS),
-                    [(p, *[f"{100 * r.shares(p).get('score', {}).get(c, 0.0):.0f}%" for c in COMPONENTS])
-                     for p in poses])
+def print_ranking(r: Ranking, out_dir: Path | None = None) -> None:
+    for table in ranking_tables(r):
+        print_table(*table)
+    if out_dir is not None:
+        out.print(f"report: {out_dir / 'report.md'}")
 
 
 def rank_poses_cmd(
@@ -74,12 +51,7 @@ def rank_poses_cmd(
     comps = Components(deflection=False, servo=False) if ideal else Components()
     r = rank_program(program, resolve_robot(robot), poses, settings=settings, components=comps, shares=shares,
                      out_dir=out_dir, workers=workers, friction=o.friction_refs(friction), progress=progress)
-    if as_json:
-        emit_json(ranking_json(r))
-        return
-    print_ranking(r)
-    if out_dir is not None:
-        out.print(f"report: {out_dir / 'report.md'}")
+    show(as_json, ranking_json(r), lambda: print_ranking(r, out_dir))
 
 
 def trace_cmd(
@@ -92,23 +64,14 @@ def trace_cmd(
     as_json: o.Json = False,
 ) -> None:
     """Time stamps and program lines that machined the surface near a point (paper 3.8)."""
-    from simulate.run import trace_workpiece
-    from simulate.toolpath.switching import axes_of
+    from simulate.run import trace_json, trace_table, trace_workpiece
 
     xyz = o.numbers(point, 3, "point", "mm")
     tr = trace_workpiece(workpiece, [v * MM for v in xyz], radius * MM, program)
     if as_json:
-        emit_json({"point_mm": list(xyz), "radius_mm": radius, "n_ends": tr.n_ends,
-                   "lines": [{"line": ln.line, "text": ln.text, "t_first_s": ln.t_first, "t_last_s": ln.t_last,
-                              "n_ends": ln.n_ends, "max_deflection_m": ln.max_deflection,
-                              "max_force_n": ln.max_force, "switching_axes": axes_of(ln.switching)}
-                             for ln in tr.lines]})
+        emit_json(trace_json(tr, xyz, radius))
         return
-    print_table(f"{tr.n_ends} machined dexel ends within {radius:g} mm of ({point}) mm",
-                ("line", "program", "t \\[s]", "ends", "max deflection \\[µm]", "max force \\[N]", "switching"),
-                [(ln.line, ln.text, f"{ln.t_first:.3f}..{ln.t_last:.3f}", ln.n_ends, f"{ln.max_deflection / 1e-6:.1f}",
-                  f"{ln.max_force:.1f}", ",".join(f"A{a}" for a in axes_of(ln.switching)) or "-") for ln in tr.lines],
-                left=7)
+    print_table(*trace_table(tr, point, radius))
     if not tr.lines:
         err.print("no machined surface near that point (stock surface or empty space)")
 

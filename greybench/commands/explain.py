@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, out, print_table, progress, resolve_robot
-from simulate.run import explain_measured
+from greybench.support import out, print_table, progress, resolve_robot, show
+from simulate.run import explain_measured, explanation_tables
 
 if TYPE_CHECKING:
     from simulate.explain.pipeline import Explanation
@@ -42,20 +42,12 @@ def explain(
     re-simulating and report the RMS before and after [m]."""
     ex = explain_measured(measured, program, resolve_robot(robot), pose, name, out_dir=out_dir, spacing_mm=spacing,
                           size=size, max_sims=max_sims, progress=progress)
-    if as_json:
-        emit_json(ex.as_json())
-    else:
-        print_explanation(ex, out_dir)
+    show(as_json, ex.as_json(), lambda: print_explanation(ex, out_dir))
 
 
 def print_explanation(ex: Explanation, out_dir: Path | None = None) -> None:
-    print_table(f"explain: cause {ex.cause} (score = dBIC vs no discrepancy; named above 10)",
-                ("cause", "score", "held-out gain \\[%]", "fitted change"),
-                [(f.cause, f"{f.score:.1f}", f"{f.heldout_gain * 100:.1f}", ", ".join(f"{v:.3g}" for v in f.theta))
-                 for f in ex.choice.ranking[:8]])
-    print_table("RMS measured - simulated \\[µm]", ("feature", "before", "after"),
-                [*[(k, f"{b * 1e6:.2f}", f"{a * 1e6:.2f}") for k, (b, a) in ex.rms_by_feature().items()],
-                 ("all", f"{ex.rms_before * 1e6:.2f}", f"{ex.rms_after * 1e6:.2f}")])
+    for table in explanation_tables(ex):
+        print_table(*table)
     if ex.calibration is not None:
         cal = ex.calibration
         out.print(f"calibrated {cal.before.param}: {cal.before.value:.6g} -> {cal.after.value:.6g} {cal.before.unit}")

@@ -10,10 +10,9 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, out, print_table, progress, resolve_robot
+from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
+from identify import workflows as wf
 from identify.axis_limits import load_axis_limits
-from identify.errors import InputError
-from identify.metrics import Metrics
 from identify.models import MODELS, FrictionModel, make_seeded, parse_model_names
 from identify.plant import Effect
 from identify.records import derivative_note
@@ -25,12 +24,6 @@ class TrajectoryKind(str, Enum):
     test = "test"
     stribeck = "stribeck"
     presliding = "presliding"
-
-
-def _print_metrics(title: str, rows: dict[str, Metrics], unit: str) -> None:
-    print_table(title, ("record", f"RMSE [{unit}]", "R^2", "NRMSE", f"max error [{unit}]", "samples"),
-                [(k, f"{m.rmse:.4f}", f"{m.r2:.5f}", f"{m.nrmse:.4f}", f"{m.max_error:.4f}", m.n)
-                 for k, m in rows.items()])
 
 
 def trajectory(
@@ -52,15 +45,9 @@ def trajectory(
     limits = load_axis_limits(resolve_robot(robot), axis)
     traj = make_trajectory(kind.value, limits, duration, rate)
     write_table(traj.to_frame(), out_file)
-    p = traj.peaks()
-    if as_json:
-        emit_json({"kind": kind.value, "axis": axis, "samples": int(traj.t.size), "duration": float(traj.t[-1]),
-                   "peaks": p, "limits": limits.__dict__, "out": str(out_file)})
-        return
-    out.print(f"{kind.value} trajectory, axis {axis}: {traj.t.size} samples over {traj.t[-1]:.1f} s -> {out_file}\n"
-              f"  position {p['q_min']:.4f}..{p['q_max']:.4f} rad, |qd| <= {p['qd']:.3f} rad/s "
-              f"(limit {limits.vmax:.3f}), |qdd| <= {p['qdd']:.3f} rad/s^2 (limit {limits.amax:.3f}), "
-              f"|jerk| <= {p['qddd']:.2f} rad/s^3 (limit {limits.jmax:.2f})")
+    show(as_json, {"kind": kind.value, "axis": axis, "samples": int(traj.t.size), "duration": float(traj.t[-1]),
+                   "peaks": traj.peaks(), "limits": limits.__dict__, "out": str(out_file)},
+         lambda: out.print(f"{kind.value} trajectory, axis {axis}: {wf.trajectory_text(traj, limits, out_file)}"))
 
 
 def synth(
@@ -87,12 +74,10 @@ def synth(
     res = synth_record(trajectory_file, out_file, config=config, static_curve=static_curve, noise=noise,
                        effect=effect, magnitude=magnitude, seed=seed, positions_only=positions_only)
     cfg = res.config
-    if as_json:
-        emit_json({"out": str(out_file), "samples": int(len(res.frame)), "effect": effect.value,
-                   "magnitude": magnitude, "seed": seed, "noise": cfg.noise, "static_curve": cfg.static_curve})
-    else:
-        out.print(f"synthetic record ({effect.value}, magnitude {magnitude}, seed {seed}, static curve "
-                  f"{cfg.static_curve}, noise {cfg.noise} Nm): {len(res.frame)} samples -> {out_file}")
+    show(as_json, {"out": str(out_file), "samples": int(len(res.frame)), "effect": effect.value, "magnitude": magnitude,
+                   "seed": seed, "noise": cfg.noise, "static_curve": cfg.static_curve},
+         lambda: out.print(f"synthetic record ({effect.value}, magnitude {magnitude}, seed {seed}, static curve "
+                           f"{cfg.static_curve}, noise {cfg.noise} Nm): {len(res.frame)} samples -> {out_file}"))
 
 
 def _make(model: str, seed: int, epochs: int | None) -> FrictionModel:
@@ -138,20 +123,13 @@ def fit(
                         robot=robot_file.stem, register=register, advance=advance)
     run = res.run
     if as_json:
-        emit_json({"model": model, "params": est.params_, "units": est.param_units(), "fit_time": res.fit_time,
-                   "n_parameters": est.n_parameters(), "warnings": warnings,
-                   "derivative_cutoff_hz": train_rec.cutoff_hz, "linear": train_rec.linear,
-                   "out": str(out_dir) if out_dir else None, "run": run.to_dict() if run else None,
-                   **{k: v.to_dict() for k, v in res.metrics.items()}})
+        emit_json(res.to_dict(model, est, train_rec, warnings, out_dir))
         return
-    units = est.param_units()
-    print_table(f"{est.name} parameters", ("parameter", "value", "unit"),
-                [(k, f"{v:.6g}", units.get(k, "")) for k, v in est.params_.items()])
+    print_table(*wf.params_table(est))
     where = f", saved to {out_dir}" if out_dir else ""
-    _print_metrics(f"{model}: fit in {res.fit_time:.2f} s{where}", res.metrics, train_rec.units["tau"])
+    print_table(*wf.metrics_table(f"{model}: fit in {res.fit_time:.2f} s{where}", res.metrics, train_rec.units["tau"]))
     if run:
-        reg = f"; registered {run.registered} v{run.version} as {run.alias}" if run.registered else ""
-        out.print(f"MLflow run {run.run_id} (experiment {run.experiment}): model {run.model_uri}{reg}")
+        out.print(res.run_text())
 
 
 def predict(
@@ -183,12 +161,9 @@ def predict(
     rec, _ = load_pair(data, None, axis, linear=bool(getattr(est, "linear_", False)),
                        cutoff=cutoff or getattr(est, "cutoff_hz_", None))
     _, m = predict_record(est, rec, out_file, source=str(data))
-    if as_json:
-        emit_json({"model": est.name, "out": str(out_file), "metrics": m.to_dict(),
-                   "derivative_cutoff_hz": rec.cutoff_hz})
-    else:
-        out.print(derivative_note(rec), highlight=False)
-        _print_metrics(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"])
+    show(as_json, {"model": est.name, "out": str(out_file), "metrics": m.to_dict(),
+                   "derivative_cutoff_hz": rec.cutoff_hz}, lambda: out.print(derivative_note(rec), highlight=False),
+         lambda: print_table(*wf.metrics_table(f"{est.name} on {data} -> {out_file}", {"data": m}, rec.units["tau"])))
 
 
 def compare(
@@ -226,12 +201,7 @@ def compare(
         emit_json({"experiment": experiment if track else None, "parent_run_id": parent, "axis": axis or 1,
                    "rows": rows})
         return
-    u = train_rec.units["tau"]  # units escaped: rich would read "[s]" as markup
-    print_table(f"compare on {test} (axis {axis or 1}), sorted by test RMSE",
-                ("rank", "model", f"test RMSE \\[{u}]", "test R^2", f"train RMSE \\[{u}]", "fit time \\[s]",
-                 "parameters"),
-                [(i, r["model"], f"{r['test_rmse']:.4f}", f"{r['test_r2']:.5f}", f"{r['train_rmse']:.4f}",
-                  f"{r['fit_time_s']:.1f}", r["n_parameters"]) for i, r in enumerate(rows, 1)], left=2)
+    print_table(*wf.compare_table(rows, test, axis or 1, train_rec.units["tau"]))
     if parent:
         out.print(f"MLflow experiment '{experiment}', parent run {parent}; open it with: greybench ui")
 
@@ -251,28 +221,16 @@ def train_robot(
 ) -> None:
     """Fit one friction model per robot axis from a six-axis log (split by ``greybench prepare``:
     tau_rb [Nm] from the rigid-body model), one MLflow run per axis under a parent run."""
+    from identify.workflows import parse_joints
     from simulate.run import train_robot as fit_robot
 
-    try:
-        axis_list = sorted({int(a) for a in axes.split(",") if a.strip()})
-    except ValueError:
-        raise InputError(f"not a list of joint numbers: {axes!r}", field="--axes") from None
-    if not axis_list:
-        raise InputError("no axis given", field="--axes")
+    axis_list = parse_joints(axes)
     _make(model, seed, epochs)  # unknown names fail before any work
     robot_file = resolve_robot(robot)
     rows, parent = fit_robot(log, robot_file, lambda: _make(model, seed, epochs), axis_list, test=test,
                              experiment=experiment, register=register, model_name=model, progress=progress)
-    if as_json:
-        emit_json({"parent_run_id": parent, "experiment": experiment, "model": model, "robot": robot_file.stem,
-                   "axes": rows})
-        return
-    print_table(f"train-robot {robot_file.stem}: {model} per axis (parent run {parent})",
-                ("axis", "train RMSE [Nm]", "train R^2", "test RMSE [Nm]", "fit time \\[s]", "registered", "run"),
-                [(r["axis"], f"{r['train_rmse']:.4f}", f"{r['train_r2']:.4f}",
-                  f"{r['test_rmse']:.4f}" if "test_rmse" in r else "-", f"{r['fit_time_s']:.1f}",
-                  f"{r['registered']} v{r['version']} ({r['alias']})" if r["registered"] else "-", r["run_id"])
-                 for r in rows])
+    show(as_json, {"parent_run_id": parent, "experiment": experiment, "model": model, "robot": robot_file.stem,
+                   "axes": rows}, lambda: print_table(*wf.train_robot_table(rows, robot_file.stem, model, parent)))
 
 
 def promote(
@@ -284,10 +242,7 @@ def promote(
     from identify.tracking import promote as do_promote
 
     res = do_promote(name)
-    if as_json:
-        emit_json(res.to_dict())
-    else:
-        out.print(res.message(), soft_wrap=True, highlight=False)
+    show(as_json, res.to_dict(), lambda: out.print(res.message(), soft_wrap=True, highlight=False))
 
 
 def ui(

@@ -7,9 +7,9 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, print_summary, progress, resolve_robot
+from greybench.support import print_summary, progress, resolve_robot, show
 from simulate import defaults
-from simulate.run import cutter_from_robot, machine_part, machining_job
+from simulate.run import MACHINING_UNITS, cutter_from_robot, machine_part, machining_job
 
 __all__ = ["COMMANDS", "cutter_from_robot"]  # the robot file's cutter, named here for the tests
 
@@ -56,12 +56,9 @@ def machine(
                         probe_spacing_mm=probe_spacing)
     # progress on stderr also with --json (stdout carries only the JSON object)
     info = machine_part(job, out_dir, variable, progress=progress)
-    if as_json:
-        emit_json(info)
-        return
-    units = {"simulated_time": "s", "wall_time": "s", "removed_volume": "m^3", "peak_force": "N",
-             "peak_deflection": "m"}
-    print_summary(f"machining {program.name}", {f"{k} ({units[k]})" if k in units else k: v for k, v in info.items()})
+    units = MACHINING_UNITS
+    show(as_json, info, lambda: print_summary(f"machining {program.name}",
+                                              {f"{k} ({units[k]})" if k in units else k: v for k, v in info.items()}))
 
 
 COMMANDS = {"machine": machine}

@@ -1,15 +1,13 @@
 """Placement command: ``optimize-pose`` (search the workpiece pose the machining simulation scores best)."""
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, out, print_summary, progress, resolve_robot
+from greybench.support import out, print_summary, progress, resolve_robot, show
 from simulate.run import optimize_placement
 
 
@@ -39,24 +37,9 @@ def optimize_pose_cmd(
     res = optimize_placement(program, resolve_robot(robot), poses, out_dir, budget_s=budget_s, workers=workers,
                              seed=seed, spacing_mm=spacing, size=size, xy_margin_mm=xy_margin, z_margin_mm=z_margin,
                              max_simulations=max_simulations, robot_name=robot, progress=progress)
-    info = res.info
-    if as_json:
-        emit_json(info)
-        return
-    b = info["best"]
-    print_summary("placement search", {
-        "best pose": f"{b['name']} ({b['origin']})",
-        "best xyz \\[mm]": ", ".join(f"{v * o.MM_PER_M:.1f}" for v in b["xyz_m"]),
-        "best yaw \\[deg]": f"{math.degrees(b['rpy_rad'][2]):.1f}",
-        "best score \\[-]": b["score"],
-        **{f"given {g['name']} score \\[-]": g["score"] for g in info["given"]},
-        "improvement \\[%]": 100 * info["improvement"],
-        "candidates": json.dumps(info["candidates"]),
-        "stopped": info["stop_reason"],
-        "wall time \\[s]": info["wall_time_s"],
-    })
-    out.print(f"report: {out_dir / 'report.md'}; check: greybench rank-poses --program {program} --robot {robot} "
-              f"--poses {out_dir / 'best.json'} --size {res.size} --spacing {spacing:g}")
+    show(as_json, res.info, lambda: print_summary("placement search", res.summary()), lambda: out.print(
+              f"report: {out_dir / 'report.md'}; check: greybench rank-poses --program {program} --robot {robot} "
+              f"--poses {out_dir / 'best.json'} --size {res.size} --spacing {spacing:g}"))
 
 
 COMMANDS = {"optimize-pose": optimize_pose_cmd}

@@ -7,12 +7,10 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, guarded, out, print_summary, print_table, resolve_robot
-from identify.errors import InputError
+from greybench.support import guarded, out, print_summary, print_table, resolve_robot, show
 from simulate.robot.model import load_robot
 
 robot_app = typer.Typer(no_args_is_help=True, help="Robot kinematics: poses (m, unit quaternion) <-> joints (rad).")
-JsonRun = Annotated[bool, typer.Option("--json", help="Print one JSON object summarising the run.")]
 #: The two table formats fk and ik read and write.
 JOINT_TABLE = "Joint table (.csv/.parquet): q1..q6 (rad); ik adds ok, status."
 POSE_TABLE = "Pose table (.csv/.parquet): x, y, z (m), qw, qx, qy, qz."
@@ -23,19 +21,13 @@ def fk_cmd(
     out_file: Annotated[Path, typer.Option("--out", help=POSE_TABLE)],
     robot: o.Robot = "max100",
     flange: Annotated[bool, typer.Option("--flange", help="Flange pose instead of the TCP pose (m).")] = False,
-    as_json: JsonRun = False,
+    as_json: o.Json = False,
 ) -> None:
     """Forward kinematics: joints (rad) -> TCP poses in the robot base frame (m, unit quaternion)."""
     from simulate.run import forward_table
 
-    r = load_robot(resolve_robot(robot))
-    n = forward_table(r, in_file, out_file, flange=flange)
-    info = {"robot": r.name, "in": str(in_file), "out": str(out_file), "poses": n,
-            "frame": "flange" if flange else "tcp"}
-    if as_json:
-        emit_json(info)
-        return
-    print_summary(f"robot fk ({r.name})", info)
+    info = forward_table(load_robot(resolve_robot(robot)), in_file, out_file, flange=flange)
+    show(as_json, info, lambda: print_summary(f"robot fk ({info['robot']})", info))
 
 
 def ik_cmd(
@@ -47,21 +39,15 @@ def ik_cmd(
                                                                   "6).")] = None,
     independent: Annotated[bool, typer.Option("--independent", help="Each pose nearest --q-start (rad) (default: a "
                                                                     "continuous path).")] = False,
-    as_json: JsonRun = False,
+    as_json: o.Json = False,
 ) -> None:
     """Inverse kinematics (analytic, paper 3.2): TCP poses -> joints; unreachable rows get ok=false and NaN."""
     from simulate.run import inverse_table
 
-    r = load_robot(resolve_robot(robot))
     q0 = o.numbers(q_start, 6, "q-start", "rad") if q_start is not None else None
-    ok, counts = inverse_table(r, in_file, out_file, q_start=q0, independent=independent)
-    info = {"robot": r.name, "in": str(in_file), "out": str(out_file), "poses": sum(counts.values()),
-            "ok": ok, "mode": "independent" if independent else "path", "status": counts}
-    if as_json:
-        emit_json(info)
-        return
-    print_summary(f"robot ik ({r.name}, {info['mode']}): poses per status", counts)
-    out.print(f"wrote {out_file}")
+    info = inverse_table(load_robot(resolve_robot(robot)), in_file, out_file, q_start=q0, independent=independent)
+    show(as_json, info, lambda: print_summary(f"robot ik ({info['robot']}, {info['mode']}): poses per status",
+                                              info["status"]), lambda: out.print(f"wrote {out_file}"))
 
 
 def prepare(
@@ -70,22 +56,13 @@ def prepare(
                                                             "log).")],
     robot: o.Robot = "max100",
     window: Annotated[float, typer.Option("--window", help="Savitzky-Golay window for qd, qdd (s).")] = 0.021,
-    as_json: JsonRun = False,
+    as_json: o.Json = False,
 ) -> None:
     """Split a six-axis log into axis records with tau_rb (RNEA) and tau_load (gravity/payload), in Nm."""
-    from simulate.robot.prepare import prepare_log
+    from simulate.run import prepare_records
 
-    r = load_robot(resolve_robot(robot))
-    if not window > 0:
-        raise InputError("must be > 0 [s]", field="window")
-    res = prepare_log(r, log, out_dir, window_s=window)
-    info = {"robot": r.name, "log": str(log), "records": [str(p) for p in res.paths], "samples": res.n_samples,
-            "dt_s": res.dt, "savgol_window_samples": res.window}
-    if as_json:
-        emit_json(info)
-        return
-    print_table(f"prepare ({r.name}): {res.n_samples} samples at {res.dt * 1e3:.3g} ms", ("axis", "record"),
-                [(f"A{i + 1}", p) for i, p in enumerate(res.paths)], left=2)
+    info, table = prepare_records(load_robot(resolve_robot(robot)), log, out_dir, window)
+    show(as_json, info, lambda: print_table(*table))
 
 
 robot_app.command("fk")(guarded(fk_cmd))

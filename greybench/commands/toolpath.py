@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, print_summary, progress, resolve_robot
+from greybench.support import print_summary, progress, resolve_robot, show
 
 
 def testpiece(
@@ -22,22 +22,10 @@ def testpiece(
     as_json: o.Json = False,
 ) -> None:
     """Write the finishing program of the ISO 10791-7 style test piece and its semi-finished stock."""
-    import math
+    from simulate.run import test_piece
 
-    from simulate.toolpath.testpiece import Technology, iso_test_piece, write_test_piece
-
-    tech = Technology(tool_diameter=tool_diameter / o.MM_PER_M, allowance=allowance / o.MM_PER_M, feed=feed,
-                      spindle=spindle)
-    prog, stock = write_test_piece(out_file, size=size, tech=tech)
-    if as_json:
-        emit_json({"program": str(prog), "stock": str(stock), "size_mm": size, "tool_diameter_mm": tool_diameter,
-                   "allowance_mm": allowance, "lines": len(prog.read_text().splitlines())})
-        return
-    piece = iso_test_piece(size)
-    print_summary(f"test piece {size}", {"program": str(prog), "stock": str(stock),
-                                         "circle diameter \\[mm]": f"{piece.circle_diameter * o.MM_PER_M:g}",
-                                         "square side \\[mm]": f"{piece.square_side * o.MM_PER_M:g}",
-                                         "slope \\[deg]": f"{math.degrees(piece.slope_angle):g}"})
+    info, rows = test_piece(out_file, size, tool_diameter, allowance, feed, spindle)
+    show(as_json, info, lambda: print_summary(f"test piece {size}", rows))
 
 
 def interpolate_cmd(
@@ -61,10 +49,8 @@ def interpolate_cmd(
 
     limits = PathLimits(acceleration=acceleration, jerk=jerk, rapid_speed=rapid_speed, cycle=cycle / o.MM_PER_M)
     res = interpolate_program(program, resolve_robot(robot), pose, name, limits, out_file, progress=progress)
-    if as_json:
-        emit_json(res.summary)
-        return
-    print_summary(f"{program.name} on {res.robot}, pose {res.placement.name}", res.summary)
+    show(as_json, res.summary, lambda: print_summary(f"{program.name} on {res.robot}, pose {res.placement.name}",
+                                                     res.summary))
 
 
 COMMANDS = {"testpiece": testpiece, "interpolate": interpolate_cmd}

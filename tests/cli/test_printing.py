@@ -56,3 +56,15 @@ def test_an_error_line_keeps_its_units():
     res = CliRunner().invoke(app, ["trace", "--workpiece", "nowhere", "--point", "0,109"])
     assert res.exit_code == 2
     assert "field 'point': expected 3 finite comma-separated numbers [mm], got '0,109'" in res.output
+
+
+def test_circle_spike_table_keeps_every_unit(capsys):
+    from greybench.support import print_table
+    from simulate.run import spike_table
+
+    spike = SimpleNamespace(angle_deg=92.25, name="A1", height_um=338.7, spike_um=31.4, lost_motion_um=292.3)
+    print_table(*spike_table(SimpleNamespace(spikes=[spike])))  # type: ignore[arg-type]
+    text = capsys.readouterr().out
+    header = [c.strip() for c in next(ln for ln in text.splitlines() if "joint" in ln).split("┃")[1:-1]]
+    assert header == ["angle [deg]", "joint", "excursion [µm]", "spike [µm]", "lost motion [µm]"]
+    assert cells(text, "92.2") == ["92.2", "A1", "+338.7", "+31.4", "+292.3"]

@@ -102,3 +102,39 @@ def test_compensation_progress_counts_every_simulation():
     assert compensation_steps(program, 2, 1.2, (0.8, 1.2, 1.0, 0.8)) == (3 + 4) * n
     with pytest.raises(InputError):
         compensation_steps(DATA_DIR / "programs" / "missing.nc")
+
+
+def test_joint_lists_are_sorted_without_repeats_and_name_the_option():
+    from identify.workflows import parse_joints
+
+    assert parse_joints("3, 1,3,,2") == [1, 2, 3]
+    for bad in ("", " , ", "1,x", "1.5"):
+        with pytest.raises(InputError) as exc:
+            parse_joints(bad, "--axes")
+        assert exc.value.field == "--axes", bad
+
+
+def test_show_prints_either_the_json_object_or_the_tables(capsys):
+    import json
+
+    from greybench.support import show
+
+    calls: list[str] = []
+    show(True, {"x_m": 1.5, "nan": float("nan")}, lambda: calls.append("table"))
+    assert json.loads(capsys.readouterr().out) == {"x_m": 1.5, "nan": None} and calls == []
+    show(False, {"x_m": 1.5}, lambda: calls.append("table"), lambda: calls.append("note"))
+    assert capsys.readouterr().out == "" and calls == ["table", "note"]
+
+
+def test_ik_summary_counts_every_pose_by_status(tmp_path):
+    from simulate.robot.model import load_robot
+    from simulate.run import forward_table, inverse_table
+
+    rob = load_robot(resolve_robot("max100"))
+    joints, poses, back = tmp_path / "q.csv", tmp_path / "p.csv", tmp_path / "q2.csv"
+    joints.write_text("q1,q2,q3,q4,q5,q6\n0,0.1,0.2,0,0.3,0\n0.2,0.3,0.1,0.1,0.4,0.2\n")
+    assert forward_table(rob, joints, poses)["poses"] == 2
+    # a pose 100 m away is out of reach: 3 poses, 2 solved
+    poses.write_text(poses.read_text() + "100,0,0,1,0,0,0\n")
+    info = inverse_table(rob, poses, back)
+    assert info["poses"] == 3 == sum(info["status"].values()) and info["ok"] == 2 and info["mode"] == "path"
