@@ -36,8 +36,10 @@ lock: | $(UV)
 	    --custom-compile-command "make lock" --quiet -o $(LOCK)
 	! grep -E '^(nvidia-|triton)' $(LOCK)
 
+# Quick sizes; make demo FULL=1 runs the full-size demo (scripts/demo.sh).
+FULL ?= 0
 demo: $(STAMP)
-	bash scripts/demo.sh
+	FULL=$(FULL) bash scripts/demo.sh
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
