@@ -2,7 +2,7 @@
 # End-to-end demo (make demo) on synthetic data, printed as tables: identify a friction model, machine
 # the ISO 10791-7 test piece with it in several poses and rank them, run a ballbar circle, and
 # pre-compensate the program.
-# Quick sizes by default (about 2 min of two cores): 10 s excitation records, five friction models
+# Quick sizes by default: 10 s excitation records, five friction models
 # (no LSTM), the 160 mm test piece in two poses, two compensation iterations.
 # FULL=1 (make demo FULL=1) runs the full sizes: 30 s records, all six models, the 320 mm test piece in
 # four poses with the component shares (4x the simulations), four compensation iterations.
