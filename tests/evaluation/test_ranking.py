@@ -64,7 +64,7 @@ def test_stiffer_robot_scores_better():
 
 @pytest.mark.parametrize("size", [160, pytest.param(320, marks=pytest.mark.slow)])
 def test_report_for_the_four_poses(tmp_path, size):
-    """The four placements of iso320.json; the 160 piece fits each of them and takes a quarter of the
+    """The four placements of iso320.json; the 160 piece fits each of them and takes less than half the
     simulation time, the 320 piece they were chosen for runs with the slow tests."""
     from simulate.evaluation.report import write_report
 
