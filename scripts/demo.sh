@@ -1,5 +1,11 @@
 #!/usr/bin/env bash
-# End-to-end demo (make demo): everything that exists so far, on synthetic data, printed as tables.
+# End-to-end demo (make demo) on synthetic data, printed as tables: identify a friction model, machine
+# the ISO 10791-7 test piece with it in several poses and rank them, run a ballbar circle, and
+# pre-compensate the program.
+# Quick sizes by default: 10 s excitation records, five friction models
+# (no LSTM), the 160 mm test piece in two poses, two compensation iterations.
+# FULL=1 (make demo FULL=1) runs the full sizes: 30 s records, all six models, the 320 mm test piece in
+# four poses with the component shares (4x the simulations), four compensation iterations.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 G=.venv/bin/greybench
@@ -7,19 +13,32 @@ OUT=demo-output
 rm -rf "$OUT"
 mkdir -p "$OUT"
 
-echo "== 1. Friction identification, axis 1 (synthetic plant: non-Stribeck static curve, noise 0.02 Nm) =="
-$G trajectory universal --axis 1 --duration 30 --out "$OUT/ut.parquet"
-$G trajectory test --axis 1 --duration 30 --out "$OUT/ut_test.parquet"
+if [ "${FULL:-0}" != 0 ]; then
+    DURATION=30 MODELS=coulomb-viscous,stribeck,lugre,lstm,residual,greybox SIZE=320 SHARES=--shares ITERATIONS=4
+else
+    DURATION=10 MODELS=coulomb-viscous,stribeck,lugre,residual,greybox SIZE=160 SHARES=--no-shares ITERATIONS=2
+fi
+
+echo "== 1. Friction identification, axis 1 (synthetic plant: non-Stribeck static curve, noise 0.02 Nm; ${DURATION} s records) =="
+$G trajectory universal --axis 1 --duration "$DURATION" --out "$OUT/ut.parquet"
+$G trajectory test --axis 1 --duration "$DURATION" --out "$OUT/ut_test.parquet"
 $G synth --trajectory "$OUT/ut.parquet" --out "$OUT/train.parquet" --seed 1 --static-curve hump
 $G synth --trajectory "$OUT/ut_test.parquet" --out "$OUT/test.parquet" --seed 2 --static-curve hump
-$G compare --train "$OUT/train.parquet" --test "$OUT/test.parquet" --axis 1 --experiment demo-axis1
+$G compare --train "$OUT/train.parquet" --test "$OUT/test.parquet" --axis 1 --models "$MODELS" --experiment demo-axis1
 $G fit --model lugre --train "$OUT/train.parquet" --test "$OUT/test.parquet" --out "$OUT/models/lugre" --no-track > /dev/null
 $G predict --model "$OUT/models/lugre" --data "$OUT/test.parquet" --out "$OUT/test-predicted.parquet"
 
-echo "== 2. Machining simulation of the ISO 10791-7 test piece in four poses, ranked (Table 2 layout) =="
-$G rank-poses --program data/programs/iso320.nc --robot max100 --poses data/poses/iso320.json \
-    --out "$OUT/ranking" --shares
-echo "Report with deviation maps and component shares: $OUT/ranking/report.md"
+echo "== 2. Machining simulation of the ISO 10791-7 test piece (${SIZE} mm) with the fitted LuGre model on axis 1, poses ranked (Table 2 layout) =="
+$G rank-poses --program "data/programs/iso$SIZE.nc" --robot max100 --poses "data/poses/iso$SIZE.json" --size "$SIZE" \
+    --friction "1=$OUT/models/lugre" --out "$OUT/ranking" "$SHARES"
+echo "Report with deviation maps: $OUT/ranking/report.md"
+
+echo "== 3. Ballbar circle, radius 50 mm, first pose: reversal spikes per joint =="
+$G circle --robot max100 --pose "data/poses/iso$SIZE.json" --out "$OUT/circle"
+
+echo "== 4. Pre-compensation of the program in the first pose, at most $ITERATIONS corrected programs simulated =="
+$G compensate --program "data/programs/iso$SIZE.nc" --robot max100 --pose "data/poses/iso$SIZE.json" \
+    --friction "1=$OUT/models/lugre" --iterations "$ITERATIONS" --out "$OUT/compensation"
 
 echo "== Friction fits above are MLflow runs; open them with: =="
 $G ui --print-only

@@ -1,5 +1,5 @@
 """Ranking end to end (full machining simulations, a few seconds each with the compiled coupled loop): ideal robot,
-stiff vs soft robot, the report for the four poses of iso320; the cutter comes from the robot file's ``[tool]``."""
+stiff vs soft robot, the report for the four poses of iso320.json; the cutter comes from the robot file's ``[tool]``."""
 from __future__ import annotations
 
 import dataclasses
@@ -62,14 +62,18 @@ def test_stiffer_robot_scores_better():
     assert stiff.results[name].score < soft.results[name].score
 
 
-def test_report_for_the_four_poses(tmp_path):
+@pytest.mark.parametrize("size", [160, pytest.param(320, marks=pytest.mark.slow)])
+def test_report_for_the_four_poses(tmp_path, size):
+    """The four placements of iso320.json; the 160 piece fits each of them and takes less than half the
+    simulation time, the 320 piece they were chosen for runs with the slow tests."""
     from simulate.evaluation.report import write_report
 
+    program = f"data/programs/iso{size}.nc"
     pl = load_poses("data/poses/iso320.json")
-    r = rank_poses("data/programs/iso320.nc", ROBOT, pl, settings=RankSettings(spacing=2e-3), out_dir=tmp_path,
+    r = rank_poses(program, ROBOT, pl, settings=RankSettings(spacing=2e-3, size=size), out_dir=tmp_path,
                    shares=True)
     assert [e.rank for e in r.entries] == [1, 2, 3, 4]
-    path = write_report(r, tmp_path, program="data/programs/iso320.nc", trajectories=r.trajectories)
+    path = write_report(r, tmp_path, program=program, trajectories=r.trajectories)
     text = path.read_text()
     for p in pl:
         assert (tmp_path / p.name / "scan.csv").exists()
