@@ -100,3 +100,13 @@ def test_atomic_files_removes_a_folder_it_created_when_it_fails(tmp_path):
         (staging / "a.txt").write_text("a")
         raise RuntimeError("fails")
     assert not target.exists()
+
+
+def test_atomic_files_gives_each_file_the_mode_of_a_new_file(tmp_path):
+    from identify.files import atomic_files, current_umask
+
+    with atomic_files(tmp_path) as staging:
+        f = staging / "secretive.bin"
+        f.write_bytes(b"x")
+        os.chmod(f, 0o600)              # as tempfile.mkstemp would leave it
+    assert stat.S_IMODE((tmp_path / "secretive.bin").stat().st_mode) == 0o666 & ~current_umask()

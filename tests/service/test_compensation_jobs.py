@@ -25,6 +25,10 @@ def test_bad_gcode_unknown_pose_and_names_are_4xx(client):
     assert r.status_code == 404
     r = client.post("/compensations", headers=HEADERS, json={"program": "iso160", "pose": "near"})
     assert r.status_code == 422   # a pose name needs a pose set
+    for key in ("ff_friction", "backlash_comp"):   # the NC options are switches
+        r = client.post("/compensations", headers=HEADERS, json={"program": "iso160", "pose_set": "iso160",
+                                                                "pose": "near", "options": {key: "sometimes"}})
+        assert r.status_code == 422 and key in str(r.json()["detail"]), r.text
     r = client.post("/compensations", headers={}, json={})
     assert r.status_code == 401
     assert client.get("/compensations/" + "0" * 32, headers=HEADERS).status_code == 404
