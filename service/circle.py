@@ -137,12 +137,12 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
 
 
 def run(request: dict, job_dir: Path, progress) -> dict:
-    """The job body: fetch the registered friction models, simulate and evaluate the circle, write the
-    files into ``<job>/out``."""
+    """The job body: fetch the registered friction models, then :func:`simulate.run.run_circle` (the
+    same simulate -> evaluate -> write sequence as ``greybench circle``) into ``<job>/out``."""
     from service import registry
     from service.paths import named_file
-    from simulate.evaluation.circle import evaluate_run, simulate_circle, write_outputs
     from simulate.robot.model import load_robot
+    from simulate.run import run_circle
     from simulate.toolpath.placement import parse_poses
 
     models = {}
@@ -156,14 +156,30 @@ def run(request: dict, job_dir: Path, progress) -> dict:
     o = request["options"]
     placement = parse_poses({"poses": [request["pose"]]}, source="pose")[0]
     rob = load_robot(named_file("robots", request["robot"], ".toml", "robot"))
-    progress(0.05, "simulating the circle")
-    run_ = simulate_circle(rob, placement, _spec(o), friction=o["friction"], backlash=o["backlash"],
-                           friction_scale=o["friction_scale"], ff_friction=o["ff_friction"], friction_models=models)
-    result = evaluate_run(run_)
-    progress(0.9, "writing the trace and the plot")
-    info = write_outputs(result, job_dir / "out", title=f"{rob.name}, pose {placement.name}",
-                         info={"robot": rob.name, "pose": placement.name, **o, "friction_models": run_.friction})
+    _, info = run_circle(rob, placement, _spec(o), job_dir / "out", friction=o["friction"], backlash=o["backlash"],
+                         friction_scale=o["friction_scale"], ff_friction=o["ff_friction"], friction_models=models,
+                         info=o, progress=_stages(progress))
     info.pop("csv"), info.pop("png")
     info["files"] = sorted(FILES)
     info["friction"] = request.get("friction", [])
     return info
+
+
+#: Each stage of :func:`simulate.run.run_circle` -> the job's progress fraction at its start and its text.
+STAGES = {"circle: simulating": (0.05, "simulating the circle"),
+          "circle: writing the trace and the plot": (0.9, "writing the trace and the plot")}
+
+
+def _stages(progress):
+    """A :data:`identify.progress.Progress` factory reporting each stage of the circle to the job's
+    ``progress(fraction, text)`` (:data:`STAGES`)."""
+    from contextlib import contextmanager
+
+    from identify.progress import Advance
+
+    @contextmanager
+    def factory(description: str, total: float | None = None):
+        progress(*STAGES.get(description, (0.5, description)))
+        yield Advance()
+
+    return factory

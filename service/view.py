@@ -33,7 +33,7 @@ page's *sections*, each a dict with ``type`` and ``title`` rendered by ``view.js
   ``data-id``);
 - ``plot``: ``x_label``, ``y_label`` (with units), ``series`` (label, x, y, ``style`` points / line /
   step, colour);
-- ``image``: ``url``, optional ``note``; ``summary``: ``items`` ([label with unit, value]); ``files``:
+- ``image``: ``url``, optional ``note``; ``summary``: ``items`` ([label with unit, value, optional decimals]); ``files``:
   ``files`` (name, bytes, url; :meth:`Context.files`).
 
 The data routes are thin: the geometry and values come from :mod:`simulate.machining.surface_mesh`
@@ -465,25 +465,26 @@ def circle_sections(ctx: Context) -> list[dict]:
     s = _read_json(ctx, "out/summary.json")
     c = s.get("center_offset_um") or [None, None]
     spikes = s.get("reversal_spikes") or []
+    # one number format per row: [label with unit, value, decimals]
     out: list[dict] = [{"type": "summary", "title": "Circle test", "items": [
-        ["roundness (circular deviation G, ISO 230-4) [µm]", _num(s.get("roundness_um"))],
-        ["radius error (least-squares radius - nominal) [µm]", _num(s.get("radius_error_um"))],
-        ["centre offset, in-plane axes [µm]", ", ".join("-" if _num(v) is None else f"{float(v):.2f}" for v in c)],
-        ["largest reversal spike, beyond the settled trace [µm]", _num(s.get("largest_reversal_spike_um"))],
-        ["largest lost motion, step of the settled trace [µm]", _num(s.get("largest_lost_motion_um"))],
-        ["largest excursion after a reversal (lost motion and spike) [µm]", _num(s.get("largest_spike_um"))],
-        ["radius [mm]", _num(s.get("radius_mm"))], ["feed [mm/min]", _num(s.get("feed_mm_min"))],
+        ["roundness (circular deviation G, ISO 230-4) [µm]", _num(s.get("roundness_um")), 1],
+        ["radius error (least-squares radius - nominal) [µm]", _num(s.get("radius_error_um")), 1],
+        ["centre offset, in-plane axes [µm]", ", ".join("-" if _num(v) is None else f"{float(v):.1f}" for v in c)],
+        ["largest reversal spike, beyond the settled trace [µm]", _num(s.get("largest_reversal_spike_um")), 1],
+        ["largest lost motion, step of the settled trace [µm]", _num(s.get("largest_lost_motion_um")), 1],
+        ["largest excursion after a reversal (lost motion and spike) [µm]", _num(s.get("largest_spike_um")), 1],
+        ["radius [mm]", _num(s.get("radius_mm")), 3], ["feed [mm/min]", _num(s.get("feed_mm_min")), 1],
         ["plane, direction", f"{s.get('plane', '-')}, {'clockwise (G2)' if s.get('cw') else 'counter-clockwise (G3)'}"],
         ["robot, pose", f"{s.get('robot', '-')}, {s.get('pose', '-')}"],
         ["friction, backlash, friction feed-forward", ", ".join(
             "-" if s.get(k) is None else ("on" if s.get(k) else "off")
             for k in ("friction", "backlash", "ff_friction"))],
-        ["friction scale [-]", _num(s.get("friction_scale"))]]},
+        ["friction scale [-]", _num(s.get("friction_scale")), 2]]},
         {"type": "table", "title": "Reversal spikes", "id": "spikes",
          "columns": ["angle [deg]", "joint", "spike [µm]", "lost motion [µm]", "excursion [µm]"],
          "rows": [[_num(r.get("angle_deg")), r.get("joint"), _num(r.get("spike_um")), _num(r.get("lost_motion_um")),
                    _num(r.get("height_um"))] for r in spikes],
-         "digits": [1, None, 2, 2, 2],
+         "digits": [1, None, 1, 1, 1],
          "note": "where a joint's commanded velocity changes sign along the circle, split as a ballbar analysis "
                  "splits it: the spike is the transient peak beyond the settled trace, the lost motion the "
                  "step of the settled trace across the reversal (after minus before), the excursion the extreme "
@@ -509,7 +510,8 @@ def circle_sections(ctx: Context) -> list[dict]:
 
 def _spike_marks(spikes: list[dict]) -> list[dict]:
     """One polar mark per reversal angle: joints reversing at the same sample share it (as in the job's
-    polar plot), labelled with the joints and the largest |height| [µm] there."""
+    polar plot), labelled as the CLI's table and the plot name them: the joints, the reversal spike
+    beyond the settled trace and the lost motion [µm] (those of the largest |spike| there)."""
     groups: dict = {}
     for r in spikes:
         a = _num(r.get("angle_deg"))
@@ -517,8 +519,11 @@ def _spike_marks(spikes: list[dict]) -> list[dict]:
             groups.setdefault(round(a, 6), []).append(r)
     out = []
     for a, rs in groups.items():
-        h = max((_num(r.get("height_um")) or 0.0 for r in rs), key=abs)
-        out.append({"angle_deg": a, "label": f"{'+'.join(str(r.get('joint')) for r in rs)} {h:+.1f} µm"})
+        top = max(rs, key=lambda r: abs(_num(r.get("spike_um")) or 0.0))
+        spike, lost = _num(top.get("spike_um")), _num(top.get("lost_motion_um"))
+        out.append({"angle_deg": a, "label": f"{'+'.join(str(r.get('joint')) for r in rs)} spike "
+                    f"{'-' if spike is None else f'{spike:+.1f}'} µm, lost motion "
+                    f"{'-' if lost is None else f'{lost:+.1f}'} µm"})
     return out
 
 

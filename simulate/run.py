@@ -594,27 +594,51 @@ def circle_test(robot: Path, pose: Path, name: str | None, out_dir: Path, *, rad
     ``feed_mm_min`` [mm/min] about ``center_mm`` [mm, workpiece frame]
     (:func:`simulate.evaluation.circle.simulate_circle`), evaluate it and, only then, write circle.csv,
     circle.png and summary.json into ``out_dir``; gives the result and the summary."""
-    from typing import cast
-
-    from simulate.evaluation.circle import CircleSpec, Plane, evaluate_run, simulate_circle, write_outputs
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import load_poses, select_pose
 
-    # CircleSpec checks the plane and makes it a Plane
-    spec = CircleSpec(radius=radius_mm * MM, feed=feed_mm_min / 6e4, plane=cast(Plane, plane.lower()),
-                      center=tuple(v * MM for v in center_mm), ccw=not cw)
+    spec = circle_spec(radius_mm, feed_mm_min, plane, center_mm, cw)
     placement = select_pose(load_poses(pose), name, source=str(pose))
-    rob = load_robot(robot)
+    return run_circle(load_robot(robot), placement, spec, out_dir, friction=friction, backlash=backlash,
+                      friction_scale=friction_scale, ff_friction=ff_friction, progress=progress)
+
+
+def circle_spec(radius_mm: float, feed_mm_min: float, plane: str, center_mm: Sequence[float] = (0.0, 0.0, 0.0),
+                cw: bool = False) -> Any:
+    """The circle from its options: radius [mm], feed [mm/min], plane (xy, yz, zx; any case), centre [mm,
+    workpiece frame], clockwise; ``InputError`` naming the option (``CircleSpec`` checks them)."""
+    from typing import cast
+
+    from simulate.evaluation.circle import CircleSpec, Plane
+
+    return CircleSpec(radius=radius_mm * MM, feed=feed_mm_min / 6e4, plane=cast(Plane, plane.lower()),
+                      center=tuple(v * MM for v in center_mm), ccw=not cw)
+
+
+def run_circle(rob: Robot, placement: Placement, spec: Any, out_dir: Path, *, friction: bool = True,
+               backlash: bool = True, friction_scale: float = 1.0, ff_friction: bool = False,
+               friction_models: dict[int, str] | None = None, info: dict[str, Any] | None = None,
+               progress: Progress = quiet) -> tuple[CircleResult, dict[str, Any]]:
+    """Simulate, evaluate and only then write one circle (``circle.csv``, ``circle.png``,
+    ``summary.json`` in ``out_dir``): the one sequence behind ``greybench circle`` and the service's
+    circle jobs. ``friction_models``: joint 1..6 -> model reference replacing the robot file's;
+    ``info`` is added to the summary (the service's request options)."""
+    from simulate.evaluation.circle import evaluate_run, simulate_circle, write_outputs
+
     with progress("circle: simulating", None) as advance:
         run = simulate_circle(rob, placement, spec, friction=friction, backlash=backlash,
-                              friction_scale=friction_scale, ff_friction=ff_friction, advance=advance)
+                              friction_scale=friction_scale, ff_friction=ff_friction,
+                              friction_models=friction_models, advance=advance)
         result = evaluate_run(run)
     title = (f"{rob.name}, pose {placement.name}" + ("" if friction else ", no friction") + ("" if backlash else
              ", no backlash") + (f", friction x{friction_scale:g}" if friction_scale != 1 else ""))
-    return result, write_outputs(result, out_dir, title=title, info={
-        "robot": rob.name, "pose": placement.name, "radius_mm": radius_mm, "feed_mm_min": feed_mm_min,
-        "plane": spec.plane.value, "friction": friction, "backlash": backlash, "friction_scale": friction_scale,
-        "friction_models": run.friction})
+    with progress("circle: writing the trace and the plot", None):
+        summary = write_outputs(result, out_dir, title=title, info={
+            "robot": rob.name, "pose": placement.name, "radius_mm": spec.radius / MM,
+            "feed_mm_min": spec.feed * 6e4, "plane": spec.plane.value, "center_mm": [v / MM for v in spec.center],
+            "cw": not spec.ccw, "friction": friction, "backlash": backlash, "friction_scale": friction_scale,
+            "ff_friction": ff_friction, **(info or {}), "friction_models": run.friction})
+    return result, summary
 
 
 def circle_rows(result: CircleResult, summary: dict[str, Any]) -> dict[str, Any]:

@@ -98,7 +98,9 @@ def test_circle_page_shows_the_circle_numbers(client):
     assert client.get(f"/circles/{job_id}/view", headers=HEADERS).status_code == 200
     secs = _sections(client, "/circles", job_id)
     by_type = {s["type"]: s for s in secs}
-    items = dict(by_type["summary"]["items"])
+    items = {k: v for k, v, *_ in by_type["summary"]["items"]}
+    # every number row names its decimals (one format per row, whole values too)
+    assert all(len(it) == 3 for it in by_type["summary"]["items"] if isinstance(it[1], float))
     assert items["roundness (circular deviation G, ISO 230-4) [µm]"] == pytest.approx(ROUNDNESS_UM)
     assert items["radius error (least-squares radius - nominal) [µm]"] == pytest.approx(RADIUS_ERROR_UM)
     assert items["largest excursion after a reversal (lost motion and spike) [µm]"] == pytest.approx(7.5)
@@ -116,8 +118,9 @@ def test_circle_page_shows_the_circle_numbers(client):
     i = s["angle_deg"].index(45.0)
     assert s["deviation_um"][i] == pytest.approx(0.0, abs=1e-3)       # cos(90 deg)
     # joints reversing together share one mark
-    assert by_type["polar"]["marks"] == [{"angle_deg": 90.0, "label": "A1+A6 +7.5 µm"},
-                                         {"angle_deg": 270.0, "label": "A2 -4.0 µm"}]
+    # joints reversing together share one mark, labelled with the spike and the lost motion as the CLI's table
+    assert by_type["polar"]["marks"] == [{"angle_deg": 90.0, "label": "A1+A6 spike +1.5 µm, lost motion +6.0 µm"},
+                                         {"angle_deg": 270.0, "label": "A2 spike -3.0 µm, lost motion -1.0 µm"}]
     png = client.get(by_type["image"]["url"], headers=HEADERS)
     assert png.status_code == 200 and png.content[:4] == b"\x89PNG"
     assert {f["name"] for f in by_type["files"]["files"]} == {"out/circle.csv", "out/circle.png", "out/summary.json"}
@@ -239,13 +242,18 @@ def test_circle_page_in_chromium(server, browser, tmp_path):
     job_id = _circle_job(JobStore(server.data_dir / "jobs.sqlite"), server.data_dir / "jobs")
     page, problems = _open(browser, server, "/circles", job_id, tmp_path / "circle.png")
     summary = dict(r.split("\t") for r in page.locator("section.summary tr").all_inner_texts())
-    assert float(summary["roundness (circular deviation G, ISO 230-4) [µm]"]) == ROUNDNESS_UM
-    assert float(summary["radius error (least-squares radius - nominal) [µm]"]) == RADIUS_ERROR_UM
+    # one format per row with its unit: µm to 0.1, whole values keep their decimals (50.000 mm, not 50)
+    assert summary["roundness (circular deviation G, ISO 230-4) [µm]"] == f"{ROUNDNESS_UM:.1f}"
+    assert summary["radius error (least-squares radius - nominal) [µm]"] in ("-3.2", "-3.3")   # -3.25 to 0.1
+    assert summary["largest lost motion, step of the settled trace [µm]"] == "6.0"
+    assert summary["radius [mm]"] == "50.000" and summary["feed [mm/min]"] == "2000.0"
+    assert summary["friction scale [-]"] == "1.00" and summary["centre offset, in-plane axes [µm]"] == "0.5, -0.2"
     spikes = [r.split("\t") for r in page.locator("table[data-id='spikes'] tbody tr").all_inner_texts()]
-    assert spikes == [[f"{a:.1f}", f"A{j}", f"{sp:.2f}", f"{lm:.2f}", f"{h:.2f}"]
+    assert spikes == [[f"{a:.1f}", f"A{j}", f"{sp:.1f}", f"{lm:.1f}", f"{h:.1f}"]
                       for (a, j, h), (sp, lm) in zip(SPIKES, SPLITS, strict=True)]
     assert page.locator("section.polar svg polyline").count() == 1
-    assert page.locator("section.polar svg text.mark").all_text_contents() == ["A1+A6 +7.5 µm", "A2 -4.0 µm"]
+    assert page.locator("section.polar svg text.mark").all_text_contents() == [
+        "A1+A6 spike +1.5 µm, lost motion +6.0 µm", "A2 spike -3.0 µm, lost motion -1.0 µm"]
     assert page.evaluate("document.querySelector('section.image img').naturalWidth") > 300   # the job's plot
     assert page.locator("ul.files a").count() == 3
     assert not problems, problems

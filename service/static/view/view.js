@@ -133,7 +133,9 @@ const RENDER = {
   },
 
   summary(section, el) {
-    const items = section.items.map(([k, v]) => `<tr><td>${esc(k)}</td><td>${typeof v === "number" ? (Number.isInteger(v) ? v : fmt(v, 3)) : esc(v ?? "-")}</td></tr>`).join('');
+    // an item may give its decimals third ([label, value, digits]): one format per row, whole values too
+    const num = (v, d) => (d === undefined || d === null ? (Number.isInteger(v) ? v : fmt(v, 3)) : fmt(v, d));
+    const items = section.items.map(([k, v, d]) => `<tr><td>${esc(k)}</td><td>${typeof v === "number" ? num(v, d) : esc(v ?? "-")}</td></tr>`).join('');
     el.insertAdjacentHTML('beforeend', `<table>${items}</table>`);
   },
 
