@@ -33,8 +33,8 @@ page's *sections*, each a dict with ``type`` and ``title`` rendered by ``view.js
   ``data-id``);
 - ``plot``: ``x_label``, ``y_label`` (with units), ``series`` (label, x, y, ``style`` points / line /
   step, colour);
-- ``image``: ``url``, optional ``note``; ``summary``: ``items`` ([label with unit, value, optional decimals]); ``files``:
-  ``files`` (name, bytes, url; :meth:`Context.files`).
+- ``image``: ``url``, optional ``note``; ``summary``: ``items`` ([label with unit, value, optional
+  decimals]); ``files``: ``files`` (name, bytes, url; :meth:`Context.files`).
 
 The data routes are thin: the geometry and values come from :mod:`simulate.machining.surface_mesh`
 and :mod:`simulate.machining.virtual_workpiece`, a click from :func:`simulate.evaluation.trace.trace_point`.
