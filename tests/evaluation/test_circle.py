@@ -325,6 +325,18 @@ def test_cli_writes_csv_png_and_json(tmp_path):
     assert (out / "circle.png").stat().st_size > 10_000
 
 
+def test_cli_prints_one_format_per_column(tmp_path):
+    """The summary's µm figures and the spike table's columns print to 0.1 µm, as the page shows them."""
+    r = runner.invoke(app, ["circle", "--pose", str(POSES), "--name", "pose1", "--out", str(tmp_path / "c")])
+    assert r.exit_code == 0, r.output
+    rows = {m.group(1): m.group(2) for m in re.finditer(r"(\w+_um)\s*\S\s*(\S+)", r.stdout)}
+    assert set(rows) == {"roundness_um", "radius_error_um", "largest_spike_um", "largest_reversal_spike_um",
+                         "largest_lost_motion_um"}
+    assert all(re.fullmatch(r"-?\d+\.\d", v) for v in rows.values()), rows
+    doc = json.loads((tmp_path / "c" / "summary.json").read_text())
+    assert float(rows["roundness_um"]) == pytest.approx(doc["roundness_um"], abs=0.05)
+
+
 def test_bench_circle_reports_the_drive_speed():
     r = runner.invoke(app, ["bench", "circle", "--repeats", "1"])
     assert r.exit_code == 0, r.output
