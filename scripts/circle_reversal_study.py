@@ -7,6 +7,7 @@ and prints as markdown:
 
 - the largest reversal spike [µm], normal -> doubled friction (ratio), for several spike + settle
   windows [deg] of :func:`simulate.evaluation.circle.split_reversal`;
+- the same with the transient modelled (:func:`transient_split`, a study, not the shipped split);
 - at A1's first reversal (xy pose1) the step of A1's link error q_cmd - q [µrad] and its overshoot
   beyond the new level [µrad], with friction, doubled, 4x, without play and without friction.
 
@@ -48,6 +49,61 @@ def largest_spike(run: CircleRun, spike_deg: float, settle_deg: float) -> float:
         return shipped(*args, **kw)
 
     C.split_reversal = split    # evaluate_circle calls it by module name
+    try:
+        return C.evaluate_run(run).largest_reversal_spike_um
+    finally:
+        C.split_reversal = shipped
+
+
+def transient_split(trav_deg: Any, dev: Any, at_deg: float, *, neighbours: Any = (), span_deg: float = 60.0,
+                    deg_per_s: float = 2.0 / 60 / 0.05 * 180 / math.pi, **_: Any) -> C.ReversalSplit:
+    """A study, not the shipped split: the settled trace after the reversal fitted together with the
+    transient, ``F = quadratic + exp(-(x - x0) / (tau w)) (A cos + B sin)(2 pi f (x - x0) / w)`` over
+    ``span_deg`` after the reversal (less the next reversal's before window), from the first extreme
+    ``x0`` of ``F - L_b`` within 20 deg on; ``f`` 2..20 Hz and ``tau`` 0.05..0.8 s on a grid, the
+    polynomial and the oscillation's amplitudes by least squares (``w`` the circle's deg/s). Lost
+    motion and spike as the shipped split, with this quadratic as the settled trace after."""
+    t, d = np.asarray(trav_deg, float), np.asarray(dev, float)
+    te, de = np.concatenate([t - 360.0, t, t + 360.0]), np.concatenate([d, d, d])
+    gaps = (np.asarray(neighbours, float) % 360.0 - at_deg) % 360.0
+    gaps = gaps[gaps > 1e-9]
+    ahead = float(gaps.min()) if gaps.size else 360.0
+    behind = float((360.0 - gaps).min()) if gaps.size else 360.0
+    before = min(1.0, behind / C.BEFORE_WINDOW_DEG) * C.BEFORE_WINDOW_DEG
+    sel = (te >= at_deg - before) & (te < at_deg)
+    lb = np.poly1d(np.polyfit(te[sel] - at_deg, de[sel], 1))
+    end = min(span_deg, ahead - (C.BEFORE_WINDOW_DEG if gaps.size else 0.0))
+    idx = np.nonzero((te >= at_deg) & (te < at_deg + end))[0]
+    x, y = te[idx] - at_deg, de[idx]
+    scan = x < min(20.0, end / 2)
+    x0 = x[int(np.argmax(np.abs(y[scan] - lb(x[scan]))))]
+    xf, yf = x[x >= x0], y[x >= x0]
+    best: tuple[float, Any] | None = None
+    for hz in np.arange(2.0, 20.01, 0.25):
+        om = 2 * np.pi * hz / deg_per_s
+        for tau in (0.05, 0.1, 0.2, 0.3, 0.5, 0.8):
+            env = np.exp(-(xf - x0) / (tau * deg_per_s))
+            a = np.stack([np.ones_like(xf), xf, xf ** 2, env * np.cos(om * (xf - x0)), env * np.sin(om * (xf - x0))], 1)
+            coef = np.linalg.lstsq(a, yf, rcond=None)[0]
+            r = float(np.sum((a @ coef - yf) ** 2))
+            if best is None or r < best[0]:
+                best = (r, coef)
+    assert best is not None
+    la = np.poly1d(best[1][:3][::-1])
+    hi, lo = np.maximum(la(x), lb(x)), np.minimum(la(x), lb(x))
+    excess = np.where(y > hi, y - hi, np.where(y < lo, y - lo, 0.0))
+    m = int(np.argmax(np.abs(excess)))
+    return C.ReversalSplit(lost_motion=float(la(0.0) - lb(0.0)), spike=float(excess[m]), index=int(idx[m] % t.size))
+
+
+def largest_transient_spike(run: CircleRun, span_deg: float) -> float:
+    """The largest |spike| [µm] of the run with :func:`transient_split`."""
+    shipped = C.split_reversal
+
+    def split(*args: Any, **kw: Any) -> C.ReversalSplit:
+        return transient_split(*args, neighbours=kw.get("neighbours", ()), span_deg=span_deg)
+
+    C.split_reversal = split
     try:
         return C.evaluate_run(run).largest_reversal_spike_um
     finally:
@@ -122,6 +178,16 @@ def main(argv: list[str] | None = None) -> None:
     print("\n".join(markdown_table(["windows spike + settle [deg]", *(f"{pl} {po}" for pl in PLANES for po in POSES)],
                                    [[f"{sw:g} + {aw:g}", *(cell(pl, po, sw, aw) for pl in PLANES for po in POSES)]
                                     for sw, aw in WINDOWS])))
+    def cell_t(plane: str, pose: str, span: float) -> str:
+        n0, a, b = (largest_transient_spike(runs[plane, pose, key], span)
+                    for key in ("no friction", "normal", "friction x2"))
+        return f"{n0:.1f} / {a:.1f} -> {b:.1f} ({b / a:.2f})"
+
+    print("\nThe same with the transient modelled (transient_split, a study): largest reversal spike [µm],\n"
+          "no friction / normal -> doubled friction (ratio):\n")
+    print("\n".join(markdown_table(["fit span [deg]", *(f"{pl} {po}" for pl in PLANES for po in POSES)],
+                                   [[f"{span:g}", *(cell_t(pl, po, span) for pl in PLANES for po in POSES)]
+                                    for span in (40.0, 60.0, 80.0)])))
     pose1 = select_pose(poses, "pose1")
     a1: dict[str, dict[str, Any]] = {"friction and play": {}, "friction x2": {"friction_scale": 2.0},
                                      "friction x4": {"friction_scale": 4.0}, "no play": {"backlash": False},
