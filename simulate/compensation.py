@@ -32,8 +32,10 @@ Choices where the method is vague (stated so they can be replaced):
   carry the correction; a line is split until the piecewise path is within ``fit_tolerance`` of the
   corrected samples. F, S, T and M words are kept (F on the first piece, as programmed), rapids and
   all other lines are copied unchanged, so the program stays the same program with the same feeds.
-  Short pieces of nearly the same direction keep the feed through the interpolator's look-ahead
-  (its junction speed limit depends on the direction change, :mod:`simulate.toolpath.interpolation`).
+  The program switches on ``G64`` before its first feed move: junctions the interpolator can cross at
+  the feed are blended (speed and acceleration carried across, the path kept exactly,
+  :mod:`simulate.toolpath.interpolation`), and the pieces are planned so that every junction of the
+  correction is such a junction (``CompensationSettings.blend``), so the dense pieces keep the feed.
 - **Curvature limit.** The correction's curvature stays within what the interpolator passes at the
   original speed (:func:`limit_curvature`): a drive's own oscillation (gear rattle in the play,
   stick-slip) is not a function of the path and is not copied into the program.
@@ -325,7 +327,8 @@ class SmoothCorrection:
 
         self.grids = corr.grids
         self.values = corr.values
-        self._spl = [CubicSpline(g, v, axis=0) if len(g) >= 4 else None for g, v in zip(corr.grids, corr.values)]
+        self._spl = [CubicSpline(g, v, axis=0) if len(g) >= 4 else None
+                     for g, v in zip(corr.grids, corr.values, strict=True)]
 
     def at(self, run: int, sigma: np.ndarray) -> np.ndarray:
         g, spl = self.grids[run], self._spl[run]
@@ -837,22 +840,19 @@ def curvature_limit(path: NominalPath, run: int, sigma: np.ndarray, limits: Path
     speed is kept only while ``v^2 k / T <= beta J``, i.e. ``k <= share beta J T / v^2`` at the
     original program's local speed ``v`` (``share`` 0.9, the margin of :func:`_junction_limit`).
 
-    With ``blend`` (``G64``) every junction must stay blendable, ``dt (v / T^2 + A / T) <= beta J``, at
-    the programmed feed ``v`` (the speed cap of the run's segment there, also where the original slows
-    down, so that the corrected program speeds up as fast as the original after a corner):
-    ``k <= share beta J T / (v (v + A T))``.
+    With ``blend`` (``G64``) a junction is blended while ``dt (v / T^2 + A / T) <= beta J``
+    (:mod:`simulate.toolpath.interpolation`): ``k <= share beta J T / (v (v + A T))``, at the original's
+    local speed as above, so that the corrected program is not slower than the original anywhere; where
+    the original cruises this is the blending rule at the feed. (At the feed cap everywhere, i.e. also
+    where the original slows down for a corner, it smoothed away more correction near the corners:
+    iso160 near, plain NC, sum ratio 0.382 instead of 0.320, square straightness 246 instead of 145 µm.)
     """
     lim = limits or PathLimits()
     it = path.setup.interp
-    if blend:
-        idx = np.flatnonzero(path.run == run)
-        k = idx[np.clip(np.searchsorted(path.sigma0[idx], sigma, side="right") - 1, 0, len(idx) - 1)]
-        v = np.minimum(np.array([path.segments[i].feed for i in k]), lim.max_speed)
-        v = np.clip(v, 1e-4, None)
-        return share * lim.junction_jerk_share * lim.jerk * lim.cycle / (v * (v + lim.acceleration * lim.cycle))
     v = np.interp(sigma, np.asarray(it.s, float), np.asarray(it.v, float))
     v = np.clip(v, 1e-4, None)
-    return share * lim.junction_jerk_share * lim.jerk * lim.cycle / v ** 2
+    return share * lim.junction_jerk_share * lim.jerk * lim.cycle / (v * (v + (lim.acceleration * lim.cycle
+                                                                             if blend else 0.0)))
 
 
 def limit_curvature(path: NominalPath, corr: Correction, s: CompensationSettings,

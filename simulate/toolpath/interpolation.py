@@ -32,10 +32,10 @@ exact geometry of a :class:`~simulate.toolpath.gcode.Program`:
 3. **Look-ahead.** A backward and a forward pass lower junction speeds until every block can
    change from its entry to its exit speed within its length under its ``A_t, J_t`` (rest-to-rest
    acceleration, S-curve distance ``(v1 + v2)/2 * T(dv)``), so every segment can stop in time.
-4. **Profiles.** Per block (a segment, or a blended run), ``ruckig`` computes the time-optimal 1-DoF jerk-limited profile along
-   the arc length from ``(0, v_in, 0)`` to ``(L, v_out, 0)`` (offline ``Ruckig.calculate``). Its
-   seven constant-jerk phases are evaluated in numpy for all 2 ms sample times at once and mapped
-   onto the exact line/arc geometry.
+4. **Profiles.** Per block (a segment, or a blended run), ``ruckig`` computes the time-optimal 1-DoF
+   jerk-limited profile along the arc length from ``(0, v_in, 0)`` to ``(L, v_out, 0)`` (offline
+   ``Ruckig.calculate``). Its seven constant-jerk phases are evaluated in numpy for all 2 ms sample
+   times at once and mapped onto the exact line/arc geometry.
 
 Limitation: under ``G61`` (zero acceleration at every junction), programs made of many very short
 near-colinear pieces (dense polylines) change speed slowly, as a chain of exact stops of the
@@ -243,7 +243,7 @@ def _blocks(segs, sl: list[_SegLimits], lim: PathLimits) -> list[tuple[int, int]
     beta_j = lim.junction_jerk_share * lim.jerk
     starts = [0] + [i for i in range(1, len(segs))
                     if not _blendable(segs[i - 1], segs[i], sl[i - 1], sl[i], lim, beta_j)]
-    return list(zip(starts, starts[1:] + [len(segs)]))
+    return list(zip(starts, starts[1:] + [len(segs)], strict=True))
 
 
 def plan_junction_speeds(program: Program, limits: PathLimits, blocks: list[tuple[int, int]] | None = None
@@ -318,7 +318,7 @@ def interpolate(program: Program, limits: PathLimits | None = None) -> Interpola
     ph_a = np.empty(7 * n)
     ph_j = np.empty(7 * n)
     t_now = 0.0
-    for i, (b0, b1) in enumerate(blocks):
+    for i, (b0, _) in enumerate(blocks):
         L = float(b_len[i])
         inp.current_position = [0.0]
         inp.current_velocity = [float(vj[i])]

@@ -143,3 +143,30 @@ def test_blended_program_keeps_the_feed(small):
     assert kept.mean() >= 0.97, kept.mean()
     assert res.iterations[1].time_ratio <= 1.01
     assert res.iterations[1].path_rms < 0.75 * res.iterations[0].path_rms
+
+
+def test_blended_limits_are_the_interpolators_blending_rule(small):
+    """Under G64 the correction's limits are the interpolator's blending rule dt (v / T^2 + A / T) <= beta J
+    (closed form), and a junction turning by the compensation's junction limit is blended by the
+    interpolator while one turning 1.2 times as much is not."""
+    from simulate.compensation import _junction_limit
+    from simulate.toolpath.gcode import parse_program
+    from simulate.toolpath.interpolation import _blocks, _segment_limits
+
+    prog, _ = small
+    path = NominalPath.of(load_program(prog))
+    r, g, mid = _line_run(path)
+    lim = PathLimits()
+    v, T, A = 1200e-3 / 60, lim.cycle, lim.acceleration
+    bj = lim.junction_jerk_share * lim.jerk
+    np.testing.assert_allclose(curvature_limit(path, r, g[mid], blend=True), 0.9 * bj * T / (v * (v + A * T)),
+                               rtol=1e-6)   # 37.5 1/m
+    turn = _junction_limit(v, lim, blend=True)
+    np.testing.assert_allclose(turn, 0.9 * bj / (v / T ** 2 + A / T), rtol=1e-12)
+    for factor, blended in ((1.0, True), (1.2 / 0.9, False)):
+        a = turn * factor
+        text = (f"G21 G90 G17\nG64\nG0 X0 Y0 Z0\nG1 X10 F1200\n"
+                f"G1 X{10 + 10 * np.cos(a):.9f} Y{10 * np.sin(a):.9f}\nM30\n")
+        segs = parse_program(text).segments
+        blocks = _blocks(segs, [_segment_limits(x, lim) for x in segs], lim)
+        assert (len(blocks) == 1) is blended, (factor, blocks)
