@@ -60,7 +60,7 @@ def test_dense_polyline_keeps_its_feed_under_g64(shape):
     # the time of one exact line of the same length: L / F plus half of each jerk-limited ramp from
     # and to rest; with F < A^2 / J the ramp never reaches A and lasts 2 sqrt(F / J_t)
     j_t = LIM.jerk * (1 - LIM.junction_jerk_share)
-    assert F < LIM.acceleration ** 2 / j_t
+    assert LIM.acceleration ** 2 / j_t > F
     ramp = 2.0 * math.sqrt(F / j_t)
     feed_length = sum(s.length for s in prog.segments if not getattr(s, "rapid", False))  # m
     assert ip.duration == pytest.approx(feed_length / F + ramp, abs=2 * LIM.cycle)
