@@ -140,9 +140,9 @@ def test_blended_program_keeps_the_feed(small):
     v0 = np.interp(sigma, it0.s, it0.v)
     cruise = (runs >= 0) & (v0 >= 0.999 * 0.02)
     kept = np.asarray(it1.v)[cruise] >= 0.99 * v0[cruise]
-    assert kept.mean() >= 0.97, kept.mean()
+    assert kept.mean() >= 0.99, kept.mean()   # measured 1.0
     assert res.iterations[1].time_ratio <= 1.01
-    assert res.iterations[1].path_rms < 0.75 * res.iterations[0].path_rms
+    assert res.iterations[1].path_rms < 0.7 * res.iterations[0].path_rms   # measured 0.58
 
 
 def test_blended_limits_are_the_interpolators_blending_rule(small):
