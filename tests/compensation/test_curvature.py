@@ -170,3 +170,51 @@ def test_blended_limits_are_the_interpolators_blending_rule(small):
         segs = parse_program(text).segments
         blocks = _blocks(segs, [_segment_limits(x, lim) for x in segs], lim)
         assert (len(blocks) == 1) is blended, (factor, blocks)
+
+
+def test_a_kink_at_one_grid_node_is_seen_and_smoothed(small):
+    """A zigzag of +-1 um from node to node (second difference 4 um / (0.1 mm)^2 = 400 1/m) is invisible to
+    np.gradient applied twice (it spans five points) but is a kink a piece shorter than a cell turns at
+    one junction: the three-point difference sees it and the limit smooths it; the 50 um offset stays."""
+    prog, _ = small
+    path = NominalPath.of(load_program(prog))
+    r, g, mid = _line_run(path)
+    corr = Correction.zero(path)
+    _, h, _ = path.frame(r, g)
+    zig = 1e-6 * (-1.0) ** np.arange(len(g))
+    corr.values[r] = (50e-6 + zig)[:, None] * h
+    d = float(g[1] - g[0])
+    assert np.abs(np.gradient(np.gradient(50e-6 + zig, d), d))[mid].max() < 1e-6   # five points: blind
+    out = limit_curvature(path, corr, CompensationSettings())
+    side = np.sum(out.values[r] * h, axis=1)
+    k3 = np.abs(np.diff(side, 2)) / d ** 2
+    assert np.all(k3[1:-1] <= curvature_limit(path, r, g)[2:-2] * 1.001)
+    assert np.abs(side[mid] - 50e-6).max() < 0.1e-6
+
+
+@pytest.mark.parametrize("smooth", [True, False])
+def test_written_pieces_through_a_spline_stay_blended(small, monkeypatch, smooth):
+    """A correction of 30 um over an 8 mm wavelength (curvature 18.5 1/m, half the limit at F1200) written as
+    pieces: through the spline of the grid every junction is blended and the line keeps its feed; read
+    linearly, each 0.1 mm grid node is a kink of 1.85 mrad, beyond the 1.5 mrad a blended junction passes,
+    and the program slows down there."""
+    import simulate.compensation as comp
+    from simulate.toolpath.gcode import parse_program
+    from simulate.toolpath.interpolation import interpolate
+
+    if not smooth:
+        monkeypatch.setattr(comp.Correction, "smooth", lambda self: self)
+    prog, _ = small
+    path = NominalPath.of(load_program(prog))
+    r, g, mid = _line_run(path)
+    corr = Correction.zero(path)
+    _, h, _ = path.frame(r, g)
+    w = np.clip((g - g[0] - 10e-3) / 4e-3, 0.0, 1.0)   # in from zero after the run's start
+    corr.values[r] = (w * w * (3 - 2 * w) * 30e-6 * np.sin(2 * np.pi * (g - g[0]) / 8e-3))[:, None] * h
+    text = comp.write_program(path, corr, CompensationSettings()).text
+    ip = interpolate(parse_program(text))
+    x = ip.xyz[:, 0]
+    cruise = (x > 6e-3) & (x < 17e-3) & (np.abs(ip.xyz[:, 1] - 24.5e-3) < 1e-4)   # the corrected line, cruising
+    assert cruise.sum() > 250
+    kept = np.mean(ip.v[cruise] >= 0.99 * 0.02)
+    assert bool(kept == 1.0) == smooth, kept
