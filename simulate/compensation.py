@@ -892,7 +892,11 @@ def limit_curvature(path: NominalPath, corr: Correction, s: CompensationSettings
             bad[:2] = bad[-2:] = False   # one-sided differences at the run's ends
             if not bad.any():
                 break
-            w = np.clip(_box(_box(bad.astype(float), 2 * s.smoothing) * 1e3, s.smoothing), 0.0, 1.0)
+            # the zone (bad widened by 2 smoothing) as 0/1, then smoothed twice: the weight rises over about
+            # 2 smoothing with a bounded second difference (clipping after smoothing made it a step within
+            # one node, i.e. a kink in the output wherever the box average differed from the correction)
+            zone = (_box(bad.astype(float), 2 * s.smoothing) > 1e-9).astype(float)
+            w = _box(_box(zone, s.smoothing), s.smoothing)
             comp = comp + w[:, None] * (_box(comp, s.smoothing) - comp)
         out.append(comp[:, :1] * h + comp[:, 1:] * up)
     return Correction(corr.grids, out)

@@ -33,7 +33,9 @@ def _curvature(path, corr, r):
     _, h, v = path.frame(r, g)
     comp = np.stack([np.sum(corr.values[r] * h, axis=1), np.sum(corr.values[r] * v, axis=1)], axis=1)
     d = float(g[1] - g[0])
-    return np.linalg.norm(np.gradient(np.gradient(comp, d, axis=0), d, axis=0), axis=1)
+    k = np.zeros(len(g))   # three-point second difference: also a kink at one node
+    k[1:-1] = np.linalg.norm(np.diff(comp, 2, axis=0), axis=1) / d ** 2
+    return k
 
 
 def test_limit_is_the_junction_jerk_rule_at_the_programmed_speed(small):
@@ -218,3 +220,25 @@ def test_written_pieces_through_a_spline_stay_blended(small, monkeypatch, smooth
     assert cruise.sum() > 250
     kept = np.mean(ip.v[cruise] >= 0.99 * 0.02)
     assert bool(kept == 1.0) == smooth, kept
+
+
+def test_the_smoothed_zone_joins_without_a_kink(small):
+    """A sharp 20 um bump (width 0.5 mm) on a correction that bends at 2/3 of the limit: the bump is
+    smoothed, and where the smoothed zone meets the untouched correction no kink is made (a weight that
+    jumped from 0 to 1 within one node left one there, which the next pass saw again)."""
+    prog, _ = small
+    path = NominalPath.of(load_program(prog))
+    r, g, mid = _line_run(path)
+    corr = Correction.zero(path)
+    _, h, _ = path.frame(r, g)
+    kmax = curvature_limit(path, r, g)
+    x = g - g[mid][len(g[mid]) // 2]
+    kb = 30.0   # 1/m, two thirds of the limit (45 1/m)
+    base = np.where(np.abs(x) < 6e-3, 0.5 * kb * x ** 2, kb * 6e-3 * (np.abs(x) - 3e-3))
+    bump = 20e-6 * np.exp(-0.5 * (x / 0.25e-3) ** 2)
+    corr.values[r] = (base + bump)[:, None] * h
+    out = limit_curvature(path, corr, CompensationSettings())
+    k = _curvature(path, out, r)
+    assert np.all(k[mid] <= kmax[mid] * 1.001), (k[mid] / kmax[mid]).max()
+    side = np.sum(out.values[r] * h, axis=1)
+    assert np.abs(side - base)[mid].max() < 20e-6   # the bump is spread, the bending correction kept
