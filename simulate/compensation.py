@@ -122,8 +122,8 @@ class CompensationSettings:
     keep_speed : bool
         Smooth the correction further where the written program would run slower than the original
         (:func:`keep_speed`); off (default): only the time contract lowers the curvature share. On
-        iso160 it kept the feed (time 1.01-1.04x instead of 1.21-1.24x) but lost more correction than
-        it gained (near: sum ratio 0.58 instead of 0.31; ``docs/compensation.md``).
+        iso160 (before ``blend``) it kept the feed (time 1.01-1.04x instead of 1.21-1.24x) but lost more
+        correction than it gained (near: sum ratio 0.58 instead of 0.31; ``docs/compensation.md``).
     """
 
     iterations: int = 4
@@ -845,7 +845,8 @@ def curvature_limit(path: NominalPath, run: int, sigma: np.ndarray, limits: Path
     local speed as above, so that the corrected program is not slower than the original anywhere; where
     the original cruises this is the blending rule at the feed. (At the feed cap everywhere, i.e. also
     where the original slows down for a corner, it smoothed away more correction near the corners:
-    iso160 near, plain NC, sum ratio 0.382 instead of 0.320, square straightness 246 instead of 145 µm.)
+    iso160 near, plain NC, sum ratio 0.382 instead of 0.320, square straightness 246 instead of 145 µm,
+    both before the smoothing weight of :func:`limit_curvature` was made smooth.)
     """
     lim = limits or PathLimits()
     it = path.setup.interp
