@@ -14,6 +14,9 @@ Supported words
 - ``G17``/``G18``/``G19`` plane XY (normal +z) / ZX (normal +y) / YZ (normal +x).
 - ``G90``/``G91`` absolute / incremental coordinates; ``G20``/``G21`` inch / mm; ``G94`` feed per
   minute (the only feed mode, accepted as a no-op).
+- ``G61`` exact path (the default) / ``G64`` continuous-path blending, modal: under ``G64`` the
+  interpolator carries speed and acceleration across junctions that need no slow-down
+  (:mod:`simulate.toolpath.interpolation`); the path itself stays exactly as programmed.
 - ``F`` feed in length unit per minute, ``S`` spindle speed in rev/min, ``T`` tool number.
 - ``M3`` spindle on (clockwise), ``M5`` spindle off, ``M6`` tool change (no motion), ``M2``/``M30``
   program end. Nothing but blank lines and comments may follow the end.
@@ -26,7 +29,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +42,7 @@ _UNIT_M = {20: 0.0254, 21: 1e-3}
 _PLANES = {17: ((0, 1), 2), 18: ((2, 0), 1), 19: ((1, 2), 0)}
 _CENTRE_WORD = {0: "I", 1: "J", 2: "K"}
 
-_SUPPORTED_G = {0, 1, 2, 3, 17, 18, 19, 20, 21, 90, 91, 94}
+_SUPPORTED_G = {0, 1, 2, 3, 17, 18, 19, 20, 21, 61, 64, 90, 91, 94}
 _SUPPORTED_M = {2, 3, 5, 6, 30}
 _VALUE_WORDS = set("XYZIJKRFSTN")
 
@@ -64,6 +67,8 @@ class Linear:
         Spindle speed, rev/s (0 when off).
     tool : int
         Active tool number (``T``), 0 if none was selected.
+    blend : bool
+        ``G64`` (continuous-path blending) was active for this move; ``False`` under ``G61``.
     """
 
     start: np.ndarray
@@ -73,6 +78,7 @@ class Linear:
     line: int
     spindle: float = 0.0
     tool: int = 0
+    blend: bool = False
 
     @property
     def length(self) -> float:
@@ -105,6 +111,8 @@ class Arc:
         Spindle speed, rev/s (0 when off).
     tool : int
         Active tool number.
+    blend : bool
+        ``G64`` was active for this move.
     """
 
     start: np.ndarray
@@ -117,6 +125,7 @@ class Arc:
     line: int
     spindle: float = 0.0
     tool: int = 0
+    blend: bool = False
 
     @property
     def rise(self) -> float:
@@ -256,6 +265,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
     spindle_rpm = 0.0
     spindle_on = False
     tool = 0
+    blend = False  # G61 exact path until G64
     pos = np.zeros(3)
     segments: list[Segment] = []
     ended_at: int | None = None
@@ -303,7 +313,8 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         groups: dict[str, int] = {}
         for code, col in gcodes:
             group = ("motion" if code in (0, 1, 2, 3) else "plane" if code in (17, 18, 19)
-                     else "units" if code in (20, 21) else "distance" if code in (90, 91) else "feedmode")
+                     else "units" if code in (20, 21) else "distance" if code in (90, 91)
+                     else "path mode" if code in (61, 64) else "feedmode")
             if group in groups:
                 raise err(f"two G words of one modal group ({group}) on one line", col)
             groups[group] = col
@@ -313,6 +324,8 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
                 absolute = code == 90
             elif code in (17, 18, 19):
                 plane = code
+            elif code in (61, 64):
+                blend = code == 64
             elif code in (0, 1, 2, 3):
                 new_motion = code
         if new_motion is not None:
@@ -359,11 +372,12 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         if motion in (0, 1):
             if np.linalg.norm(target - pos) > 0.0:
                 segments.append(Linear(start=pos.copy(), end=target.copy(), feed=feed if feed else 0.0,
-                                       rapid=motion == 0, line=lineno, spindle=spindle, tool=tool))
+                                       rapid=motion == 0, line=lineno, spindle=spindle, tool=tool,
+                                       blend=blend))
         else:
             seg = _arc(pos, target, values, seen, motion, plane, unit, feed, lineno, spindle, tool,
                        arc_tolerance, err)
-            segments.append(seg)
+            segments.append(replace(seg, blend=blend) if blend else seg)
         pos = target
     return Program(segments=segments, source=source)
 

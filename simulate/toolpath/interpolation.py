@@ -20,17 +20,26 @@ exact geometry of a :class:`~simulate.toolpath.gcode.Program`:
    finite differences of the emitted points stays below ``J`` (``J_t <= (1 - beta) J`` elsewhere).
    Sharp corners are thus passed at almost zero speed (exact path, no corner rounding), tangent
    transitions at speed. Acceleration is zero at every junction (continuous acceleration).
-3. **Look-ahead.** A backward and a forward pass lower junction speeds until every segment can
+2b. **Blended junctions (``G64``).** Under ``G64`` (:mod:`simulate.toolpath.gcode`) a junction of two
+   feed moves with the same speed cap is *blended* when it can be crossed at that cap with any
+   tangential acceleration up to ``A``: ``dt (v_cap / T^2 + A / T) + v_cap^2 dk / T <= beta J`` (the
+   velocity turns by ``v dt`` and the acceleration by ``a dt`` within one cycle). Blended segments form
+   one block planned as a single profile (smallest ``A_t``, ``J_t`` of its segments), so speed and
+   acceleration carry across the junction; the samples still lie exactly on the programmed segments
+   (no corner rounding: a junction that needs a slow-down is never blended). This is the look-ahead an
+   NC applies to dense CAM polylines in continuous-path mode; ``G61`` (the default) keeps ``a = 0`` at
+   every junction.
+3. **Look-ahead.** A backward and a forward pass lower junction speeds until every block can
    change from its entry to its exit speed within its length under its ``A_t, J_t`` (rest-to-rest
    acceleration, S-curve distance ``(v1 + v2)/2 * T(dv)``), so every segment can stop in time.
-4. **Profiles.** Per segment, ``ruckig`` computes the time-optimal 1-DoF jerk-limited profile along
-   the arc length from ``(0, v_in, 0)`` to ``(L, v_out, 0)`` (offline ``Ruckig.calculate``). Its
-   seven constant-jerk phases are evaluated in numpy for all 2 ms sample times at once and mapped
-   onto the exact line/arc geometry.
+4. **Profiles.** Per block (a segment, or a blended run), ``ruckig`` computes the time-optimal 1-DoF
+   jerk-limited profile along the arc length from ``(0, v_in, 0)`` to ``(L, v_out, 0)`` (offline
+   ``Ruckig.calculate``). Its seven constant-jerk phases are evaluated in numpy for all 2 ms sample
+   times at once and mapped onto the exact line/arc geometry.
 
-Limitation: with zero acceleration at every junction, programs made of many very short colinear
-pieces (dense polylines) run slower than a controller that blends acceleration across junctions;
-CAM output with arcs (as the test-piece program) is not affected.
+Limitation: under ``G61`` (zero acceleration at every junction), programs made of many very short
+near-colinear pieces (dense polylines) change speed slowly, as a chain of exact stops of the
+acceleration; ``G64`` removes that. CAM output with arcs (as the test-piece program) is not affected.
 
 Samples are uniform in time and therefore nonuniform along the path (paper Figure 5). The last
 sample is the first cycle at or after the end of motion, holding the end point.
@@ -112,7 +121,8 @@ class Interpolation:
     cycle : float
         s.
     junction_speed : numpy.ndarray, (M+1,)
-        Planned speed at the start of each segment and at the end of the last one, m/s.
+        Planned speed at the start of each segment and at the end of the last one, m/s (inside a
+        blended run, ``G64``: the profile's speed there).
     """
 
     t: np.ndarray
@@ -211,21 +221,52 @@ def _junction_cap(t1, k1, t2, k2, lim: PathLimits, beta_j: float) -> float:
     return (-b + math.sqrt(b * b + 4.0 * c * rhs)) / (2.0 * c)
 
 
-def plan_junction_speeds(program: Program, limits: PathLimits) -> tuple[np.ndarray, list[_SegLimits]]:
-    """Look-ahead: speeds at the M+1 segment boundaries (0 at both ends), m/s (docstring steps 2-3)."""
+def _blendable(seg1, seg2, sl1: _SegLimits, sl2: _SegLimits, lim: PathLimits, beta_j: float) -> bool:
+    """``G64`` junction: crossed at any speed up to the (common) cap with any tangential acceleration up to
+    ``A`` without exceeding the junction jerk budget (module docstring, step 2b)."""
+    if not (seg1.blend and seg2.blend) or any(isinstance(x, Linear) and x.rapid for x in (seg1, seg2)):
+        return False  # rapids are positioning moves: exact path, as without G64
+    if abs(sl1.v_cap - sl2.v_cap) > 1e-9 * max(sl1.v_cap, sl2.v_cap):
+        return False
+    t1, k1 = _tangent_curvature(seg1, True)
+    t2, k2 = _tangent_curvature(seg2, False)
+    dt = float(np.linalg.norm(t2 - t1))
+    dk = float(np.linalg.norm(k2 - k1))
+    v, T = sl1.v_cap, lim.cycle
+    # the velocity turns by v dt and the tangential acceleration by a dt within one cycle
+    return dt * (v / (T * T) + lim.acceleration / T) + v * v * dk / T <= beta_j
+
+
+def _blocks(segs, sl: list[_SegLimits], lim: PathLimits) -> list[tuple[int, int]]:
+    """Runs ``[first, last)`` of segments interpolated as one profile: a segment of its own unless its
+    junction with the previous one is blended (``G64``, :func:`_blendable`)."""
+    beta_j = lim.junction_jerk_share * lim.jerk
+    starts = [0] + [i for i in range(1, len(segs))
+                    if not _blendable(segs[i - 1], segs[i], sl[i - 1], sl[i], lim, beta_j)]
+    return list(zip(starts, starts[1:] + [len(segs)], strict=True))
+
+
+def plan_junction_speeds(program: Program, limits: PathLimits, blocks: list[tuple[int, int]] | None = None
+                         ) -> tuple[np.ndarray, list[_SegLimits]]:
+    """Look-ahead: speeds at the B+1 block boundaries (0 at both ends), m/s, and each block's limits
+    (docstring steps 2-3). Without ``blocks`` every segment is a block of its own."""
     segs = program.segments
-    n = len(segs)
-    sl = [_segment_limits(s, limits) for s in segs]
+    seg_lim = [_segment_limits(s, limits) for s in segs]
+    blocks = blocks or [(i, i + 1) for i in range(len(segs))]
+    # a blended run keeps the common speed cap and the smallest tangential limits of its segments
+    sl = [_SegLimits(min(x.v_cap for x in seg_lim[a:b]), min(x.a_t for x in seg_lim[a:b]),
+                     min(x.j_t for x in seg_lim[a:b])) for a, b in blocks]
+    n = len(blocks)
     vj = np.zeros(n + 1)
     beta_j = limits.junction_jerk_share * limits.jerk
     for i in range(1, n):
-        t1, k1 = _tangent_curvature(segs[i - 1], True)
-        t2, k2 = _tangent_curvature(segs[i], False)
+        t1, k1 = _tangent_curvature(segs[blocks[i - 1][1] - 1], True)
+        t2, k2 = _tangent_curvature(segs[blocks[i][0]], False)
         vj[i] = min(sl[i - 1].v_cap, sl[i].v_cap, _junction_cap(t1, k1, t2, k2, limits, beta_j))
-    lengths = [s.length for s in segs]
-    for i in range(n - 1, -1, -1):  # backward: every segment can slow down to its exit speed
+    lengths = [sum(s.length for s in segs[a:b]) for a, b in blocks]
+    for i in range(n - 1, -1, -1):  # backward: every block can slow down to its exit speed
         vj[i] = min(vj[i], _reachable(vj[i + 1], lengths[i], sl[i].v_cap, sl[i].a_t, sl[i].j_t))
-    for i in range(n):  # forward: every segment can reach its exit speed from its entry speed
+    for i in range(n):  # forward: every block can reach its exit speed from its entry speed
         vj[i + 1] = min(vj[i + 1], _reachable(vj[i], lengths[i], sl[i].v_cap, sl[i].a_t, sl[i].j_t))
     # A hair below the bound so that the exact solver never sees an infeasible pair after rounding.
     vj *= 1.0 - 1e-9
@@ -258,22 +299,27 @@ def interpolate(program: Program, limits: PathLimits | None = None) -> Interpola
     segs = program.segments
     if not segs:
         raise InputError("program has no motion", source=program.source)
-    vj, sl = plan_junction_speeds(program, lim)
+    blocks = _blocks(segs, [_segment_limits(x, lim) for x in segs], lim)
+    vj, sl = plan_junction_speeds(program, lim, blocks)
+    lengths = np.array([x.length for x in segs])
+    cum = np.concatenate(([0.0], np.cumsum(lengths)))
+    b_first = np.array([b0 for b0, _ in blocks])
+    b_last = np.array([b1 - 1 for _, b1 in blocks])
+    b_len = np.array([lengths[b0:b1].sum() for b0, b1 in blocks])
 
     otg = ruckig.Ruckig(1)
     inp = ruckig.InputParameter(1)
     traj = ruckig.Trajectory(1)
-    n = len(segs)
-    # 7 constant-jerk phases per segment: global start time, start state, jerk.
+    n = len(blocks)
+    # 7 constant-jerk phases per block: global start time, start state, jerk.
     ph_t0 = np.empty(7 * n)
     ph_p = np.empty(7 * n)
     ph_v = np.empty(7 * n)
     ph_a = np.empty(7 * n)
     ph_j = np.empty(7 * n)
-    seg_t0 = np.empty(n + 1)
     t_now = 0.0
-    for i, seg in enumerate(segs):
-        L = seg.length
+    for i, (b0, _) in enumerate(blocks):
+        L = float(b_len[i])
         inp.current_position = [0.0]
         inp.current_velocity = [float(vj[i])]
         inp.current_acceleration = [0.0]
@@ -288,9 +334,8 @@ def interpolate(program: Program, limits: PathLimits | None = None) -> Interpola
         if res not in (ruckig.Result.Working, ruckig.Result.Finished):
             raise InputError(f"no jerk-limited profile for this segment ({res.name}); "
                              f"length {L * 1e3:.6f} mm, speeds {vj[i]:.6g} -> {vj[i + 1]:.6g} m/s",
-                             source=program.source, line=seg.line)
+                             source=program.source, line=segs[b0].line)
         prof = traj.profiles[0][0]
-        seg_t0[i] = t_now
         tt = np.asarray(prof.t)
         starts = t_now + np.concatenate(([0.0], np.cumsum(tt)[:-1]))
         sl7 = slice(7 * i, 7 * i + 7)
@@ -300,7 +345,6 @@ def interpolate(program: Program, limits: PathLimits | None = None) -> Interpola
         ph_a[sl7] = prof.a[:7]
         ph_j[sl7] = prof.j
         t_now += float(traj.duration)
-    seg_t0[n] = t_now
 
     T = lim.cycle
     nsamp = int(math.ceil(t_now / T - 1e-9)) + 1
@@ -309,10 +353,10 @@ def interpolate(program: Program, limits: PathLimits | None = None) -> Interpola
     ph = np.searchsorted(ph_t0, tc, side="right") - 1
     # Zero-length phases share a start time; searchsorted picks the last of them, which is right.
     ph = np.clip(ph, 0, 7 * n - 1)
-    seg_idx = ph // 7
+    blk = ph // 7
     tau = tc - ph_t0[ph]
     jj = ph_j[ph]
-    s_loc = ph_p[ph] + tau * (ph_v[ph] + tau * (0.5 * ph_a[ph] + tau * jj / 6.0))
+    s_blk = ph_p[ph] + tau * (ph_v[ph] + tau * (0.5 * ph_a[ph] + tau * jj / 6.0))
     v = ph_v[ph] + tau * (ph_a[ph] + 0.5 * tau * jj)
     a = ph_a[ph] + tau * jj
     j = jj.copy()
@@ -320,14 +364,25 @@ def interpolate(program: Program, limits: PathLimits | None = None) -> Interpola
     v[end] = vj[n]
     a[end] = 0.0
     j[end] = 0.0
-    lengths = np.array([s.length for s in segs])
-    s_loc = np.clip(s_loc, 0.0, lengths[seg_idx])
-    s_loc[end] = lengths[-1]
-    cum = np.concatenate(([0.0], np.cumsum(lengths)))
+    s_blk = np.clip(s_blk, 0.0, b_len[blk])
+    s_blk[end] = b_len[-1]
+    # the segment of a block that holds each sample (a block of one segment: that segment)
+    s_glob = cum[b_first[blk]] + s_blk
+    seg_idx = np.clip(np.searchsorted(cum, s_glob, side="right") - 1, b_first[blk], b_last[blk])
+    # (a block of one segment uses its own arc length as before: bit-identical without G64)
+    single = b_first[blk] == b_last[blk]
+    s_loc = np.clip(np.where(single, s_blk, s_glob - cum[seg_idx]), 0.0, lengths[seg_idx])
     xyz = _geometry(segs, seg_idx, s_loc, lengths)
-    line = np.array([s.line for s in segs], dtype=np.int64)[seg_idx]
-    return Interpolation(t=t, line=line, segment=seg_idx.astype(np.int64) + first, xyz=xyz, s=cum[seg_idx] + s_loc,
-                         v=v, a=a, j=j, cycle=T, junction_speed=vj)
+    line = np.array([x.line for x in segs], dtype=np.int64)[seg_idx]
+    # planned speed at every segment start: the block's boundary speed, inside a block its profile's
+    v_seg = np.empty(len(segs) + 1)
+    v_seg[b_first] = vj[:-1]
+    v_seg[-1] = vj[-1]
+    inner = np.setdiff1d(np.arange(len(segs)), b_first)
+    if inner.size:
+        v_seg[inner] = np.interp(cum[inner], cum[seg_idx] + s_loc, v)
+    return Interpolation(t=t, line=line, segment=seg_idx.astype(np.int64) + first, xyz=xyz,
+                         s=cum[seg_idx] + s_loc, v=v, a=a, j=j, cycle=T, junction_speed=v_seg)
 
 
 def _geometry(segs, seg_idx: np.ndarray, s_loc: np.ndarray, lengths: np.ndarray) -> np.ndarray:
