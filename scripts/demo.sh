@@ -19,6 +19,30 @@ else
     DURATION=10 MODELS=coulomb-viscous,stribeck,lugre,residual,greybox SIZE=160 SHARES=--no-shares ITERATIONS=2
 fi
 
+# The simulation kernels (numba) are compiled once per clone and cached next to the sources. Compile them
+# in the background while step 1 (torch; it needs none of them) runs, so the simulations of steps 2-4
+# load them, and the two rank-poses workers do not both compile them (simulate/warmup.py); its output
+# goes to a log, not between the demo's tables. Ended with the demo on an error or Ctrl-C.
+.venv/bin/python -m simulate.warmup > "$OUT/warmup.log" 2>&1 &
+WARMUP=$!
+trap 'kill "$WARMUP" 2>/dev/null || true' EXIT
+trap 'exit 130' INT TERM
+
+# Before the first simulation: wait for the warm-up, showing its progress lines meanwhile. A failed
+# warm-up only costs time (each simulation then compiles what it needs), so the demo goes on.
+kernels_ready() {
+    if kill -0 "$WARMUP" 2>/dev/null; then
+        echo "(waiting for the background compilation of the simulation kernels, log $OUT/warmup.log)"
+        tail -n 0 --pid="$WARMUP" -f "$OUT/warmup.log" >&2
+    fi
+    if wait "$WARMUP"; then
+        echo "(simulation kernels compiled in the background: $OUT/warmup.log)"
+    else
+        echo "warning: the background compilation of the simulation kernels failed (see $OUT/warmup.log);" \
+            "the simulations compile them themselves" >&2
+    fi
+}
+
 echo "== 1. Friction identification, axis 1 (synthetic plant: non-Stribeck static curve, noise 0.02 Nm; ${DURATION} s records) =="
 $G trajectory universal --axis 1 --duration "$DURATION" --out "$OUT/ut.parquet"
 $G trajectory test --axis 1 --duration "$DURATION" --out "$OUT/ut_test.parquet"
@@ -27,6 +51,8 @@ $G synth --trajectory "$OUT/ut_test.parquet" --out "$OUT/test.parquet" --seed 2 
 $G compare --train "$OUT/train.parquet" --test "$OUT/test.parquet" --axis 1 --models "$MODELS" --experiment demo-axis1
 $G fit --model lugre --train "$OUT/train.parquet" --test "$OUT/test.parquet" --out "$OUT/models/lugre" --no-track > /dev/null
 $G predict --model "$OUT/models/lugre" --data "$OUT/test.parquet" --out "$OUT/test-predicted.parquet"
+
+kernels_ready
 
 echo "== 2. Machining simulation of the ISO 10791-7 test piece (${SIZE} mm) with the fitted LuGre model on axis 1, poses ranked (Table 2 layout) =="
 $G rank-poses --program "data/programs/iso$SIZE.nc" --robot max100 --poses "data/poses/iso$SIZE.json" --size "$SIZE" \
