@@ -92,21 +92,30 @@ class WarmupResult:
     wall: float
 
 
-def _kernel_counts() -> tuple[int, int]:
-    """(compiled, loaded from the cache) over the numba dispatchers of the loaded simulate modules."""
+def _dispatchers():
+    """The numba dispatchers of the loaded ``simulate`` modules, by qualified name."""
     from numba.core.registry import CPUDispatcher
 
-    seen: set[int] = set()
-    compiled = loaded = 0
+    out = {}
     for name, mod in list(sys.modules.items()):
         if not name.startswith("simulate.") or mod is None:
             continue
         for obj in list(vars(mod).values()):
-            if isinstance(obj, CPUDispatcher) and id(obj) not in seen:
-                seen.add(id(obj))
-                loaded += sum(obj._cache_hits.values())
-                compiled += sum(obj._cache_misses.values())
-    return compiled, loaded
+            if isinstance(obj, CPUDispatcher) and getattr(obj.py_func, "__module__", None) == name:
+                out[f"{name}.{obj.py_func.__name__}"] = obj
+    return out
+
+
+def kernel_signatures() -> dict[str, int]:
+    """Per simulation kernel (qualified name) the number of argument-type signatures this process has
+    compiled or loaded; kernels not called yet are left out."""
+    return {k: len(d.signatures) for k, d in sorted(_dispatchers().items()) if d.signatures}
+
+
+def _kernel_counts() -> tuple[int, int]:
+    """(compiled, loaded from the cache) signatures of this process's simulation kernels."""
+    ds = _dispatchers().values()
+    return (sum(sum(d.stats.cache_misses.values()) for d in ds), sum(sum(d.stats.cache_hits.values()) for d in ds))
 
 
 def warm_up(robot: str | Path = ROBOT, poses: str | Path = POSES, stock: str | Path = STOCK, *,
