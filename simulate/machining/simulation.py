@@ -507,7 +507,8 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     nsub = substeps(float(np.median(np.diff(t))), spindle.omega, cutter.flutes, per_tooth=4)
     model = force_model(cutter, material, spindle, nsub)
     use_c = compliance is not None and forces
-    C = np.ascontiguousarray(np.broadcast_to(np.asarray(compliance, float), (n, 3, 3))) if use_c \
+    # a writable copy: a read-only broadcast view is another array type, which would compile the loop twice
+    C = np.array(np.broadcast_to(np.asarray(compliance, float), (n, 3, 3)), order="C") if use_c \
         else np.zeros((1, 3, 3))
     path = LoopPath(t, xyz, err, C)
     flags = (LoopFlags.FORCES if forces else LoopFlags(0)) | (LoopFlags.COMPLIANCE if use_c else LoopFlags(0))
