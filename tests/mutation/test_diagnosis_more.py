@@ -276,8 +276,8 @@ def _result(causes, ranking, gain=0.25):
                          threshold=0.0021, residual_rms=(0.05, 0.06), noise=0.021)
     return DiagnosisResult(analysis=a, baseline=_model(LuGre, base_p, 0.04321),
                            extended=_model(LuGreExtended, ext_p, 0.01234, causes=[c.value for c in causes]),
-                           baseline_test=Metrics(0.06, 0.9, 0.1, 1.0, 10), extended_test=Metrics(0.045, 0.9, 0.1, 1.0, 10),
-                           gain=gain)
+                           baseline_test=Metrics(0.06, 0.9, 0.1, 1.0, 10),
+                           extended_test=Metrics(0.045, 0.9, 0.1, 1.0, 10), gain=gain)
 
 
 def _rec(n=5, linear=False):
@@ -341,7 +341,7 @@ Identified extension parameters (refitted jointly with the LuGre parameters):
 ![held-out residual vs the drift variable, before and after](residual_drift.png)
 
 The extended model is saved in this folder (`greybench predict --model <this folder>`); the baseline in `baseline/`.
-"""
+"""  # noqa: E501 (the report's long lines, verbatim)
     assert text == expected
 
 
