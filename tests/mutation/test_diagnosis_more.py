@@ -3,6 +3,7 @@ extra effects; the report's text, the plotted data and the written files checked
 computed here (fast: no GA for the baseline, a short joint refit)."""
 from __future__ import annotations
 
+import inspect
 import json
 
 import numpy as np
@@ -59,7 +60,9 @@ def case():
 
 
 # ---- diagnose -------------------------------------------------------------------------------
-def test_diagnose_names_both_causes_and_the_extension_recovers_them(case):
+# mutmut maps a module fixture's calls to the first test that requests it (in file order on a full
+# run, in name order when it adds new tests): this test comes first both ways, so it holds the checks.
+def test_diagnose_and_its_json_name_both_causes_and_the_extension_recovers_them(case):
     train, test, base, res = case
     a = res.analysis
     assert set(a.causes) == {Cause.DRIFT, Cause.ASYMMETRY} and res.cause is a.causes[0]
@@ -79,10 +82,6 @@ def test_diagnose_names_both_causes_and_the_extension_recovers_them(case):
     assert set(res.timings) == {"baseline fit", "analysis", "extended refit"}
     assert all(v >= 0.0 for v in res.timings.values())
     assert res.timings["extended refit"] > res.timings["baseline fit"]      # the refit did work, the fit none
-
-
-def test_diagnose_label_and_json(case):
-    _, _, _, res = case
     assert res.extended_label == "lugre-extended[asymmetry+drift]"
     doc = res.to_json()
     assert doc == {"cause": res.cause.value,
@@ -108,6 +107,9 @@ def test_diagnose_fits_its_own_baseline_and_refuses_another_model():
     assert none.gain == pytest.approx(0.0, abs=1e-12)
     with pytest.raises(TypeError, match="LuGre"):
         diagnose(train, test, baseline=CoulombViscous().fit(train))
+    # the defaults the docstring gives: 30 GA generations of 48, seed 0, the module's threshold
+    kw = {k: v.default for k, v in inspect.signature(diagnose).parameters.items() if k not in ("train", "test")}
+    assert kw == {"seed": 0, "population": 48, "generations": 30, "threshold": dg.SCORE_THRESHOLD, "baseline": None}
 
 
 # ---- what the plots show ----------------------------------------------------------------------

@@ -91,7 +91,7 @@ def fitted():
 
 
 @pytest.mark.parametrize("rigid", [True, False])
-def test_the_network_learns_what_lugre_leaves(fitted, rigid):
+def test_fit_learns_what_lugre_leaves(fitted, rigid):  # first in file and name order (module fixture)
     rec, m = fitted[rigid]
     base = m.base_
     assert (base.population, base.generations, base.seed) == (10, 2, 3) and base.ga_generations_ == 2
