@@ -184,11 +184,16 @@ class _Kept:
 
 @pytest.mark.parametrize("cause", [Cause.ASYMMETRY, Cause.LOAD])
 def test_residual_plot_draws_the_binned_residuals(case, tmp_path, monkeypatch, cause):
-    _, test, _, res = case
+    _, _, _, res = case
+    # a held-out record longer than the 4000 points shown: every other sample is scattered
+    test = _with_effect(_record(0.17, 0.29, n=9000, seed=1), _drift_and_asymmetry, 2)
     kept = _Kept(monkeypatch)
     path = tmp_path / "r.png"
     residual_plot(res, test, cause, path)
-    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    png = path.read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    # 8 x 4.5 in at 110 dpi
+    assert (int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")) == (880, 495)
     (fig,) = kept.figs
     ax = fig.axes[0]
     view = variable_view(cause, test)
@@ -196,7 +201,10 @@ def test_residual_plot_draws_the_binned_residuals(case, tmp_path, monkeypatch, c
     before = (test.tau - res.baseline.predict(test)) * view.sign
     after = (test.tau - res.extended.predict(test)) * view.sign
     *lines, zero = ax.get_lines()
-    np.testing.assert_array_equal(zero.get_ydata(), [0.0, 0.0])         # the zero line
+    np.testing.assert_array_equal(zero.get_ydata(), [0.0, 0.0])         # the zero line, thin and black
+    assert zero.get_color() == "k" and zero.get_linewidth() == 0.6
+    assert [ln.get_color() for ln in lines] == ["C0", "C3"]
+    assert all(ln.get_marker() == "o" and ln.get_markersize() == 3 for ln in lines)
     for line, y in zip(lines, (before, after), strict=True):
         xc, yc = _binned(view.x[m], y[m])
         np.testing.assert_allclose(line.get_xdata(), xc)
@@ -205,9 +213,13 @@ def test_residual_plot_draws_the_binned_residuals(case, tmp_path, monkeypatch, c
         "before: lugre (binned mean)", f"after: {res.extended_label} (binned mean)"]
     # the scatter: every step-th shown sample of the baseline residual
     offsets = ax.collections[0].get_offsets()
-    step = max(1, int(m.sum()) // 4000)
+    step = int(m.sum()) // 4000
+    assert step == 2 or (cause is Cause.LOAD and step >= 1)
     np.testing.assert_allclose(offsets[:, 0], view.x[m][::step])
     np.testing.assert_allclose(offsets[:, 1], before[m][::step])
+    sc = ax.collections[0]
+    assert list(sc.get_sizes()) == [2] and sc.get_alpha() == 0.15
+    assert ax.get_legend()._loc == 0 and ax.get_legend().get_texts()[0].get_fontsize() == 8   # "best"
     assert ax.get_xlabel() == view.label
     signed = "residual [Nm]" if view.signed == "1" else f"residual * {view.signed} [Nm]"
     assert ax.get_ylabel() == signed
@@ -394,13 +406,15 @@ def test_save_diagnosis_writes_everything_and_guards_the_folder(case, tmp_path):
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "keep.txt").write_text("x")
-    with pytest.raises(InputError, match="not a diagnosis output") as e:
+    with pytest.raises(InputError) as e:
         save_diagnosis(res, train, test, foreign, track=False)
+    assert e.value.message == "folder exists, is not empty and is not a diagnosis output: choose another --out"
     assert e.value.source == str(foreign) and sorted(p.name for p in foreign.iterdir()) == ["keep.txt"]
     afile = tmp_path / "afile"
     afile.write_text("x")
-    with pytest.raises(InputError, match="not a folder"):
+    with pytest.raises(InputError) as e:
         save_diagnosis(res, train, test, afile, track=False)
+    assert e.value.message == "exists and is not a folder" and e.value.source == str(afile)
     assert afile.read_text() == "x"
     empty = tmp_path / "empty"
     empty.mkdir()
