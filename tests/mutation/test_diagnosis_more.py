@@ -454,3 +454,86 @@ def test_tracking_logs_both_models_with_the_gain(case, tmp_path, monkeypatch):
     dg.save_diagnosis(res, train, test, tmp_path / "t2")
     assert calls[0][5] == "diagnose" and calls[0][7] == {**{k: v for k, v in extra.items() if k != "cut"},
                                                          "role": "baseline"}
+
+
+# ---- the analysis's finer points ----------------------------------------------------------------
+def test_refine_order_reaches_the_true_order_on_either_side():
+    q = np.linspace(0.0, 6.0, 20000)                  # more than 8000 samples: every other one is used
+    base = np.column_stack([np.ones(q.size), q])
+    orders = np.linspace(2.0, 12.0, 41)
+    dn = float(orders[1] - orders[0])
+    for true in (7.0 - 0.3 * dn, 7.0 + 0.3 * dn):
+        r = 0.4 * np.sin(true * q + 0.5) + 0.1 + 0.02 * q
+        p = Periodogram(orders=orders, power=np.zeros(41), best=7.0, resolved=False)
+        out = dg._refine_order(p, q, base, r)
+        assert out.best == pytest.approx(true, abs=1e-3 * dn)
+        assert out.orders is orders and out.power is p.power and out.resolved is False
+    # the search stays inside the searched range: a best order at its upper end is not pushed beyond it
+    r = 0.4 * np.sin(12.2 * q)
+    out = dg._refine_order(Periodogram(orders=orders, power=np.zeros(41), best=12.0), q, base, r)
+    assert 12.0 - 0.5 * dn <= out.best <= 12.0
+    out = dg._refine_order(Periodogram(orders=orders, power=np.zeros(41), best=2.0), q, base, 0.4 * np.sin(1.8 * q))
+    assert 2.0 <= out.best <= 2.0 + 0.5 * dn
+    # a single order: nothing to refine
+    one = Periodogram(orders=np.array([3.0]), power=np.zeros(1), best=3.0)
+    assert dg._refine_order(one, q, base, r) is one
+
+
+def test_refine_order_keeps_the_periodogram_order_when_the_search_is_worse():
+    q = np.linspace(0.0, 6.0, 3000)
+    base = np.ones((q.size, 1))
+    orders = np.linspace(2.0, 12.0, 41)
+    r = 0.4 * np.sin(7.0 * q)                         # exactly on the grid: the search cannot beat it
+    out = dg._refine_order(Periodogram(orders=orders, power=np.zeros(41), best=7.0), q, base, r)
+    assert out.best == pytest.approx(7.0, abs=1e-6)
+
+
+def _ramp(ratio):
+    """A record whose searched ripple band is ``hi / lo = ratio`` (travel 1 rad, steady speed)."""
+    n, dt = 101, 1e-3
+    v = 1.0 / (8.0 * ratio * dt)                      # hi / lo = span / (8 v dt) with the bounds' constants
+    return AxisRecord(t=np.arange(n) * dt, q=np.linspace(0.0, 1.0, n), qd=np.full(n, v), qdd=np.zeros(n),
+                      tau=np.zeros(n))
+
+
+def test_ripple_band_must_be_five_percent_wide():
+    lo, hi = dg.ripple_orders(_ramp(1.055), _ramp(1.055))
+    assert hi / lo == pytest.approx(1.055)
+    assert dg.ripple_orders(_ramp(1.045), _ramp(1.045)) is None
+    # standing still while the position moves (no speed): the travel bound alone
+    still = AxisRecord(t=np.arange(5) * 1e-3, q=np.linspace(0.0, 1.0, 5), qd=np.zeros(5), qdd=np.zeros(5),
+                       tau=np.zeros(5))
+    assert dg.ripple_orders(still, still) == pytest.approx((2 * 2 * np.pi, 200 * 2 * np.pi))
+
+
+def test_a_weak_second_cause_is_not_named_beside_a_strong_one():
+    # drift explains ~80 mNm; the asymmetry ~5 mNm: above the ~3 mNm threshold but under 10 % of the drift
+    train, test = _pair(lambda r, p: 0.03 * (r.t - r.t[0]) + 0.03 * p.dry * (r.qd < 0))
+    a = dg.analyse_residual(_baseline(), train, test)
+    assert a.causes == [Cause.DRIFT]
+    asym = next(s for s in a.ranking if s.cause is Cause.ASYMMETRY)
+    drift = next(s for s in a.ranking if s.cause is Cause.DRIFT)
+    assert a.threshold < asym.score < dg.SECONDARY_SHARE * drift.score and not asym.selected
+    # two strong causes: both named, the larger unique contribution first, the ranking by score
+    train, test = _pair(lambda r, p: 0.005 * (r.t - r.t[0]) + 0.3 * p.dry * (r.qd < 0))
+    a = dg.analyse_residual(_baseline(), train, test)
+    assert a.causes == [Cause.ASYMMETRY, Cause.DRIFT]
+    scores = {s.cause: s.score for s in a.ranking}
+    assert scores[Cause.ASYMMETRY] > scores[Cause.DRIFT] > a.threshold
+    assert [s.cause for s in a.ranking[:2]] == a.causes
+
+
+class _Plain(CoulombViscous):
+    """A fitted baseline without a viscous parameter ``nu``: all of its friction counts as dry."""
+
+    def _friction(self, record):
+        return 2.0 * np.tanh(record.qd / 0.01)
+
+
+def test_baseline_without_nu_is_all_dry():
+    rec = _record(0.13, 0.41)
+    m = _Plain()
+    m.params_, m.rigid_ = {"c": 0.0}, False
+    parts = dg.BaselineParts.of(m, rec)
+    np.testing.assert_array_equal(parts.viscous, np.zeros(rec.n))
+    np.testing.assert_allclose(parts.dry, 2.0 * np.tanh(rec.qd / 0.01))
