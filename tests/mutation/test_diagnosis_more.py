@@ -151,7 +151,7 @@ def test_variable_views():
     assert variable_view(Cause.POSITION, lin).label == "q [m]"
     assert variable_view(Cause.LOAD, lin).label == "|tau_load| [N]"
     # the moving share: a sample just below it is not moving
-    slow = AxisRecord(t=rec.t[:3], q=np.zeros(3), qd=np.array([1.0, 0.9 * MOVING_SHARE, 1.1 * MOVING_SHARE]),
+    slow = AxisRecord(t=rec.t[:3], q=np.zeros(3), qd=np.array([2.0, 1.8 * MOVING_SHARE, 2.2 * MOVING_SHARE]),
                       qdd=np.zeros(3), tau=np.zeros(3), temp=np.zeros(3))
     np.testing.assert_array_equal(variable_view(Cause.TEMPERATURE, slow).mask, [True, False, True])
 
@@ -537,3 +537,32 @@ def test_baseline_without_nu_is_all_dry():
     parts = dg.BaselineParts.of(m, rec)
     np.testing.assert_array_equal(parts.viscous, np.zeros(rec.n))
     np.testing.assert_allclose(parts.dry, 2.0 * np.tanh(rec.qd / 0.01))
+
+
+def _linear(rec):
+    return AxisRecord(t=rec.t, q=rec.q, qd=rec.qd, qdd=rec.qdd, tau=rec.tau, temp=rec.temp, tau_load=rec.tau_load,
+                      tau_rb=rec.tau_rb, linear=True)
+
+
+def test_linear_axis_analysis_in_newtons_with_a_shorter_test_record():
+    effect = lambda r, p: 0.02 * (r.t - r.t[0])                      # noqa: E731
+    train = _linear(_with_effect(_record(0.13, 0.41, seed=0), effect, 1))
+    test = _linear(_with_effect(_record(0.17, 0.29, n=3000, seed=1), effect, 2))
+    a = dg.analyse_residual(_baseline(), train, test)
+    assert a.causes == [Cause.DRIFT] and a.unit == "N"
+    assert Cause.GRAVITY not in [s.cause for s in a.ranking]       # no weight torque on a linear axis
+    assert " mN RMS" in a.ranking[0].evidence and "mNm" not in a.ranking[0].evidence
+    assert a.residual_rms[1] == pytest.approx(np.sqrt(np.mean(dg.BaselineParts.of(_baseline(), test).residual ** 2)))
+
+
+def test_a_perfect_baseline_gains_nothing():
+    # records the baseline predicts exactly (no noise, no effect): nothing named, a gain of 0, not 0/0
+    train = _with_effect(_record(0.13, 0.41, n=1000), lambda r, p: np.zeros(r.n), 1)
+    test = _with_effect(_record(0.17, 0.29, n=1000, seed=1), lambda r, p: np.zeros(r.n), 2)
+    train = AxisRecord(t=train.t, q=train.q, qd=train.qd, qdd=train.qdd, temp=train.temp, tau_load=train.tau_load,
+                       tau_rb=train.tau_rb, tau=dg.BaselineParts.of(_baseline(), train).total)
+    test = AxisRecord(t=test.t, q=test.q, qd=test.qd, qdd=test.qdd, temp=test.temp, tau_load=test.tau_load,
+                      tau_rb=test.tau_rb, tau=dg.BaselineParts.of(_baseline(), test).total)
+    res = diagnose(train, test, baseline=_fitted_baseline(train))
+    assert res.baseline_test.rmse == 0.0 and res.analysis.causes == []
+    assert res.gain == 0.0
