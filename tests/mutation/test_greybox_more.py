@@ -252,3 +252,19 @@ def test_training_lowers_the_loss_and_keeps_the_fit(fitted, rigid):
     else:
         np.testing.assert_allclose(m.predict(rec), out.friction.numpy() + rec.tau_rb, rtol=1e-12, atol=1e-12)
     assert m.params_ == m.net_.physical_parameters()
+
+
+def test_build_floors_the_initial_level_at_five_percent_of_the_torque_scale():
+    # purely viscous friction: the model-free level is zero; the network starts at the floor instead,
+    # 5 % of the torque scale, so the bristle update's division by g stays finite
+    n = 600
+    t = np.arange(n) * DT
+    qd = 1.5 * np.sin(2 * np.pi * 1.1 * t)
+    rec = AxisRecord(t=t, q=np.cumsum(qd) * DT, qd=qd, qdd=np.gradient(qd, DT), tau=0.9 * qd + np.sin(t),
+                     tau_rb=np.sin(t))
+    m = GreyBoxLuGre(hidden=4, seed=0)
+    net = m.build(rec)
+    scale = float(np.std(rec.friction_target))
+    with torch.no_grad():
+        g = net.level(T(np.linspace(-1.5, 1.5, 61))).numpy()
+    np.testing.assert_allclose(g, 0.05 * scale, rtol=0.1)
