@@ -566,3 +566,5 @@ def test_a_perfect_baseline_gains_nothing():
     res = diagnose(train, test, baseline=_fitted_baseline(train))
     assert res.baseline_test.rmse == 0.0 and res.analysis.causes == []
     assert res.gain == 0.0
+    # the defaults reach the extension (a signature check alone would not see a mutated default)
+    assert (res.extended.seed, res.extended.population, res.extended.generations) == (0, 48, 30)
