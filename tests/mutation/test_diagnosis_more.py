@@ -468,6 +468,13 @@ def test_refine_order_reaches_the_true_order_on_either_side():
         out = dg._refine_order(p, q, base, r)
         assert out.best == pytest.approx(true, abs=1e-3 * dn)
         assert out.orders is orders and out.power is p.power and out.resolved is False
+    # the search stays within half a periodogram bin of its best order, even when the true order lies beyond
+    r = 0.4 * np.sin((7.0 - 0.8 * dn) * q)
+    out = dg._refine_order(Periodogram(orders=orders, power=np.zeros(41), best=7.0), q, base, r)
+    assert out.best == pytest.approx(7.0 - 0.5 * dn, abs=0.01 * dn)
+    r = 0.4 * np.sin((7.0 + 0.8 * dn) * q)
+    out = dg._refine_order(Periodogram(orders=orders, power=np.zeros(41), best=7.0), q, base, r)
+    assert out.best == pytest.approx(7.0 + 0.5 * dn, abs=0.01 * dn)
     # the search stays inside the searched range: a best order at its upper end is not pushed beyond it
     r = 0.4 * np.sin(12.2 * q)
     out = dg._refine_order(Periodogram(orders=orders, power=np.zeros(41), best=12.0), q, base, r)
