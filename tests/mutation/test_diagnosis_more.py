@@ -388,7 +388,9 @@ def test_save_diagnosis_writes_everything_and_guards_the_folder(case, tmp_path):
         assert (out / n).read_bytes()[:4] == b"\x89PNG"
     plots = dict(zip(res.analysis.causes, names, strict=True))
     assert (out / REPORT_FILE).read_text() == render_report(res, train, test, plots)
-    doc = json.loads((out / RESULT_FILE).read_text())
+    text = (out / RESULT_FILE).read_text()
+    assert text.startswith('{\n  "cause": "') and text.endswith("}\n")      # indented for people to read
+    doc = json.loads(text)
     assert doc == json.loads(json.dumps({**res.to_json(), "causes": [c.value for c in res.analysis.causes],
                                          "threshold": res.analysis.threshold, "timings": res.timings,
                                          "mlflow_runs": {}}))
@@ -575,3 +577,17 @@ def test_a_perfect_baseline_gains_nothing():
     assert res.gain == 0.0
     # the defaults reach the extension (a signature check alone would not see a mutated default)
     assert (res.extended.seed, res.extended.population, res.extended.generations) == (0, 48, 30)
+
+
+def test_evidence_names_what_each_candidate_models():
+    rp = Periodogram(orders=np.array([1.0]), power=np.array([0.0]), best=3.5)
+    what = {Cause.LOAD: "friction levels scaled by |tau_load|",
+            Cause.TEMPERATURE: "viscous and dry friction varying with temperature",
+            Cause.POSITION: "a position ripple of order 3.50/rad",
+            Cause.ASYMMETRY: "separate friction levels for negative velocity",
+            Cause.INERTIA: "an inertia that moves with |tau_load|",
+            Cause.DRIFT: "an additive drift linear in time",
+            Cause.GRAVITY: "a pose-dependent torque a cos q + b sin q"}
+    for c, w in what.items():
+        assert dg._evidence(c, 0.002, 0.003, [c], 0.001, rp) == (
+            f"{w} explains 2 mNm RMS of the held-out torque (3 mNm alone; threshold 1 mNm): named")
