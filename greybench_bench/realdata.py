@@ -27,8 +27,6 @@ from identify.models import make_model, parse_model_names
 from identify.records import load_record, read_table
 from identify.workflows import COMPARE_MODELS
 
-#: Model types in the order of the table.
-MODELS = ("coulomb-viscous", "stribeck", "lugre", "lstm", "residual", "greybox")
 #: Modest settings so seven joints run in a few minutes on two cores; documented in the README.
 BENCH_SETTINGS: dict[str, dict] = {
     "lugre": {"generations": 30},
@@ -107,7 +105,7 @@ def _rmse(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def run_joint(data: Path, joint: int, models=MODELS, *, seed: int = 0, epochs: int | None = None,
+def run_joint(data: Path, joint: int, models=COMPARE_MODELS, *, seed: int = 0, epochs: int | None = None,
               advance: Callable[[float], None] | None = None) -> JointResult:
     """Fit ``models`` on one joint's training record and score them on its test record."""
     data = Path(data)
