@@ -25,7 +25,8 @@ Choices where the method is vague (stated so they can be replaced):
   of that growth. From the second iteration on, the local sensitivity of the deviation to the
   correction, ``g = <de, dc> / <dc, dc>`` over a window of the path, is measured from the last two
   iterations and the step is ``-gain * e / g`` (``g`` clipped to ``[0.25, 1.5]``; ``g = 1`` where
-  the correction did not change). With ``g = 1`` this is the mirror update.
+  the correction did not change or the measured ``g`` is not positive: a response that is not local,
+  such as a gear changing flank, :func:`update_correction`). With ``g = 1`` this is the mirror update.
 - **The corrected path as G-code.** Every feed line of the original program is kept and split into
   pieces of the same kind (G1 lines stay lines, G2/G3 arcs become shorter arcs of the same
   direction with the centre moved onto the bisector of the corrected end points), whose end points
@@ -790,7 +791,10 @@ def update_correction(corr: Correction, dev: Correction, prev: tuple | None,
             de = e - prev[1].values[r]
             num = _box(np.sum(dc * de, axis=1), s.sensitivity_window)
             den = _box(np.sum(dc * dc, axis=1), s.sensitivity_window)
-            ok = den > (0.5e-6) ** 2
+            # a sensitivity <= 0 (a deeper command left the tip further out: not the local response of
+            # a deflection, e.g. a gear that changed flank) gets the mirror step; clipped to 0.25 it got
+            # the largest step, four times the mirror's, where the measurement is least to be trusted
+            ok = (den > (0.5e-6) ** 2) & (num > 0)
             g[ok] = np.clip(num[ok] / den[ok], 0.25, 1.5)
         new = c - s.gain * e / g[:, None]
         norm = np.linalg.norm(new, axis=1, keepdims=True)

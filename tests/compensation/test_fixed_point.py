@@ -154,3 +154,26 @@ def test_corner_arc_correction_is_blended_between_the_walls(small):
     far = (g < a - 1e-4) | (g > b + 1e-4)
     np.testing.assert_array_equal(out.values[r][far], corr.values[r][far])
     np.testing.assert_array_equal(blend_corners(path, corr, tool_radius=4e-3).values[r], corr.values[r])
+
+
+def test_a_sensitivity_that_is_not_positive_gets_the_mirror_step():
+    """The secant step ``c - e / g`` with ``g = <de, dc> / <dc, dc>``: where the last step moved the
+    command deeper (dc = -100 µm) and the tip moved out (de = +50 µm, g = -0.5: not a deflection's
+    local response, e.g. a gear that changed flank) the step is the mirror step ``c - e``; where the
+    tip followed by half (de = -50 µm) it is ``c - e / 0.5``. Clipping g = -0.5 to 0.25 would step
+    ``c - 4 e``."""
+    from simulate.compensation import update_correction
+
+    s = CompensationSettings()
+    g = np.arange(0.0, 100e-3 + 1e-9, 0.1e-3)        # 0.1 mm grid over 100 mm
+    y = np.array([0.0, 1.0, 0.0])
+    half = g < 50e-3
+    c0 = np.zeros((len(g), 3))
+    c1 = -100e-6 * np.ones(len(g))[:, None] * y
+    e0 = 200e-6 * np.ones(len(g))[:, None] * y
+    e1 = (e0[:, 1] + np.where(half, 50e-6, -50e-6))[:, None] * y
+    new = update_correction(Correction([g], [c1]), Correction([g], [e1]),
+                            (Correction([g], [c0]), Correction([g], [e0])), s).values[0][:, 1]
+    far = np.abs(g - 50e-3) > s.sensitivity_window    # away from where the window straddles both halves
+    assert np.allclose(new[half & far], -100e-6 - 250e-6, atol=1e-9)            # mirror: c - e
+    assert np.allclose(new[~half & far], -100e-6 - 150e-6 / 0.5, atol=1e-9)     # secant: c - e / 0.5
