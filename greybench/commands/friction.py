@@ -1,7 +1,5 @@
 """Friction identification commands: synth, fit, predict, compare, train-robot, promote, ui
-(:mod:`identify.workflows`; fits are tracked in MLflow, :mod:`identify.tracking`). ``trajectory`` has
-a module of its own (:mod:`greybench.commands.trajectory`): it needs none of the models and plant
-imported here for the options (numba, scipy, pandas: seconds of start-up)."""
+(:mod:`identify.workflows`; fits are tracked in MLflow, :mod:`identify.tracking`)."""
 from __future__ import annotations
 
 import sys

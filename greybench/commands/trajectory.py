@@ -1,13 +1,8 @@
-"""The excitation trajectory command (:func:`identify.workflows.make_trajectory`).
-
-Apart from the friction commands (:mod:`greybench.commands.friction`), whose module imports the
-models and the plant (numba, scipy): generating a trajectory needs neither.
-"""
+"""``trajectory``: apart from the friction commands, whose options import the models and plant (numba, scipy)."""
 from __future__ import annotations
 
-from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import typer
 
@@ -15,20 +10,12 @@ from greybench import options as o
 from greybench.support import out, resolve_robot, show
 from identify import workflows as wf
 from identify.axis_limits import load_axis_limits
-from identify.workflows import make_trajectory
-
-
-class TrajectoryKind(str, Enum):
-    universal = "universal"
-    test = "test"
-    stribeck = "stribeck"
-    presliding = "presliding"
 
 
 def trajectory(
-    kind: Annotated[TrajectoryKind, typer.Argument(help="universal | test (Universal Trajectory and its test "
-                                                        "variant), stribeck (constant-velocity steps) | presliding "
-                                                        "(slow motion).")],
+    kind: Annotated[Literal["universal", "test", "stribeck", "presliding"], typer.Argument(
+        help="universal | test (Universal Trajectory and its test variant), stribeck (constant-velocity steps) | "
+             "presliding (slow motion).")],
     out_file: Annotated[Path, typer.Option("--out", help="Output table, .csv or .parquet: t [s], q [rad], qd [rad/s], "
                                                          "qdd [rad/s^2].")],
     axis: Annotated[int, typer.Option("--axis", help="Joint number 1..6 whose limits apply.")] = 1,
@@ -42,11 +29,11 @@ def trajectory(
     from identify.records import write_table
 
     limits = load_axis_limits(resolve_robot(robot), axis)
-    traj = make_trajectory(kind.value, limits, duration, rate)
+    traj = wf.make_trajectory(kind, limits, duration, rate)
     write_table(traj.to_frame(), out_file)
-    show(as_json, {"kind": kind.value, "axis": axis, "samples": int(traj.t.size), "duration": float(traj.t[-1]),
+    show(as_json, {"kind": kind, "axis": axis, "samples": int(traj.t.size), "duration": float(traj.t[-1]),
                    "peaks": traj.peaks(), "limits": limits.__dict__, "out": str(out_file)},
-         lambda: out.print(f"{kind.value} trajectory, axis {axis}: {wf.trajectory_text(traj, limits, out_file)}"))
+         lambda: out.print(f"{kind} trajectory, axis {axis}: {wf.trajectory_text(traj, limits, out_file)}"))
 
 
 COMMANDS = {"trajectory": trajectory}
