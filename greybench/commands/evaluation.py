@@ -1,19 +1,20 @@
-"""Evaluation commands: ``rank-poses``, ``trace`` (paper 3.8, 4, Table 2)."""
+"""Evaluation commands: ``rank-poses``, ``trace`` (paper 3.8, 4, Table 2); the simulation is imported when run."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from greybench import options as o
 from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
-from simulate.evaluation.features import MM
-from simulate.evaluation.ranking import Components, Ranking, RankSettings, ranking_json
-from simulate.run import rank_program, ranking_tables
+
+if TYPE_CHECKING:
+    from simulate.evaluation.ranking import Ranking
 
 
 def print_ranking(r: Ranking, out_dir: Path | None = None) -> None:
+    from simulate.run import ranking_tables
     for table in ranking_tables(r):
         print_table(*table)
     if out_dir is not None:
@@ -45,6 +46,8 @@ def rank_poses_cmd(
                                                          "pose).")] = False,
 ) -> None:
     """Simulate the program in every pose, measure the virtual parts (ISO 10791-7 features) and rank the poses."""
+    from simulate.evaluation.ranking import Components, RankSettings, ranking_json
+    from simulate.run import MM, rank_program
     settings = RankSettings(spacing=spacing * MM, probe_spacing=probe_spacing * MM, stiffness_scale=stiffness_scale,
                             size=size, ff_friction=ff_friction,
                             backlash_comp=backlash_comp)
@@ -64,7 +67,7 @@ def trace_cmd(
     as_json: o.Json = False,
 ) -> None:
     """Time stamps and program lines that machined the surface near a point (paper 3.8)."""
-    from simulate.run import trace_json, trace_table, trace_workpiece
+    from simulate.run import MM, trace_json, trace_table, trace_workpiece
 
     xyz = o.numbers(point, 3, "point", "mm")
     tr = trace_workpiece(workpiece, [v * MM for v in xyz], radius * MM, program)

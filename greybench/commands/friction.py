@@ -1,9 +1,8 @@
-"""Friction identification commands: trajectory, synth, fit, predict, compare, train-robot,
-promote, ui (:mod:`identify.workflows`; fits are tracked in MLflow, :mod:`identify.tracking`)."""
+"""Friction identification commands: synth, fit, predict, compare, train-robot, promote, ui
+(:mod:`identify.workflows`; fits are tracked in MLflow, :mod:`identify.tracking`)."""
 from __future__ import annotations
 
 import sys
-from enum import Enum
 from pathlib import Path
 from typing import Annotated
 
@@ -12,42 +11,10 @@ import typer
 from greybench import options as o
 from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
 from identify import workflows as wf
-from identify.axis_limits import load_axis_limits
 from identify.models import MODELS, FrictionModel, make_seeded, parse_model_names
 from identify.plant import Effect
 from identify.records import derivative_note
-from identify.workflows import COMPARE_MODELS, fit_model, load_pair, make_trajectory, predict_record, synth_record
-
-
-class TrajectoryKind(str, Enum):
-    universal = "universal"
-    test = "test"
-    stribeck = "stribeck"
-    presliding = "presliding"
-
-
-def trajectory(
-    kind: Annotated[TrajectoryKind, typer.Argument(help="universal | test (Universal Trajectory and its test "
-                                                        "variant), stribeck (constant-velocity steps) | presliding "
-                                                        "(slow motion).")],
-    out_file: Annotated[Path, typer.Option("--out", help="Output table, .csv or .parquet: t [s], q [rad], qd [rad/s], "
-                                                         "qdd [rad/s^2].")],
-    axis: Annotated[int, typer.Option("--axis", help="Joint number 1..6 whose limits apply.")] = 1,
-    robot: o.Robot = "max100",
-    duration: Annotated[float, typer.Option("--duration", help="Duration [s] (universal, test, presliding).")] = 60.0,
-    rate: Annotated[float, typer.Option("--rate", help="Sampling rate [Hz].")] = 1000.0,
-    as_json: o.Json = False,
-) -> None:
-    """Generate an excitation trajectory within the axis's position, velocity [rad/s],
-    acceleration [rad/s^2] and jerk [rad/s^3] limits from the robot file."""
-    from identify.records import write_table
-
-    limits = load_axis_limits(resolve_robot(robot), axis)
-    traj = make_trajectory(kind.value, limits, duration, rate)
-    write_table(traj.to_frame(), out_file)
-    show(as_json, {"kind": kind.value, "axis": axis, "samples": int(traj.t.size), "duration": float(traj.t[-1]),
-                   "peaks": traj.peaks(), "limits": limits.__dict__, "out": str(out_file)},
-         lambda: out.print(f"{kind.value} trajectory, axis {axis}: {wf.trajectory_text(traj, limits, out_file)}"))
+from identify.workflows import COMPARE_MODELS, fit_model, load_pair, predict_record, synth_record
 
 
 def synth(
@@ -274,5 +241,5 @@ def ui(
     raise typer.Exit(code=run.code)
 
 
-COMMANDS = {"trajectory": trajectory, "synth": synth, "fit": fit, "predict": predict, "compare": compare,
+COMMANDS = {"synth": synth, "fit": fit, "predict": predict, "compare": compare,
             "train-robot": train_robot, "promote": promote, "ui": ui}

@@ -178,3 +178,44 @@ def test_no_torch_until_a_learned_model_is_used():
 def test_a_learned_model_loads_torch():
     """The check above sees torch when it is loaded: asking for a learned model class imports it."""
     assert "torch" in _heavy_modules("from identify.models import MODELS; MODELS['lstm']")
+
+
+
+_COMMAND_LOADS = """
+import json, runpy, sys
+for args in {calls!r}:
+    sys.argv = ['greybench'] + args
+    try:
+        runpy.run_module('greybench.cli', run_name='__main__')
+    except SystemExit as e:
+        assert e.code in (0, None), (args, e.code)
+print(json.dumps(sorted(m for m in {heavy!r} if m in sys.modules)))
+"""
+HEAVY = ("numba", "scipy", "torch", "mlflow")
+
+
+def _command_loads(*calls: list[str]) -> list[str]:
+    """Which of numba, scipy, torch, mlflow console runs of ``greybench <call>`` imported, one after
+    the other in one fresh interpreter (a module any of them loads stays in ``sys.modules``)."""
+    code = _COMMAND_LOADS.format(calls=list(calls), heavy=HEAVY)
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_light_commands_import_no_numba_scipy_torch_or_mlflow(tmp_path):
+    """Seconds of start-up per call: a command imports only what it uses, so generating a trajectory, and
+    the help of the commands that run simulations, load none of the friction models, plant or simulation."""
+    out = tmp_path / "ut.csv"
+    helps = [[cmd, "--help"] for cmd in ("trajectory", "rank-poses", "trace", "circle", "machine", "compensate",
+                                         "serve")]
+    run = ["trajectory", "universal", "--axis", "1", "--duration", "1", "--out", str(out)]
+    assert _command_loads(run, *helps) == []
+    assert out.stat().st_size > 0
+
+
+def test_friction_commands_load_numba_and_scipy_but_no_torch():
+    """The check above sees numba and scipy when loaded: the friction commands' options name the models and
+    the plant; ``ui --print-only`` needs the tracking store (mlflow), but no learned model (torch)."""
+    loaded = set(_command_loads(["synth", "--help"], ["ui", "--print-only"]))
+    assert {"numba", "scipy", "mlflow"} <= loaded and "torch" not in loaded
