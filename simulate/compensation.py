@@ -466,7 +466,7 @@ def _piece_tangents(segs, seg_i: np.ndarray, a: np.ndarray, b: np.ndarray):
     return ta, tb
 
 
-def plan_pieces(path: NominalPath, correction: Correction, s: CompensationSettings,
+def plan_pieces(path: NominalPath, correction: Correction | SmoothCorrection, s: CompensationSettings,
                 limits: PathLimits | None = None, shortest: float = 0.05e-3) -> dict:
     """Pieces (start, end fraction) of every feed segment: split until within ``fit_tolerance``, then
     further where the correction turns the path at a junction by more than the interpolator passes at
@@ -576,9 +576,9 @@ def write_program(path: NominalPath, correction: Correction, settings: Compensat
     """
     segs = path.segments
     by_line = {s.line: i for i, s in enumerate(segs) if path.run[i] >= 0}
-    if settings.blend:
-        correction = correction.smooth()   # the pieces' end points through the spline (SmoothCorrection)
-    plan = plan_pieces(path, correction, settings)
+    # the pieces' end points through the spline under G64
+    read: Correction | SmoothCorrection = correction.smooth() if settings.blend else correction
+    plan = plan_pieces(path, read, settings)
     unit = 1e-3
     out_lines: list[str] = []
     pieces: dict = {}
@@ -610,7 +610,7 @@ def write_program(path: NominalPath, correction: Correction, settings: Compensat
         s0, L = path.sigma0[i], seg.length
 
         def target(u, seg=seg, r=r, s0=s0, L=L):
-            return _seg_point(seg, u) + correction.at(r, s0 + np.asarray(u) * L)
+            return _seg_point(seg, u) + read.at(r, s0 + np.asarray(u) * L)
 
         spans = plan[i]
         keep_g = [w for w in words if w[0] == "G" and int(w[1]) not in (0, 1, 2, 3)]
