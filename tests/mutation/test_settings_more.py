@@ -100,7 +100,7 @@ def test_keys_rules():
         assert e.value.field is None and "8 characters and no spaces" in e.value.message
     # dev mode alone accepts only the documented key; a configured key replaces it
     assert load_settings(dev_mode=True, api_keys=" , ").keys() == frozenset({DEV_API_KEY})
-    assert DEV_API_KEY not in load_settings(dev_mode=True, api_keys=KEY).keys()
+    assert load_settings(dev_mode=True, api_keys=KEY).keys() == frozenset({KEY})
     assert load_settings(api_keys=KEY).keys() == frozenset({KEY})
     with pytest.raises(InputError) as e:
         load_settings(api_keys=" ,, ")
