@@ -154,3 +154,76 @@ def test_the_empty_owner_counts_only_its_own_jobs(tmp_path):
     finally:
         m.shutdown()
         store.close()
+
+
+def test_one_connection_per_thread_and_close_from_any_thread(tmp_path):
+    import threading
+
+    store = JobStore(tmp_path / "jobs.sqlite")
+    assert store._conn() is store._conn()                 # reused, not reopened per statement
+    errors = []
+
+    def other():
+        try:
+            store.close()                                 # this thread never opened one: nothing to close
+            store.get("nope")
+            store.close()
+        except Exception as exc:                          # pragma: no cover - reported below
+            errors.append(exc)
+
+    t = threading.Thread(target=other)
+    t.start()
+    t.join()
+    assert errors == []
+    store.close()
+
+
+def test_lock_release_without_acquire_and_a_second_manager_on_the_same_folders(tmp_path):
+    from service.jobs import DataDirLock
+
+    DataDirLock(tmp_path / "d").release()                 # never acquired: nothing to release
+    store = JobStore(tmp_path / "jobs.sqlite")
+    for _ in range(2):                                    # the jobs folder exists the second time
+        m = JobManager(store, tmp_path / "jobs", workers=0, capacity=2, retry_after=1)
+        rec = m.submit(JobKind.simulation, {"pose": "p1", "n": 3})
+        assert store.get(rec.id).request == {"pose": "p1", "n": 3} and rec.request == {"pose": "p1", "n": 3}
+        m.shutdown()
+    store.close()
+
+
+class _Alive(_NotStarted):
+    pid = 12345
+
+
+class _Ended:
+    pid = 12346
+    exitcode = 7
+
+    def is_alive(self):
+        return False
+
+    def join(self, timeout=None):
+        pass
+
+
+def test_a_pass_reaps_every_ended_worker_behind_a_running_one(tmp_path):
+    from service.jobs import WORKER_DIED_REASON
+
+    store = JobStore(tmp_path / "jobs.sqlite")
+    m = JobManager(store, tmp_path / "jobs", workers=0, capacity=3, retry_after=1)
+    try:
+        a = store.create(JobKind.simulation, {}, m.boot)
+        b = store.create(JobKind.simulation, {}, m.boot)
+        for rec in (a, b):
+            store.start(rec.id, m.boot)
+        with m._lock:
+            m._running.update({a.id: _Alive(), b.id: _Ended()})     # the running one comes first
+        m._pass()
+        assert m.running_pids() == {a.id: 12345}
+        assert store.get(b.id).message == WORKER_DIED_REASON.format(how="exit code 7")
+        assert store.get(a.id).state is JobState.running
+        with m._lock:
+            m._running.clear()
+    finally:
+        m.shutdown()
+        store.close()
