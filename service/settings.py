@@ -121,6 +121,8 @@ def load_settings(**overrides) -> ServiceSettings:
         return ServiceSettings(**overrides)
     except ValidationError as exc:
         first = exc.errors()[0]
-        loc = ".".join(str(p) for p in first.get("loc", ()) if p != "__root__")
+        # no mutate: pydantic 2 always gives "loc" (one element for these flat fields) and never "__root__",
+        # so the separator, the default and the filter's text are equivalent mutants
+        loc = ".".join(str(p) for p in first.get("loc", ()) if p != "__root__")  # pragma: no mutate
         field = ("GREYBENCH_" + loc.upper()) if loc else None
         raise InputError(f"invalid service settings: {first['msg']}", source="environment", field=field) from None

@@ -160,10 +160,11 @@ def fit_circle_kasa(pts) -> tuple[np.ndarray, float]:
     q = p - m
     A = np.column_stack([2 * q[:, 0], 2 * q[:, 1], np.ones(len(q))])
     rhs = (q ** 2).sum(axis=1)
-    sol, *_ = np.linalg.lstsq(A, rhs, rcond=None)
+    sol, _, rank, _ = np.linalg.lstsq(A, rhs, rcond=None)
     c = sol[:2]
     r2 = sol[2] + c @ c
-    if not r2 > 0:
+    # distinct collinear points leave the system rank-deficient: its minimum-norm solution is no circle
+    if rank < 3 or not r2 > 0:
         raise ValueError("circle fit: points are collinear")
     return c + m, float(math.sqrt(r2))
 
