@@ -20,7 +20,18 @@ import pytest
 
 from service.jobs import RESTART_REASON, JobKind, JobState, JobStore, folder_digests, process_start
 
-from .conftest import DATA, GREYBENCH, HEADERS, KEY, ROBOT_FRICTION, Server, free_port, server_env, short_program, wait_for
+from .conftest import (
+    DATA,
+    GREYBENCH,
+    HEADERS,
+    KEY,
+    ROBOT_FRICTION,
+    Server,
+    free_port,
+    server_env,
+    short_program,
+    wait_for,
+)
 
 OTHER_KEY = "other-key-9876543210"
 
