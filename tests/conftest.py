@@ -8,6 +8,8 @@ import os
 
 import pytest
 
+pytest_plugins = ["pytester"]  # tests/test_xdist_groups.py runs the suite's parallel set-up on small modules
+
 # An xdist worker sizes its torch/numba/BLAS thread pools to its share of the cores before any of
 # them loads (two workers with a thread per core each would oversubscribe the machine twice over).
 if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
