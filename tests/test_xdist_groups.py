@@ -49,8 +49,10 @@ def _worker_sets(out: Path) -> dict[str, list[str]]:
     return seen
 
 
-def test_groups_under_two_workers(pytester):
+def test_groups_under_two_workers(pytester, monkeypatch):
     pytest.importorskip("xdist")
+    for var in ("PYTEST_XDIST_WORKER", "PYTEST_XDIST_WORKER_COUNT", "PYTEST_ADDOPTS"):  # when make test runs it
+        monkeypatch.delenv(var, raising=False)
     out = pytester.mkdir("out")
     pytester.makeconftest(CONFTEST.read_text())
     pytester.makeini("[pytest]\naddopts = --import-mode=importlib\n")  # same-named modules, as in the suite
