@@ -59,8 +59,25 @@ def pytest_collection_modifyitems(config, items):
 
 
 def _fixture_defs(item) -> list:
+    """The item's fixture definitions, without those named ``_...``: set-up of the environment, cheap."""
     info = getattr(item, "_fixtureinfo", None)  # doctest items have none
-    return [] if info is None else [defs for defs in info.name2fixturedefs.values() if defs]
+    return [] if info is None else [defs for name, defs in info.name2fixturedefs.items()
+                                    if defs and not name.startswith("_")]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    """xdist (controller): each worker gets this process's COLUMNS and LINES (a worker starts with 80 and 24
+    of its own, which rich would take as a fixed width and cut the tables the CLI writes to a pipe)."""
+    node.workerinput["terminal_env"] = {k: os.environ.get(k) for k in ("COLUMNS", "LINES")}
+
+
+def pytest_configure(config):
+    for key, value in getattr(config, "workerinput", {}).get("terminal_env", {}).items():
+        if value is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = value
 
 
 @pytest.fixture(autouse=True, scope="session")
