@@ -45,11 +45,15 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 
+# The tests run on every core this process may use (pytest-xdist; -n auto), one pytest worker per core;
+# TEST_JOBS=1 runs them in one process. Tests that must not overlap share an xdist_group (tests/conftest.py).
+TEST_JOBS ?= auto
+TEST_XDIST := -n $(TEST_JOBS) --dist loadgroup
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(TEST_XDIST)
 
 test-all: $(STAMP)
-	$(BIN)/python -m pytest -q -m ""
+	$(BIN)/python -m pytest -q -m "" $(TEST_XDIST)
 
 bench: $(STAMP)
 	for b in friction diagnose robot toolpath machining ranking explain service circle; do $(BIN)/greybench bench $$b || exit 1; done

@@ -380,23 +380,12 @@ def _robot_with_models(tmp_path: Path, refs: dict) -> Path:
     return out
 
 
-def test_cli_circle_with_fitted_greybox_and_lstm_models(tmp_path):
-    """A robot file whose A1 friction is a fitted grey-box model and A2's an LSTM (few epochs): the
-    circle runs through the same loop with those models and gives another trace than the inline LuGre."""
-    pytest.importorskip("torch")
-    from dataclasses import replace
-
-    from identify.axis_limits import AxisLimits
-    from identify.models import make_model
-    from identify.plant import PlantConfig, synthesize
-    from identify.records import validate_frame
-    from identify.trajectories import universal_trajectory
-
-    tr = universal_trajectory(AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0), duration=4.0)
-    rec = validate_frame(synthesize(tr.t, tr.q, tr.qd, tr.qdd, config=replace(PlantConfig(), static_curve="hump"),
-                                    seed=1).frame, "circle-models")
-    make_model("greybox", epochs=5).fit(rec).save(tmp_path / "m1")
-    make_model("lstm", epochs=2, batches=2).fit(rec).save(tmp_path / "m2")
+def test_cli_circle_with_fitted_greybox_and_lstm_models(tmp_path, few_epoch_models):
+    """A robot file whose A1 friction is a fitted grey-box model and A2's an LSTM (few epochs, fitted once
+    per session: tests/conftest.py): the circle runs through the same loop with those models and gives
+    another trace than the inline LuGre."""
+    few_epoch_models("greybox", tmp_path / "m1")
+    few_epoch_models("lstm", tmp_path / "m2")
     robot = _robot_with_models(tmp_path, {1: "m1", 2: "m2"})
     docs = {}
     for key, rob in (("models", str(robot)), ("inline", "max100")):

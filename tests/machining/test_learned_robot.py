@@ -8,7 +8,6 @@ Fast version of the acceptance scenario: the square and circle contours of the 1
 from __future__ import annotations
 
 import re
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +19,6 @@ from greybench.cli import app
 ROOT = Path(__file__).resolve().parents[2]
 SMALL = ROOT / "tests" / "explain" / "data"
 KINDS = {1: "greybox", 2: "residual", 3: "lstm"}
-HYPER = {"greybox": dict(epochs=5), "residual": dict(epochs=10, population=8, generations=3),
-         "lstm": dict(epochs=2, batches=2)}
 
 
 def _robot_with_models(tmp_path: Path, refs: dict[int, str]) -> Path:
@@ -41,20 +38,10 @@ def _robot_with_models(tmp_path: Path, refs: dict[int, str]) -> Path:
 
 
 @pytest.fixture(scope="module")
-def learned_robot(tmp_path_factory):
-    pytest.importorskip("torch")
-    from identify.axis_limits import AxisLimits
-    from identify.models import make_model
-    from identify.plant import PlantConfig, synthesize
-    from identify.records import validate_frame
-    from identify.trajectories import universal_trajectory
-
+def learned_robot(tmp_path_factory, few_epoch_models):
     d = tmp_path_factory.mktemp("learned")
-    tr = universal_trajectory(AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0), duration=4.0)
-    rec = validate_frame(synthesize(tr.t, tr.q, tr.qd, tr.qdd, config=replace(PlantConfig(), static_curve="hump"),
-                                    seed=1).frame, "learned-robot")
     for j, kind in KINDS.items():
-        make_model(kind, **HYPER[kind]).fit(rec).save(d / f"model{j}")
+        few_epoch_models(kind, d / f"model{j}")   # tests/conftest.py: fitted once per session
     return _robot_with_models(d, {j: f"model{j}" for j in KINDS})   # relative to the robot file
 
 

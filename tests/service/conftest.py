@@ -160,15 +160,21 @@ def client(settings):
         yield c
 
 
-@pytest.fixture(scope="session", autouse=True)
+@pytest.fixture(scope="session")
 def service_tracking_store(tmp_path_factory):
-    """The service tests get an MLflow store of their own: other areas' tests register models
-    under the same names (max100-axis1-friction) in the session store."""
-    mp = pytest.MonkeyPatch()
-    root = tmp_path_factory.mktemp("service-mlflow")
-    mp.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{root}/mlruns.db")
-    yield os.environ["MLFLOW_TRACKING_URI"]
-    mp.undo()
+    """URI of the service tests' own MLflow store: other areas' tests register models under the same
+    names (max100-axis1-friction) in the session store."""
+    return f"sqlite:///{tmp_path_factory.mktemp('service-mlflow')}/mlruns.db"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _service_tracking(service_tracking_store):
+    """MLFLOW_TRACKING_URI is the service store while a service test module runs (its servers inherit it),
+    and only then: under xdist other areas' tests run after it in the same process and register models
+    under the same names. Module scope: set before the modules' served fixtures start their servers."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("MLFLOW_TRACKING_URI", service_tracking_store)
+        yield service_tracking_store
 
 
 @pytest.fixture(scope="session")
@@ -190,20 +196,22 @@ def registered_model(tmp_path_factory, service_tracking_store):
     model = make_model("coulomb-viscous").fit(rec)
     folder = tmp_path_factory.mktemp("model") / "cv"
     model.save(folder)
-    mlflow.set_tracking_uri(os.environ["MLFLOW_TRACKING_URI"])
-    mlflow.set_registry_uri(os.environ["MLFLOW_TRACKING_URI"])  # other tests may have set a global one
-    with mlflow.start_run() as run:
-        mlflow.log_metrics({"test_rmse": 0.0123, "test_r2": 0.99})
-        mlflow.log_artifacts(str(folder), artifact_path="model")
-    client = mlflow.MlflowClient()
-    name = "max100-axis1-friction"
-    client.create_registered_model(name)
-    mv = client.create_model_version(name, f"runs:/{run.info.run_id}/model", run_id=run.info.run_id)
-    # registered as the challenger and promoted, the way a fit becomes champion (never by itself)
-    client.set_registered_model_alias(name, "challenger", mv.version)
-    from identify.tracking import promote
+    with pytest.MonkeyPatch.context() as mp:  # a session fixture: set up before the module's environment
+        mp.setenv("MLFLOW_TRACKING_URI", service_tracking_store)
+        mlflow.set_tracking_uri(service_tracking_store)
+        mlflow.set_registry_uri(service_tracking_store)  # other tests may have set a global one
+        with mlflow.start_run() as run:
+            mlflow.log_metrics({"test_rmse": 0.0123, "test_r2": 0.99})
+            mlflow.log_artifacts(str(folder), artifact_path="model")
+        client = mlflow.MlflowClient()
+        name = "max100-axis1-friction"
+        client.create_registered_model(name)
+        mv = client.create_model_version(name, f"runs:/{run.info.run_id}/model", run_id=run.info.run_id)
+        # registered as the challenger and promoted, the way a fit becomes champion (never by itself)
+        client.set_registered_model_alias(name, "challenger", mv.version)
+        from identify.tracking import promote
 
-    assert promote(name).promoted
+        assert promote(name).promoted
     return model, rec, run.info.run_id
 
 

@@ -7,8 +7,6 @@ same job with the robot file's friction, which repeats exactly.
 """
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
@@ -18,28 +16,18 @@ KINDS = {1: "greybox", 2: "residual", 3: "lstm"}
 
 
 @pytest.fixture(scope="module")
-def champions(tmp_path_factory):
-    """max100-axis{1,2,3}-friction@champion = grey-box, residual, LSTM (version 1 each) in a fresh store."""
+def champions(tmp_path_factory, few_epoch_models):
+    """max100-axis{1,2,3}-friction@champion = grey-box, residual, LSTM (version 1 each) in a fresh store
+    (the few-epoch models of tests/conftest.py, fitted once per session)."""
     import mlflow
-
-    from identify.axis_limits import AxisLimits
-    from identify.models import make_model
-    from identify.plant import PlantConfig, synthesize
-    from identify.records import validate_frame
-    from identify.trajectories import universal_trajectory
 
     root = tmp_path_factory.mktemp("champions")
     uri = f"sqlite:///{root}/mlruns.db"
-    tr = universal_trajectory(AxisLimits(-3.2, 3.2, 2.1, 6.0, 60.0), duration=4.0)
-    rec = validate_frame(synthesize(tr.t, tr.q, tr.qd, tr.qdd, config=replace(PlantConfig(), static_curve="hump"),
-                                    seed=1).frame, "champion-record")
-    hyper = {"greybox": dict(epochs=5), "residual": dict(epochs=10, population=8, generations=3),
-             "lstm": dict(epochs=2, batches=2)}
     # the client only: mlflow.set_tracking_uri would also set MLFLOW_TRACKING_URI for the whole session
     client = mlflow.MlflowClient(tracking_uri=uri, registry_uri=uri)
     experiment = client.create_experiment("champions", artifact_location=(root / "artifacts").as_uri())
     for axis, kind in KINDS.items():
-        folder = make_model(kind, **hyper[kind]).fit(rec).save(root / kind)
+        folder = few_epoch_models(kind, root / kind)
         run = client.create_run(experiment)
         client.log_artifacts(run.info.run_id, str(folder), artifact_path="model")
         client.set_terminated(run.info.run_id)

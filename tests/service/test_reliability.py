@@ -20,7 +20,18 @@ import pytest
 
 from service.jobs import RESTART_REASON, JobKind, JobState, JobStore, folder_digests, process_start
 
-from .conftest import DATA, GREYBENCH, HEADERS, KEY, ROBOT_FRICTION, Server, server_env, short_program, wait_for
+from .conftest import (
+    DATA,
+    GREYBENCH,
+    HEADERS,
+    KEY,
+    ROBOT_FRICTION,
+    Server,
+    free_port,
+    server_env,
+    short_program,
+    wait_for,
+)
 
 OTHER_KEY = "other-key-9876543210"
 
@@ -226,7 +237,7 @@ def test_a_second_server_on_the_folder_exits_naming_it_and_the_first_keeps_its_j
         try:
             before = wait_for(c, job, ("running",), timeout=120)
             t0 = time.time()
-            second = subprocess.run([GREYBENCH, "serve", "--port", str(srv.port + 1)], env=srv.env,
+            second = subprocess.run([GREYBENCH, "serve", "--port", str(free_port())], env=srv.env,
                                     capture_output=True, text=True, timeout=120)
             took = time.time() - t0
             assert second.returncode == 2, second.stderr
