@@ -246,13 +246,14 @@ def _blocks(segs, sl: list[_SegLimits], lim: PathLimits) -> list[tuple[int, int]
     return list(zip(starts, starts[1:] + [len(segs)], strict=True))
 
 
-def plan_junction_speeds(program: Program, limits: PathLimits, blocks: list[tuple[int, int]] | None = None
-                         ) -> tuple[np.ndarray, list[_SegLimits]]:
-    """Look-ahead: speeds at the B+1 block boundaries (0 at both ends), m/s, and each block's limits
-    (docstring steps 2-3). Without ``blocks`` every segment is a block of its own."""
+def plan_junction_speeds(program: Program, limits: PathLimits
+                         ) -> tuple[np.ndarray, list[_SegLimits], list[tuple[int, int]]]:
+    """Look-ahead: speeds at the B+1 block boundaries (0 at both ends), m/s, each block's limits and the
+    blocks ``[first, last)`` themselves (docstring steps 2-3; a block is one segment unless ``G64``
+    blends it with its neighbours)."""
     segs = program.segments
     seg_lim = [_segment_limits(s, limits) for s in segs]
-    blocks = blocks or [(i, i + 1) for i in range(len(segs))]
+    blocks = _blocks(segs, seg_lim, limits)
     # a blended run keeps the common speed cap and the smallest tangential limits of its segments
     sl = [_SegLimits(min(x.v_cap for x in seg_lim[a:b]), min(x.a_t for x in seg_lim[a:b]),
                      min(x.j_t for x in seg_lim[a:b])) for a, b in blocks]
@@ -270,7 +271,7 @@ def plan_junction_speeds(program: Program, limits: PathLimits, blocks: list[tupl
         vj[i + 1] = min(vj[i + 1], _reachable(vj[i], lengths[i], sl[i].v_cap, sl[i].a_t, sl[i].j_t))
     # A hair below the bound so that the exact solver never sees an infeasible pair after rounding.
     vj *= 1.0 - 1e-9
-    return vj, sl
+    return vj, sl, blocks
 
 
 def interpolate(program: Program, limits: PathLimits | None = None) -> Interpolation:
@@ -299,8 +300,7 @@ def interpolate(program: Program, limits: PathLimits | None = None) -> Interpola
     segs = program.segments
     if not segs:
         raise InputError("program has no motion", source=program.source)
-    blocks = _blocks(segs, [_segment_limits(x, lim) for x in segs], lim)
-    vj, sl = plan_junction_speeds(program, lim, blocks)
+    vj, sl, blocks = plan_junction_speeds(program, lim)
     lengths = np.array([x.length for x in segs])
     cum = np.concatenate(([0.0], np.cumsum(lengths)))
     b_first = np.array([b0 for b0, _ in blocks])
