@@ -328,6 +328,7 @@ class SmoothCorrection:
 
         self.grids = corr.grids
         self.values = corr.values
+        self._linear = corr   # runs too short for a spline
         self._spl = [CubicSpline(g, v, axis=0) if len(g) >= 4 else None
                      for g, v in zip(corr.grids, corr.values, strict=True)]
 
@@ -335,7 +336,7 @@ class SmoothCorrection:
         g, spl = self.grids[run], self._spl[run]
         sigma = np.atleast_1d(np.asarray(sigma, float))
         if spl is None:
-            return Correction(self.grids, self.values).at(run, sigma)
+            return self._linear.at(run, sigma)
         return spl(np.clip(sigma, g[0], g[-1]))
 
 
