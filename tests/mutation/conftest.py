@@ -20,3 +20,14 @@ def _record(qd, tau, *, dt=1e-3, qdd=None, tau_rb=None) -> AxisRecord:
 @pytest.fixture
 def make_record():
     return _record
+
+
+@pytest.fixture
+def service_env_cleared(monkeypatch):
+    """No service setting, Ray address or MLflow store from the caller's environment: the settings are the
+    documented defaults unless the test sets them."""
+    import os
+
+    for k in list(os.environ):
+        if k.startswith("GREYBENCH_") or k in ("RAY_ADDRESS", "MLFLOW_TRACKING_URI"):
+            monkeypatch.delenv(k, raising=False)

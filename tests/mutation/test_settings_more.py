@@ -15,13 +15,7 @@ from service.settings import DEV_API_KEY, load_settings
 KEY = "right-key-0123"
 
 
-@pytest.fixture(autouse=True)
-def _clean_env(monkeypatch):
-    import os
-    for k in list(os.environ):
-        if k.startswith("GREYBENCH_") or k in ("RAY_ADDRESS", "MLFLOW_TRACKING_URI"):
-            monkeypatch.delenv(k, raising=False)
-
+pytestmark = pytest.mark.usefixtures("service_env_cleared")
 
 # (field, refused just outside, accepted at the edge); the module docstring documents each range
 EDGES = [
