@@ -42,9 +42,14 @@ Choices where the method is vague (stated so they can be replaced):
   stick-slip) is not a function of the path and is not copied into the program.
 - **Corners.** On an arc whose radius is at most the tool radius (the tool turning round a convex
   corner of the part) the correction is blended between its neighbours' (:func:`blend_corners`).
-- **Stopping.** Iterate at most ``iterations`` times; stop at the first iteration that does not
-  improve the objective (sum of |Table-2 deviation| when the stock is a test piece, else the RMS
-  normal path deviation); the best program is the result.
+- **Choosing.** Iterate at most ``iterations`` times; stop after :data:`PATIENCE` iterations in a
+  row that do not beat the best so far, or at one outside the contract. The result is, among the
+  iterations within the contract that lower the objective (sum of |Table-2 deviation| when the stock
+  is a test piece, else the RMS normal path deviation) below the original's, the one with the fewest
+  Table-2 rows worse than the original's by more than max(10 %, 2 µm) (:func:`worse_rows`), then the
+  lowest objective (:func:`better`): a correction that makes a feature of the part worse is not what a
+  user asks for even where it lowers the sum. The iteration's outcome swings between iterations (a
+  gear whose flank the corrected cut decides), so one worse step does not end it.
 """
 from __future__ import annotations
 
@@ -82,6 +87,11 @@ CURVATURE_SHARES = tuple(0.9 * 0.8 ** i for i in range(10))
 SPEED_KEEP = 0.95
 #: Local rounds of :func:`keep_speed` and the factor on the curvature share where the program was slow.
 SPEED_ROUNDS, SPEED_FACTOR = 8, 0.5
+#: Iterations in a row that do not beat the best so far before the iteration stops [-].
+PATIENCE = 2
+#: A Table-2 row is worse after than before when its |deviation| grew by more than
+#: max(WORSE_SHARE |before|, WORSE_FLOOR) [-, m].
+WORSE_SHARE, WORSE_FLOOR = 0.1, 2e-6
 
 
 @dataclass(frozen=True)
@@ -1027,6 +1037,8 @@ class Iteration:
         Feed pieces written.
     wall_time : float
         [s] of the simulation.
+    rows_worse : int or None
+        Table-2 rows worse than the original's (:func:`worse_rows`); None without a table.
     """
 
     index: int
@@ -1039,6 +1051,7 @@ class Iteration:
     speed_ratio: float
     pieces: int
     wall_time: float
+    rows_worse: int | None = None
 
     @property
     def within_contract(self) -> bool:
@@ -1093,6 +1106,24 @@ def feed_peak_speed(setup: ProgramSetup) -> float:
     return float(np.max(setup.interp.v[feed])) if feed.any() else 0.0
 
 
+def worse_rows(before, after) -> list[str]:
+    """Names of the Table-2 rows whose |deviation| grew by more than max(10 %, 2 µm) from ``before``
+    to ``after`` (:class:`simulate.evaluation.features.FeatureTable`)."""
+    return [rb.name for rb, ra in zip(before.rows, after.rows, strict=True)
+            if abs(ra.deviation) > abs(rb.deviation) + max(WORSE_SHARE * abs(rb.deviation), WORSE_FLOOR)]
+
+
+def better(it: Iteration, than: Iteration, original: Iteration) -> bool:
+    """Whether ``it`` is a better result than ``than`` (module docstring, *Choosing*): within the
+    contract and below the original's objective, then fewer rows worse, then a lower objective. The
+    original (index 0) is the fallback every candidate must beat."""
+    if it.index == 0 or not it.within_contract or it.objective() >= original.objective():
+        return False
+    if than.index == 0:
+        return True
+    return (it.rows_worse or 0, it.objective()) < (than.rows_worse or 0, than.objective())
+
+
 def _path_stats(dev: Correction) -> tuple[float, float]:
     v = np.concatenate([np.linalg.norm(x, axis=1) for x in dev.values]) if dev.values else np.zeros(1)
     return float(np.sqrt(np.mean(v ** 2))), float(v.max())
@@ -1142,7 +1173,8 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
     dev = deviation_field(path, None, run, s.smoothing)
     rms, mx = _path_stats(raw)
     it0 = Iteration(0, table_sum(run.table) if run.table is not None else None,
-                    run.table.score if run.table is not None else None, rms, mx, 0.0, 1.0, 1.0, 0, run.wall_time)
+                    run.table.score if run.table is not None else None, rms, mx, 0.0, 1.0, 1.0, 0, run.wall_time,
+                    None if run.table is None else 0)
     iters = [it0]
     if on_iteration:
         on_iteration(it0)
@@ -1150,6 +1182,7 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
     best = (0, corr, run, None, raw)
     run0, before_raw = run, raw
     prev = None
+    stale = 0
 
     def load(f: Path) -> ProgramSetup:
         return _load(f, path, spindle_rpm, require_spindle)
@@ -1172,13 +1205,16 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
             it = Iteration(k, table_sum(run.table) if run.table is not None else None,
                            run.table.score if run.table is not None else None, rms, mx, corr.max_norm(),
                            setup.interp.duration / t_nom, feed_peak_speed(setup) / v_nom, wp.n_pieces,
-                           run.wall_time)
+                           run.wall_time,
+                           None if run.table is None or run0.table is None else len(worse_rows(run0.table, run.table)))
             iters.append(it)
             if on_iteration:
                 on_iteration(it)
-            if it.within_contract and it.objective() < iters[best[0]].objective():
-                best = (k, corr, run, wp, raw)
+            if better(it, iters[best[0]], it0):
+                best, stale = (k, corr, run, wp, raw), 0
             else:
+                stale += 1
+            if not it.within_contract or stale >= PATIENCE:
                 break
         k, corr_b, run_b, wp_b, raw_b = best
         if wp_b is None:   # nothing improved: the original's pieces, no correction

@@ -28,19 +28,10 @@ from identify.errors import InputError
 from identify.files import atomic_files
 from identify.records import markdown_table, write_table
 from simulate import defaults as DEFAULTS
-from simulate.compensation import MAX_OFFSET, TIME_RATIO, CompensationResult, table_sum
+from simulate.compensation import MAX_OFFSET, TIME_RATIO, CompensationResult, table_sum, worse_rows
 from simulate.figures import save_png
 
 UM = 1e-6
-
-
-def worse_rows(before, after) -> list[str]:
-    """Rows whose |deviation| grew by more than max(10 %, 2 um)."""
-    out = []
-    for rb, ra in zip(before.rows, after.rows, strict=True):
-        if abs(ra.deviation) > abs(rb.deviation) + max(0.1 * abs(rb.deviation), 2 * UM):
-            out.append(rb.name)
-    return out
 
 
 def evaluation(result: CompensationResult, scale: float = 1.0) -> tuple:
@@ -71,7 +62,8 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
             "iterations": [{"index": it.index, "table_sum_mm": None if it.table_sum is None else it.table_sum / 1e-3,
                             "score": it.score, "path_rms_um": it.path_rms / UM, "path_max_um": it.path_max / UM,
                             "max_offset_um": it.max_offset / UM, "time_ratio": it.time_ratio,
-                            "speed_ratio": it.speed_ratio, "pieces": it.pieces, "wall_time_s": it.wall_time}
+                            "speed_ratio": it.speed_ratio, "pieces": it.pieces, "wall_time_s": it.wall_time,
+                            "rows_worse": it.rows_worse}
                            for it in result.iterations],
             "max_offset_mm": best.max_offset / 1e-3, "time_ratio": best.time_ratio, "speed_ratio": best.speed_ratio}
 
@@ -165,11 +157,12 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
         lines.append("")
     lines += ["## Iterations (model stiffness)", ""]
     lines += markdown_table(
-        ("iteration", "sum of abs. deviation [µm]", "score", "path RMS [µm]", "path max [µm]", "max offset [µm]",
+        ("iteration", "sum of abs. deviation [µm]", "score", "rows worse", "path RMS [µm]", "path max [µm]", "max offset [µm]",
          "time ratio", "peak speed ratio", "pieces", "wall [s]"),
         [(f"{it['index']}{' (chosen)' if it['index'] == info['best_iteration'] else ''}",
           "-" if it["table_sum_mm"] is None else f"{it['table_sum_mm'] * 1e3:.1f}",
-          "-" if it["score"] is None else f"{it['score']:.2f}", f"{it['path_rms_um']:.1f}",
+          "-" if it["score"] is None else f"{it['score']:.2f}",
+          "-" if it["rows_worse"] is None else it["rows_worse"], f"{it['path_rms_um']:.1f}",
           f"{it['path_max_um']:.1f}", f"{it['max_offset_um']:.1f}", f"{it['time_ratio']:.3f}",
           f"{it['speed_ratio']:.3f}", it["pieces"], f"{it['wall_time_s']:.1f}") for it in info["iterations"]])
     lines += ["", "## The corrected program", "",

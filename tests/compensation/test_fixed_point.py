@@ -177,3 +177,39 @@ def test_a_sensitivity_that_is_not_positive_gets_the_mirror_step():
     far = np.abs(g - 50e-3) > s.sensitivity_window    # away from where the window straddles both halves
     assert np.allclose(new[half & far], -100e-6 - 250e-6, atol=1e-9)            # mirror: c - e
     assert np.allclose(new[~half & far], -100e-6 - 150e-6 / 0.5, atol=1e-9)     # secant: c - e / 0.5
+
+
+def _scripted(rows_um):
+    """The constant deflection, with the k-th simulation's Table-2 rows [µm] given (a table per call)."""
+    from types import SimpleNamespace
+
+    calls = iter(rows_um)
+
+    def sim(setup, scale=1.0):
+        rows = [SimpleNamespace(name=f"row{i}", deviation=d * 1e-6) for i, d in enumerate(next(calls))]
+        return SimulationRun(setup, setup.interp.xyz + D / scale,
+                             table=SimpleNamespace(rows=rows, score=sum(abs(r.deviation) for r in rows)))
+
+    return sim
+
+
+@pytest.mark.parametrize(("rows_um", "chosen", "ran"), [
+    # a lower sum with a row worse by more than max(10 %, 2 µm) (70 > 50 + 5) loses to a higher one without
+    ([[50, 50], [10, 70], [45, 45], [60, 60], [60, 60]], 2, 4),
+    # one worse step (a row 60 > 55, sum 65) does not end it: the next one is the best
+    ([[50, 50], [10, 40], [20, 20], [5, 60], [3, 30], [50, 60], [50, 60]], 4, 6),
+    # within max(10 %, 2 µm): 2 -> 4 µm is not worse; so the lowest sum wins
+    ([[2, 50], [4, 30], [1, 45], [9, 9], [9, 9]], 1, 3),
+    # nothing beats the original's sum: no correction
+    ([[10, 10], [15, 15], [12, 12]], 0, 2),
+])
+def test_the_chosen_iteration_has_the_fewest_rows_worse_then_the_lowest_sum(small, rows_um, chosen, ran):
+    prog, _ = small
+    setup = load_program(prog)
+    res = compensate(setup, _scripted(rows_um), CompensationSettings(iterations=len(rows_um) - 1, keep_speed=False))
+    assert res.best == chosen
+    assert len(res.iterations) == ran + 1          # stopped after two in a row that are no better
+    worse = [it.rows_worse for it in res.iterations]
+    assert worse[0] == 0
+    if chosen:
+        assert res.after.table.rows[0].deviation == pytest.approx(rows_um[chosen][0] * 1e-6)
