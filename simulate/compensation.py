@@ -43,7 +43,7 @@ Choices where the method is vague (stated so they can be replaced):
 - **Corners.** On an arc whose radius is at most the tool radius (the tool turning round a convex
   corner of the part) the correction is blended between its neighbours' (:func:`blend_corners`).
 - **Choosing.** Iterate at most ``iterations`` times; stop after :data:`PATIENCE` iterations in a
-  row that do not beat the best so far, or at one outside the contract. The result is, among the
+  row that do not lower the objective below the lowest so far, or at one outside the contract. The result is, among the
   iterations within the contract that lower the objective (sum of |Table-2 deviation| when the stock
   is a test piece, else the RMS normal path deviation) below the original's, the one with the fewest
   Table-2 rows worse than the original's by more than max(10 %, 2 µm) (:func:`worse_rows`), then the
@@ -87,7 +87,7 @@ CURVATURE_SHARES = tuple(0.9 * 0.8 ** i for i in range(10))
 SPEED_KEEP = 0.95
 #: Local rounds of :func:`keep_speed` and the factor on the curvature share where the program was slow.
 SPEED_ROUNDS, SPEED_FACTOR = 8, 0.5
-#: Iterations in a row that do not beat the best so far before the iteration stops [-].
+#: Iterations in a row that do not lower the lowest objective so far before the iteration stops [-].
 PATIENCE = 2
 #: A Table-2 row is worse after than before when its |deviation| grew by more than
 #: max(WORSE_SHARE |before|, WORSE_FLOOR) [-, m].
@@ -1182,7 +1182,7 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
     best = (0, corr, run, None, raw)
     run0, before_raw = run, raw
     prev = None
-    stale = 0
+    stale, lowest = 0, it0.objective()
 
     def load(f: Path) -> ProgramSetup:
         return _load(f, path, spindle_rpm, require_spindle)
@@ -1211,9 +1211,10 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
             if on_iteration:
                 on_iteration(it)
             if better(it, iters[best[0]], it0):
-                best, stale = (k, corr, run, wp, raw), 0
-            else:
-                stale += 1
+                best = (k, corr, run, wp, raw)
+            # progress is the objective's, whatever the rows: a step may pass through more rows worse
+            stale = 0 if it.objective() < lowest else stale + 1
+            lowest = min(lowest, it.objective())
             if not it.within_contract or stale >= PATIENCE:
                 break
         k, corr_b, run_b, wp_b, raw_b = best
