@@ -45,10 +45,12 @@ Choices where the method is vague (stated so they can be replaced):
 - **Choosing.** Iterate at most ``iterations`` times; stop after :data:`PATIENCE` iterations in a
   row that do not lower the objective below the lowest so far, or at one outside the contract. The result is, among the
   iterations within the contract that lower the objective (sum of |Table-2 deviation| when the stock
-  is a test piece, else the RMS normal path deviation) below the original's, the one with the fewest
-  Table-2 rows worse than the original's by more than max(10 %, 2 µm) (:func:`worse_rows`), then the
-  lowest objective (:func:`better`): a correction that makes a feature of the part worse is not what a
-  user asks for even where it lowers the sum. The iteration's outcome swings between iterations (a
+  is a test piece, else the RMS normal path deviation) below the original's, the lowest objective of
+  those that leave no Table-2 row worse than the original's by more than max(10 %, 2 µm)
+  (:func:`worse_rows`), and only if there is none the lowest objective of all (:func:`better`): a
+  correction that makes a feature of the part worse is not what a user asks for, but where every
+  iteration does, trading much of the sum for one row fewer is no better (feasible first, then the
+  objective, as a constrained search ranks its candidates). The iteration's outcome swings between iterations (a
   gear whose flank the corrected cut decides), so one worse step does not end it.
 """
 from __future__ import annotations
@@ -1115,13 +1117,13 @@ def worse_rows(before, after) -> list[str]:
 
 def better(it: Iteration, than: Iteration, original: Iteration) -> bool:
     """Whether ``it`` is a better result than ``than`` (module docstring, *Choosing*): within the
-    contract and below the original's objective, then fewer rows worse, then a lower objective. The
-    original (index 0) is the fallback every candidate must beat."""
+    contract and below the original's objective; then no row worse beats some row worse; then a lower
+    objective. The original (index 0) is the fallback every candidate must beat."""
     if it.index == 0 or not it.within_contract or it.objective() >= original.objective():
         return False
     if than.index == 0:
         return True
-    return (it.rows_worse or 0, it.objective()) < (than.rows_worse or 0, than.objective())
+    return (bool(it.rows_worse), it.objective()) < (bool(than.rows_worse), than.objective())
 
 
 def _path_stats(dev: Correction) -> tuple[float, float]:
