@@ -156,12 +156,13 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
                       f"{ev['sum_after_mm'] * 1e3:.1f} µm, **ratio {ev['ratio']:.3f}**; score "
                       f"{ev['score_before']:.2f} -> {ev['score_after']:.2f}. Rows worse than before by more than "
                       f"max(10 %, 2 µm): {', '.join(ev['rows_worse']) or 'none'}.", ""]
-    if info["checks"]:
+    checks = [c for c in info["checks"] if c is not None]   # None: no Table-2 rows (not a test-piece stock)
+    if checks:
         lines += ["## Robustness: the robot stiffer or softer than the compensating model", ""]
         lines += markdown_table(
             ("stiffness scale", "sum before [µm]", "sum after [µm]", "ratio", "rows worse"),
             [(f"{c['stiffness_scale']:g}", f"{c['sum_before_mm'] * 1e3:.1f}", f"{c['sum_after_mm'] * 1e3:.1f}",
-              f"{c['ratio']:.3f}", ", ".join(c["rows_worse"]) or "none") for c in info["checks"]])
+              f"{c['ratio']:.3f}", ", ".join(c["rows_worse"]) or "none") for c in checks])
         lines.append("")
     lines += ["## Iterations (model stiffness)", ""]
     lines += markdown_table(
