@@ -644,7 +644,8 @@ def run_circle(rob: Robot, placement: Placement, spec: Any, out_dir: Path, *, fr
 def circle_rows(result: CircleResult, summary: dict[str, Any]) -> dict[str, Any]:
     """The circle's figures [µm, to 0.1 µm as the spike table] and files, for a summary table."""
     um = {"roundness_um": result.roundness_um, "radius_error_um": result.radius_error_um,
-          "largest_spike_um": result.largest_spike_um, "largest_reversal_spike_um": result.largest_reversal_spike_um,
+          "largest_excursion_um": result.largest_excursion_um,
+          "largest_reversal_spike_um": result.largest_reversal_spike_um,
           "largest_lost_motion_um": result.largest_lost_motion_um}
     return {**{k: f"{v:.1f}" for k, v in um.items()}, "csv": str(summary["csv"]), "png": str(summary["png"])}
 
