@@ -5,7 +5,8 @@ from __future__ import annotations
 from simulate.compensation_report import report_text
 
 ITERATION = {"index": 0, "table_sum_mm": None, "score": None, "path_rms_um": 12.0, "path_max_um": 30.0,
-             "max_offset_um": 0.0, "time_ratio": 1.0, "speed_ratio": 1.0, "pieces": 3, "wall_time_s": 0.5}
+             "max_offset_um": 0.0, "time_ratio": 1.0, "speed_ratio": 1.0, "pieces": 3, "wall_time_s": 0.5,
+             "rows_worse": None}
 INFO = {"evaluation": None, "checks": [None], "best_iteration": 0, "iterations": [ITERATION],
         "max_offset_mm": 0.0, "time_ratio": 1.0, "speed_ratio": 1.0}
 CHECK = {"stiffness_scale": 0.8, "sum_before_mm": 0.05, "sum_after_mm": 0.02, "ratio": 0.4, "rows_worse": []}
