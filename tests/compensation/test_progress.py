@@ -29,17 +29,16 @@ class Recorder:
         self.running.append(sum(self.calls))
 
 
-@pytest.mark.parametrize("growth, iterations, early", [(0.0, 3, False), (5.0, 4, True)])
-def test_meter_counts_each_simulation_as_the_original_and_ends_at_the_total(small, growth, iterations, early):
+def test_meter_counts_each_simulation_as_the_original_and_ends_at_the_total(small):
     """A synthetic simulator that reports its steps as the machining loop does (steps 1..N-1 in chunks),
-    in the real iteration with a check at 0.8: a constant deflection (every iteration runs; the corrected
-    programs have more steps than the original), and one that grows with every simulation (the iteration
-    stops early: the skipped ones are counted at the end)."""
+    in the real iteration with a check at 0.8; a constant deflection: the corrected programs have more
+    steps than the original."""
     prog, _ = small
     setup = load_program(prog)
     n0 = len(setup.interp)
     lengths = []
     rec = Recorder()
+    iterations = 3
     meter = SimulationMeter(rec, n0, iterations + 1 + 2)
 
     def sim(s, scale=1.0):
@@ -48,28 +47,45 @@ def test_meter_counts_each_simulation_as_the_original_and_ends_at_the_total(smal
         chunk = max(1, n // 7)
         for k in range(1, n, chunk):
             meter.meter(min(chunk, n - k))
-        return SimulationRun(s, s.interp.xyz + D * (1 + growth * len(lengths)) / scale)
+        return SimulationRun(s, s.interp.xyz + D / scale)
 
     compensate(setup, meter.wrap(sim), CompensationSettings(iterations=iterations), checks=(0.8,))
     runs = len(lengths)
-    assert (runs < iterations + 3) if early else (runs == iterations + 3)
-    done_before_finish = rec.running[-1]
+    assert rec.running[-1] == runs * n0          # each simulation counted as the original's steps
     meter.finish()
     total = progress_total(n0, iterations, 0.8)
     assert total == (iterations + 3) * n0
-    assert done_before_finish == runs * n0
     assert all(isinstance(c, int) and c > 0 for c in rec.calls)           # whole steps
     assert max(rec.running) == rec.running[-1] == total                   # never past, ends at it
     assert np.all(np.diff(rec.running) > 0)
     assert max(lengths[1:]) > n0                                           # a corrected program is longer
 
 
+class _Setup:
+    interp = np.zeros(11)   # 11 steps: the loop reports 10
+
+
+def test_meter_finish_counts_the_simulations_not_run():
+    """An iteration that stops early: two of five planned simulations ran; finish brings the count to the
+    total in one step."""
+    rec = Recorder()
+    meter = SimulationMeter(rec, 10, 5)
+
+    def sim(s, scale=1.0):
+        for _ in range(10):
+            meter.meter(1)
+
+    wrapped = meter.wrap(sim)
+    wrapped(_Setup())
+    wrapped(_Setup())
+    assert rec.running[-1] == 20
+    meter.finish()
+    assert rec.running[-1] == 50 and rec.calls[-1] == 30
+
+
 def test_meter_stays_within_the_total_when_a_simulation_reports_more_steps():
     rec = Recorder()
     meter = SimulationMeter(rec, 10, 2)
-
-    class Setup:
-        interp = np.zeros(11)   # 11 steps: the loop reports 10
 
     def sim(s, scale=1.0):
         for _ in range(25):     # more than its steps
@@ -77,10 +93,10 @@ def test_meter_stays_within_the_total_when_a_simulation_reports_more_steps():
         return None
 
     wrapped = meter.wrap(sim)
-    wrapped(Setup())
+    wrapped(_Setup())
     assert rec.running[-1] == 10
-    wrapped(Setup())
-    wrapped(Setup())            # one more simulation than planned
+    wrapped(_Setup())
+    wrapped(_Setup())            # one more simulation than planned
     assert max(rec.running) == 20
     meter.finish()
     assert rec.running[-1] == 20
