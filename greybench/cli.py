@@ -52,10 +52,10 @@ app.add_typer(typer.Typer(cls=_LazyBench, no_args_is_help=True, rich_markup_mode
 # Areas, in the order of the workflow, with their commands. Each module defines COMMANDS: name ->
 # command function or sub-app.
 _AREA_COMMANDS = {
-    "trajectory": "trajectory", "friction": "synth fit predict compare train-robot promote ui", "diagnose": "diagnose",
+    "trajectory": "trajectory", "friction": "synth fit predict compare train-robot promote", "diagnose": "diagnose",
     "robot": "robot prepare", "toolpath": "testpiece interpolate", "machining": "machine",
     "evaluation": "rank-poses trace", "placement": "optimize-pose", "circle": "circle", "compensate": "compensate",
-    "explain": "explain", "serve": "serve"}
+    "explain": "explain", "serve": "serve ui"}
 _AREAS = list(_AREA_COMMANDS)
 #: The area of each command: a console run of one command loads only its own area, so ``greybench
 #: machine`` does not import torch, pandas or scipy.signal for the friction commands (seconds of

@@ -77,6 +77,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from identify.diagnosis_defaults import SCORE_THRESHOLD
 from identify.errors import InputError
 from identify.files import atomic_folder
 from identify.metrics import Metrics
@@ -108,14 +109,6 @@ CANDIDATES: tuple[Cause, ...] = (Cause.LOAD, Cause.TEMPERATURE, Cause.POSITION, 
 REQUIRES: dict[Cause, tuple[str, ...]] = {Cause.LOAD: ("tau_load",), Cause.TEMPERATURE: ("temp",),
                                           Cause.POSITION: (), Cause.ASYMMETRY: (),
                                           Cause.INERTIA: ("tau_load",), Cause.DRIFT: (), Cause.GRAVITY: ()}
-#: Held-out RMS torque a candidate must explain to be named, as a share of the held-out
-#: residual's noise RMS (:func:`noise_rms`) [-]. Null distribution measured on clean synthetic
-#: records (LuGre plant, 0.02 Nm noise, UT train / test trajectory, 15 GA generations): the
-#: best candidate's score over 30 seeds of 25 s records had its 99th percentile at 0.33 mNm
-#: (max 0.34 mNm), i.e. 0.017 of the noise; 60 s records stayed below 0.0125. 0.1 is six
-#: times that: a candidate is named only when it predicts a tenth of the noise RMS on data it
-#: never saw.
-SCORE_THRESHOLD = 0.1
 #: ... and at least this share of the held-out torque's standard deviation [-] (a floor for
 #: records whose torque is almost noise-free).
 LEVEL_SHARE = 1e-3

@@ -21,6 +21,9 @@ Every fit is one run with
 carries ``<metric>/<model>`` metrics (one row in the MLflow compare view holds every model), the
 comparison table, the overlay of all models' predictions and their residual analyses in one plot.
 
+The store's location and the ``mlflow ui`` command are in :mod:`identify.tracking_store` (no mlflow,
+numpy or models: the CLI's light paths), re-exported here.
+
 Registered models are named per robot and axis (:func:`registered_name`, e.g.
 ``max100-axis1-friction``); every new version becomes ``challenger`` (an untested model never
 drives a simulation by itself); only :func:`promote` makes a ``champion``: the first promotion
@@ -47,29 +50,13 @@ from identify.models import FrictionModel, load_model
 from identify.records import AxisRecord, load_record, markdown_table, record_params, validate_frame
 from identify.residual_analysis import ResidualAnalysis, residual_analysis
 from identify.residual_analysis import figure as residual_figure
+from identify.tracking_store import ARTIFACT_DIR, DB_FILE, artifact_root, tracking_uri, ui_command  # noqa: F401
 
-DB_FILE = "mlruns.db"
-ARTIFACT_DIR = "mlartifacts"
 MODEL_ARTIFACT = "model"
 CHAMPION = "champion"
 CHALLENGER = "challenger"
 #: Key of the saved model folder inside the pyfunc's artifacts.
 PYFUNC_ARTIFACT = "friction_model"
-
-
-def tracking_uri(cwd: str | os.PathLike | None = None) -> str:
-    """``MLFLOW_TRACKING_URI`` if set, else ``sqlite:///<cwd>/mlruns.db``."""
-    env = os.environ.get("MLFLOW_TRACKING_URI")
-    if env:
-        return env
-    return f"sqlite:///{Path(cwd or os.getcwd()).resolve() / DB_FILE}"
-
-
-def artifact_root(uri: str) -> str | None:
-    """Artifact folder for an embedded SQLite store (beside the database); None for servers."""
-    if uri.startswith("sqlite:///"):
-        return (Path(uri[len("sqlite:///"):]).resolve().parent / ARTIFACT_DIR).as_uri()
-    return None
 
 
 def _mlflow():
@@ -596,18 +583,6 @@ def log_comparison(parent_run_id: str, models: dict[str, FrictionModel], record:
         client.log_figure(parent_run_id, fig, f"plots/{fname}")
         plt.close(fig)
     return analyses
-
-
-def ui_command(host: str = "127.0.0.1", port: int = 5000) -> list[str]:
-    """The ``mlflow ui`` command line for the current store."""
-    import sys
-
-    uri = tracking_uri()
-    cmd = [sys.executable, "-m", "mlflow", "ui", "--backend-store-uri", uri, "--host", host, "--port", str(port)]
-    root = artifact_root(uri)
-    if root:
-        cmd += ["--default-artifact-root", root]
-    return cmd
 
 
 class _Progress(Protocol):

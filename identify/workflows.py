@@ -260,12 +260,12 @@ class UIRun:
 
 
 def run_ui(host: str, port: int, on_ready: Callable[[str], None], progress: Progress = quiet) -> UIRun:
-    """Start the MLflow UI on the tracking store (:func:`identify.tracking.ui_command`; its own messages
+    """Start the MLflow UI on the tracking store (:func:`identify.tracking_store.ui_command`; its own messages
     go to stderr), call ``on_ready(url)`` once it answers and run it until it exits or Ctrl-C stops it;
     stop it at once when it does not answer (a taken port)."""
     import subprocess
 
-    from identify.tracking import ui_command
+    from identify.tracking_store import ui_command
 
     if not 0 < port < 65536:
         raise InputError("must be 1..65535", field="--port")

@@ -118,7 +118,7 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
 def run(request: dict, job_dir: Path, progress) -> dict:
     """The job body: fetch the friction models, compensate, write the files into ``<job>/out``."""
     from service.pipeline import DATA_DIR, PoseTask, _model_folders, pose_tasks
-    from simulate.compensation_report import run_compensation
+    from simulate.compensation_report import progress_total, run_compensation
 
     req = dict(request, poses=[request["pose"]])
     task: PoseTask = pose_tasks(req, job_dir, progress)[0]
@@ -141,9 +141,9 @@ def run(request: dict, job_dir: Path, progress) -> dict:
         from simulate.pipeline import load_program
 
         interp = load_program(program, require_spindle=True, source=task.program_source).interp
-        n = len(interp.t)
-        scales = {float(opts.get("stiffness_scale", 1.0)), *map(float, opts.get("check_scales", []))} - {1.0}
-        total = [n * (int(opts.get("iterations", 4)) + 1 + 2 * len(scales))]
+        # run_compensation counts up to exactly this total (the original's steps per simulation)
+        total = [progress_total(len(interp.t), int(opts.get("iterations", 4)), float(opts.get("stiffness_scale", 1.0)),
+                                opts.get("check_scales", []))]
         try:
             info = run_compensation(program, robot, poses, task.pose["name"], job_dir / "out",
                                     iterations=int(opts.get("iterations", 4)),

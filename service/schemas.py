@@ -226,7 +226,8 @@ class PlacementSearchJobStatus(JobStatus):
 
 class CircleJobStatus(JobStatus):
     """Status of a circle (ballbar) job (``POST /circles``); result: roundness, radius error and reversal
-    spikes [µm], the friction model per axis (``circle --json``)."""
+    spikes [µm], the friction model per axis (``circle --json``; ``largest_spike_um`` is a deprecated alias
+    of ``largest_excursion_um``)."""
 
     kind: Literal[JobKind.circle] = Field(description="'circle'")
 

@@ -465,6 +465,7 @@ def circle_sections(ctx: Context) -> list[dict]:
     s = _read_json(ctx, "out/summary.json")
     c = s.get("center_offset_um") or [None, None]
     spikes = s.get("reversal_spikes") or []
+    excursion = s.get("largest_excursion_um", s.get("largest_spike_um"))   # the deprecated name: older jobs
     # one number format per row: [label with unit, value, decimals]
     out: list[dict] = [{"type": "summary", "title": "Circle test", "items": [
         ["roundness (circular deviation G, ISO 230-4) [µm]", _num(s.get("roundness_um")), 1],
@@ -472,7 +473,7 @@ def circle_sections(ctx: Context) -> list[dict]:
         ["centre offset, in-plane axes [µm]", ", ".join("-" if _num(v) is None else f"{float(v):.1f}" for v in c)],
         ["largest reversal spike, beyond the settled trace [µm]", _num(s.get("largest_reversal_spike_um")), 1],
         ["largest lost motion, step of the settled trace [µm]", _num(s.get("largest_lost_motion_um")), 1],
-        ["largest excursion after a reversal (lost motion and spike) [µm]", _num(s.get("largest_spike_um")), 1],
+        ["largest excursion after a reversal (lost motion and spike) [µm]", _num(excursion), 1],
         ["radius [mm]", _num(s.get("radius_mm")), 3], ["feed [mm/min]", _num(s.get("feed_mm_min")), 1],
         ["plane, direction", f"{s.get('plane', '-')}, {'clockwise (G2)' if s.get('cw') else 'counter-clockwise (G3)'}"],
         ["robot, pose", f"{s.get('robot', '-')}, {s.get('pose', '-')}"],

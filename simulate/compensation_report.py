@@ -148,12 +148,13 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
                       f"{ev['sum_after_mm'] * 1e3:.1f} µm, **ratio {ev['ratio']:.3f}**; score "
                       f"{ev['score_before']:.2f} -> {ev['score_after']:.2f}. Rows worse than before by more than "
                       f"max(10 %, 2 µm): {', '.join(ev['rows_worse']) or 'none'}.", ""]
-    if info["checks"]:
+    checks = [c for c in info["checks"] if c is not None]   # None: no Table-2 rows (not a test-piece stock)
+    if checks:
         lines += ["## Robustness: the robot stiffer or softer than the compensating model", ""]
         lines += markdown_table(
             ("stiffness scale", "sum before [µm]", "sum after [µm]", "ratio", "rows worse"),
             [(f"{c['stiffness_scale']:g}", f"{c['sum_before_mm'] * 1e3:.1f}", f"{c['sum_after_mm'] * 1e3:.1f}",
-              f"{c['ratio']:.3f}", ", ".join(c["rows_worse"]) or "none") for c in info["checks"]])
+              f"{c['ratio']:.3f}", ", ".join(c["rows_worse"]) or "none") for c in checks])
         lines.append("")
     lines += ["## Iterations (model stiffness)", ""]
     lines += markdown_table(
@@ -241,6 +242,68 @@ def compensation_job(program: Path, robot: str | Path, pose: Path, name: str | N
     return setup, job, placement, rob
 
 
+def check_scales_of(stiffness_scale: float, check_scales=()) -> list[float]:
+    """The stiffness multipliers [-] both programs are simulated again at: ``stiffness_scale`` and the
+    ``check_scales``, 1 (the iteration's own) left out."""
+    return sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
+
+
+def progress_total(steps: int, iterations: int, stiffness_scale: float = 1.0, check_scales=()) -> int:
+    """The progress total of :func:`run_compensation` for a program of ``steps`` 2 ms steps: that
+    many per simulation (:class:`SimulationMeter`), for the original, every iteration and both
+    programs at every stiffness multiplier [-] other than 1."""
+    return steps * (iterations + 1 + 2 * len(check_scales_of(stiffness_scale, check_scales)))
+
+
+class SimulationMeter:
+    """Progress of a compensation in units of the original program's 2 ms steps (``steps``), passed to
+    ``advance`` in whole units: every simulation counts ``steps``, whatever its own length (a corrected
+    program has a few per cent more steps than the original, so counting its own steps would pass the
+    total), scaled from the steps the machining loop reports; iterations that do not run (the
+    iteration stopped early) are counted by :meth:`finish`. So the count never passes
+    ``steps * simulations`` and ends there.
+
+    ``meter`` is the machining loop's ``advance``; :meth:`wrap` makes a simulator start each
+    simulation's count and complete it when the simulation returns."""
+
+    def __init__(self, advance, steps: int, simulations: int) -> None:
+        self.advance, self.steps, self.total = advance, int(steps), int(steps) * int(simulations)
+        self.counted = 0.0   # units counted, fractions included
+        self.sent = 0        # whole units passed to advance
+        self.sim_counted, self.unit = 0.0, 1.0
+
+    def _count(self, units: float) -> None:
+        self.counted = min(self.total, self.counted + units)
+        whole = int(self.counted + 1e-6) - self.sent   # a simulation's scaled steps add up to `steps` but for rounding
+        if whole > 0:
+            self.sent += whole
+            self.advance(whole)
+
+    def meter(self, n: float = 1) -> None:
+        """``n`` steps of the running simulation, in units of the original's steps."""
+        units = min(n * self.unit, self.steps - self.sim_counted)
+        if units > 0:
+            self.sim_counted += units
+            self._count(units)
+
+    def wrap(self, simulate):
+        """``simulate`` (a :data:`simulate.compensation.Simulator`) counted as one simulation per call."""
+
+        def metered(setup, scale: float = 1.0):
+            # the loop reports steps 1..N-1 of the N it simulates
+            self.sim_counted, self.unit = 0.0, self.steps / max(1, len(setup.interp) - 1)
+            try:
+                return simulate(setup, scale)
+            finally:
+                self._count(self.steps - self.sim_counted)
+
+        return metered
+
+    def finish(self) -> None:
+        """Count what remains (the iterations not run): the progress ends at its total."""
+        self._count(self.total - self.counted)
+
+
 def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir: Path, *,
                      iterations: int = 4, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
                      spacing_mm: float = DEFAULTS.RANKING_DEXEL_SPACING * 1e3,
@@ -249,7 +312,8 @@ def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir
                      advance=None) -> dict:
     """Compensate, evaluate and write every output (``greybench compensate``'s work; the service's
     compensation jobs call it too). ``robot``: robot TOML path or a loaded robot; ``advance(n)``:
-    progress in simulated 2 ms steps.
+    progress in the original program's 2 ms steps per simulation (:class:`SimulationMeter`), up to
+    :func:`progress_total` exactly.
 
     ``stiffness_scale`` [-]: the robot the *evaluation* simulates is that much stiffer than the model
     the compensation iterates with (both programs); ``check_scales`` add more such evaluations.
@@ -272,12 +336,14 @@ def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir
                                                   probe_spacing_mm=probe_spacing_mm, size=size,
                                                   friction=friction or {}, ff_friction=ff_friction,
                                                   backlash_comp=backlash_comp)
-    scales = sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
+    scales = check_scales_of(stiffness_scale, check_scales)
     from simulate.evaluation.cutter import robot_cutter
 
-    sim = pipeline_simulator(job, advance=advance)
+    meter = SimulationMeter(advance or (lambda n=1: None), len(setup.interp), iterations + 1 + 2 * len(scales))
+    sim = meter.wrap(pipeline_simulator(job, advance=meter.meter if advance else None))
     res = compensate(setup, sim, cs, checks=scales, require_spindle=True, tool_radius=robot_cutter(rob).radius,
                      header=f"compensated by greybench for robot {rob.name}, pose {placement.name}")
+    meter.finish()
     nc = [n for n, on in (("friction feed-forward", ff_friction), ("backlash compensation", backlash_comp)) if on]
     title = f"{program.name}, robot {rob.name}, pose {placement.name}" + (f", NC {' and '.join(nc)} on" if nc else "")
     return write_outputs(res, out_dir, robot=rob, placement=placement, title=title, scale=float(stiffness_scale),

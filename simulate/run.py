@@ -356,17 +356,17 @@ def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *
 # ---- compensation, explain --------------------------------------------------------------------
 def compensation_steps(program: Path, iterations: int = 4, stiffness_scale: float = 1.0,
                        check_scales: Sequence[float] = ()) -> int:
-    """The progress total of :func:`simulate.compensation_report.run_compensation` in simulated 2 ms
-    steps: the original, the iterations, two runs per stiffness multiplier [-] other than 1."""
+    """The progress total of :func:`simulate.compensation_report.run_compensation`
+    (:func:`simulate.compensation_report.progress_total`: the original program's 2 ms steps per
+    simulation, for the original, the iterations, two runs per stiffness multiplier [-] other than 1)."""
+    from simulate.compensation_report import progress_total
     from simulate.pipeline import load_program
     from simulate.toolpath.interpolation import Interpolation
 
     _program(program)
     interp = load_program(program, require_spindle=True).interp
     assert isinstance(interp, Interpolation)  # the pipeline's stages are typed object
-    n = len(interp)
-    scales = {float(stiffness_scale), *map(float, check_scales)} - {1.0}
-    return n * (iterations + 1 + 2 * len(scales))
+    return progress_total(len(interp), iterations, stiffness_scale, check_scales)
 
 
 def write_explanation(ex: Explanation, out_dir: Path, measured_name: str) -> None:
@@ -644,7 +644,8 @@ def run_circle(rob: Robot, placement: Placement, spec: Any, out_dir: Path, *, fr
 def circle_rows(result: CircleResult, summary: dict[str, Any]) -> dict[str, Any]:
     """The circle's figures [µm, to 0.1 µm as the spike table] and files, for a summary table."""
     um = {"roundness_um": result.roundness_um, "radius_error_um": result.radius_error_um,
-          "largest_spike_um": result.largest_spike_um, "largest_reversal_spike_um": result.largest_reversal_spike_um,
+          "largest_excursion_um": result.largest_excursion_um,
+          "largest_reversal_spike_um": result.largest_reversal_spike_um,
           "largest_lost_motion_um": result.largest_lost_motion_um}
     return {**{k: f"{v:.1f}" for k, v in um.items()}, "csv": str(summary["csv"]), "png": str(summary["png"])}
 

@@ -8,8 +8,7 @@ import typer
 
 from greybench import options as o
 from greybench.support import out, print_table, progress, show
-from identify.diagnosis import SCORE_THRESHOLD
-from identify.records import derivative_note
+from identify.diagnosis_defaults import SCORE_THRESHOLD
 from identify.workflows import diagnose_files
 
 
@@ -37,6 +36,8 @@ def diagnose(
     """Name what the LuGre model gets wrong (load, temperature, position, asymmetry, inertia, drift, gravity or none)
     by held-out nested-model tests, extend the model with the named causes, refit and report the test
     RMSE gain [-]."""
+    from identify.records import derivative_note
+
     with progress("diagnosing (baseline fit, held-out tests, extended refit)", total=None) as advance:
         d = diagnose_files(train, test, out_dir, seed=seed, generations=generations, threshold=threshold, track=track,
                            linear=linear, cutoff=cutoff, advance=advance)

@@ -1,8 +1,7 @@
-"""Friction identification commands: synth, fit, predict, compare, train-robot, promote, ui
+"""Friction identification commands: synth, fit, predict, compare, train-robot, promote
 (:mod:`identify.workflows`; fits are tracked in MLflow, :mod:`identify.tracking`)."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -212,34 +211,5 @@ def promote(
     show(as_json, res.to_dict(), lambda: out.print(res.message(), soft_wrap=True, highlight=False))
 
 
-def ui(
-    host: Annotated[str, typer.Option("--host", help="Interface to listen on.")] = "127.0.0.1",
-    port: Annotated[int, typer.Option("--port", help="TCP port.")] = 5000,
-    print_only: Annotated[bool, typer.Option("--print-only", help="Print the mlflow ui command instead of running "
-                                                                  "it.")] = False,
-) -> None:
-    """Start the MLflow UI on the tracking store (MLFLOW_TRACKING_URI or ./mlruns.db); its URL is
-    printed once the UI answers (starting takes seconds to a minute), then it runs until Ctrl-C."""
-    import shlex
-
-    from identify.tracking import ui_command
-    from identify.workflows import run_ui
-
-    if print_only:
-        out.print(" ".join(shlex.quote(c) for c in ui_command(host, port)), highlight=False, soft_wrap=True)
-        return
-
-    def ready(url: str) -> None:  # stdout carries only the URL
-        out.print(f"MLflow UI: {url}", highlight=False, soft_wrap=True)
-        sys.stdout.flush()
-
-    run = run_ui(host, port, ready, progress=progress)
-    if not run.answered:
-        err.print(f"error: the MLflow UI did not answer at {run.url} (exit code {run.code}; is the port taken?)",
-                  highlight=False, markup=False, soft_wrap=True)
-        raise typer.Exit(code=1)
-    raise typer.Exit(code=run.code)
-
-
 COMMANDS = {"synth": synth, "fit": fit, "predict": predict, "compare": compare,
-            "train-robot": train_robot, "promote": promote, "ui": ui}
+            "train-robot": train_robot, "promote": promote}

@@ -1,11 +1,15 @@
-"""``greybench serve``: the REST service."""
+"""Servers: ``greybench serve`` (the REST service), ``greybench ui`` (the MLflow UI; loads no friction model)."""
 from __future__ import annotations
 
+import shlex
+import sys
 from typing import Annotated
 
 import typer
 
-from greybench.support import err
+from greybench.support import err, out, progress
+from identify.tracking_store import ui_command
+from identify.workflows import run_ui
 
 
 def serve(host: Annotated[str, typer.Option(help="interface to listen on (IP address)")] = "127.0.0.1",
@@ -29,4 +33,28 @@ def serve(host: Annotated[str, typer.Option(help="interface to listen on (IP add
     uvicorn.run(create_app(settings), host=host, port=port, log_level=log_level)
 
 
-COMMANDS = {"serve": serve}
+def ui(
+    host: Annotated[str, typer.Option("--host", help="Interface to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option("--port", help="TCP port.")] = 5000,
+    print_only: Annotated[bool, typer.Option("--print-only", help="Print the mlflow ui command instead of running "
+                                                                  "it.")] = False,
+) -> None:
+    """Start the MLflow UI on the tracking store (MLFLOW_TRACKING_URI or ./mlruns.db); its URL is
+    printed once the UI answers (starting takes seconds to a minute), then it runs until Ctrl-C."""
+    if print_only:
+        out.print(" ".join(shlex.quote(c) for c in ui_command(host, port)), highlight=False, soft_wrap=True)
+        return
+
+    def ready(url: str) -> None:  # stdout carries only the URL
+        out.print(f"MLflow UI: {url}", highlight=False, soft_wrap=True)
+        sys.stdout.flush()
+
+    run = run_ui(host, port, ready, progress=progress)
+    if not run.answered:
+        err.print(f"error: the MLflow UI did not answer at {run.url} (exit code {run.code}; is the port taken?)",
+                  highlight=False, markup=False, soft_wrap=True)
+        raise typer.Exit(code=1)
+    raise typer.Exit(code=run.code)
+
+
+COMMANDS = {"serve": serve, "ui": ui}

@@ -328,10 +328,17 @@ class CircleResult:
     plane: str
 
     @property
-    def largest_spike_um(self) -> float:
+    def largest_excursion_um(self) -> float:
         """Largest |excursion| ``height_um`` at a reversal [µm] (lost motion and spike together; 0
         when no joint reverses)."""
         return max((abs(s.height_um) for s in self.spikes), default=0.0)
+
+    @property
+    def largest_spike_um(self) -> float:
+        """Deprecated alias of :attr:`largest_excursion_um` [µm], kept for compatibility (the JSON key
+        too): despite the name it is the lumped excursion, not the ballbar reversal spike
+        (:attr:`largest_reversal_spike_um`)."""
+        return self.largest_excursion_um
 
     @property
     def largest_reversal_spike_um(self) -> float:
@@ -347,7 +354,8 @@ class CircleResult:
         """Plain numbers for printing / JSON."""
         return {"roundness_um": self.roundness_um, "radius_error_um": self.radius_error_um,
                 "center_offset_um": [float(v) for v in self.center_offset_um],
-                "largest_spike_um": self.largest_spike_um,
+                "largest_excursion_um": self.largest_excursion_um,
+                "largest_spike_um": self.largest_excursion_um,   # deprecated alias of largest_excursion_um
                 "largest_reversal_spike_um": self.largest_reversal_spike_um,
                 "largest_lost_motion_um": self.largest_lost_motion_um,
                 "reversal_spikes": [{"angle_deg": s.angle_deg, "joint": s.name, "height_um": s.height_um,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ast
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -188,34 +189,59 @@ for args in {calls!r}:
     try:
         runpy.run_module('greybench.cli', run_name='__main__')
     except SystemExit as e:
-        assert e.code in (0, None), (args, e.code)
+        assert e.code in {codes!r}, (args, e.code)
 print(json.dumps(sorted(m for m in {heavy!r} if m in sys.modules)))
 """
 HEAVY = ("numba", "scipy", "torch", "mlflow")
 
 
-def _command_loads(*calls: list[str]) -> list[str]:
+def _command_loads(*calls: list[str], codes: tuple = (0, None), cwd: Path = ROOT) -> list[str]:
     """Which of numba, scipy, torch, mlflow console runs of ``greybench <call>`` imported, one after
-    the other in one fresh interpreter (a module any of them loads stays in ``sys.modules``)."""
-    code = _COMMAND_LOADS.format(calls=list(calls), heavy=HEAVY)
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    the other in one fresh interpreter (a module any of them loads stays in ``sys.modules``); each must
+    exit with one of ``codes``."""
+    code = _COMMAND_LOADS.format(calls=list(calls), heavy=HEAVY, codes=codes)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (str(ROOT), os.environ.get("PYTHONPATH"))))}
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=cwd, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
 def test_light_commands_import_no_numba_scipy_torch_or_mlflow(tmp_path):
-    """Seconds of start-up per call: a command imports only what it uses, so generating a trajectory, and
-    the help of the commands that run simulations, load none of the friction models, plant or simulation."""
+    """Seconds of start-up per call: a command imports only what it uses, so generating a trajectory, printing
+    the MLflow UI command, and the help of the commands that run simulations or the diagnosis, load none of the
+    friction models, plant, simulation or tracking store."""
     out = tmp_path / "ut.csv"
     helps = [[cmd, "--help"] for cmd in ("trajectory", "rank-poses", "trace", "circle", "machine", "compensate",
-                                         "serve")]
+                                         "serve", "diagnose", "ui")]
     run = ["trajectory", "universal", "--axis", "1", "--duration", "1", "--out", str(out)]
-    assert _command_loads(run, *helps) == []
+    assert _command_loads(run, ["ui", "--print-only"], *helps) == []
     assert out.stat().st_size > 0
 
 
-def test_friction_commands_load_numba_and_scipy_but_no_torch():
-    """The check above sees numba and scipy when loaded: the friction commands' options name the models and
-    the plant; ``ui --print-only`` needs the tracking store (mlflow), but no learned model (torch)."""
-    loaded = set(_command_loads(["synth", "--help"], ["ui", "--print-only"]))
+def test_friction_commands_load_numba_scipy_and_mlflow_but_no_torch(tmp_path, monkeypatch):
+    """The check above sees numba, scipy and mlflow when loaded: the friction commands' options name the models
+    and the plant, and promoting a fit opens the tracking store (here an empty one in ``tmp_path``: an unknown
+    name, exit 2), but no learned model (torch)."""
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    loaded = set(_command_loads(["synth", "--help"], ["promote", "--name", "no-such-model"], codes=(0, 2),
+                                cwd=tmp_path))
     assert {"numba", "scipy", "mlflow"} <= loaded and "torch" not in loaded
+
+
+def test_ui_print_only_names_the_store_of_the_working_folder(tmp_path, monkeypatch):
+    """The light path prints the tracking module's command line: this interpreter running ``mlflow ui`` on
+    ``<cwd>/mlruns.db`` with its artifacts beside it."""
+    import shlex
+
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    code = ("import sys; sys.argv = ['greybench', 'ui', '--print-only', '--port', '5123']\n"
+            "from greybench.cli import main\nmain()\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr
+    root = tmp_path.resolve()
+    assert shlex.split(res.stdout.strip()) == [sys.executable, "-m", "mlflow", "ui", "--backend-store-uri",
+                                               f"sqlite:///{root / 'mlruns.db'}", "--host", "127.0.0.1", "--port",
+                                               "5123", "--default-artifact-root", (root / "mlartifacts").as_uri()]
+    assert not (root / "mlruns.db").exists()  # printing creates no store

@@ -67,7 +67,11 @@ def test_reversal_spikes_angle_joint_and_height():
     assert a[0].angle_deg == pytest.approx(90.0, abs=0.2) and a[1].angle_deg == pytest.approx(270.0, abs=0.2)
     assert a[0].height_um == pytest.approx(25.0, rel=0.01) and a[1].height_um == pytest.approx(-40.0, rel=0.01)
     assert a[0].peak_angle_deg == pytest.approx(94.0, abs=0.2)
-    assert res.largest_spike_um == pytest.approx(40.0, rel=0.01)
+    assert res.largest_excursion_um == pytest.approx(40.0, rel=0.01)
+    assert res.largest_spike_um == res.largest_excursion_um               # the deprecated alias
+    doc = res.summary()
+    assert doc["largest_excursion_um"] == doc["largest_spike_um"] == res.largest_excursion_um
+    assert doc["largest_excursion_um"] != doc["largest_reversal_spike_um"]
 
 
 def stepped(spec: CircleSpec, step: float, bumps, n=7200, at=(92.0, 272.0), width=0.5, lag=2.5):
@@ -317,6 +321,9 @@ def test_cli_writes_csv_png_and_json(tmp_path):
     assert {"angle_deg", "joint", "height_um", "spike_um", "lost_motion_um"} == set(doc["reversal_spikes"][0])
     assert doc["largest_reversal_spike_um"] == max(abs(s["spike_um"]) for s in doc["reversal_spikes"])
     assert doc["largest_lost_motion_um"] == max(abs(s["lost_motion_um"]) for s in doc["reversal_spikes"])
+    # the lumped excursion under its clear name and its deprecated alias, both kept
+    assert doc["largest_excursion_um"] == doc["largest_spike_um"] == max(abs(s["height_um"])
+                                                                        for s in doc["reversal_spikes"])
     import pandas as pd
 
     df = pd.read_csv(out / "circle.csv")
@@ -330,7 +337,7 @@ def test_cli_prints_one_format_per_column(tmp_path):
     r = runner.invoke(app, ["circle", "--pose", str(POSES), "--name", "pose1", "--out", str(tmp_path / "c")])
     assert r.exit_code == 0, r.output
     rows = {m.group(1): m.group(2) for m in re.finditer(r"(\w+_um)\s*\S\s*(\S+)", r.stdout)}
-    assert set(rows) == {"roundness_um", "radius_error_um", "largest_spike_um", "largest_reversal_spike_um",
+    assert set(rows) == {"roundness_um", "radius_error_um", "largest_excursion_um", "largest_reversal_spike_um",
                          "largest_lost_motion_um"}
     assert all(re.fullmatch(r"-?\d+\.\d", v) for v in rows.values()), rows
     doc = json.loads((tmp_path / "c" / "summary.json").read_text())

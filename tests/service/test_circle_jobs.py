@@ -65,6 +65,7 @@ def test_circle_job_end_to_end(make_server, tmp_path):
                                  "--out", str(tmp_path / "cli"), "--json"])
     assert r.exit_code == 0, r.output
     cli = json.loads(r.stdout)
-    for key in ("roundness_um", "radius_error_um", "largest_spike_um"):
+    for key in ("roundness_um", "radius_error_um", "largest_excursion_um", "largest_spike_um"):
         assert res[key] == summary[key] == cli[key], key
+    assert res["largest_spike_um"] == res["largest_excursion_um"]   # the deprecated alias
     assert [f["kind"] for f in res["friction_models"]] == ["lugre"] * 6

@@ -98,3 +98,34 @@ def test_job_body_passes_robot_file_and_models(tmp_path, monkeypatch):
     compensation.run({**req, "options": {"iterations": 1, "ff_friction": True, "backlash_comp": True}}, tmp_path,
                      lambda *a: None)
     assert seen["nc"] == (True, True)
+
+
+def test_job_progress_ends_where_run_compensation_counts_to(tmp_path, monkeypatch):
+    """The job's progress total is run_compensation's own (progress_total of the program's steps): counting
+    it all brings the job to 95 % (the rest is writing the files), never past."""
+    from service import compensation
+    from service.paths import DATA_DIR
+    from simulate import compensation_report
+    from simulate.pipeline import load_program
+
+    gcode = (DATA_DIR / "programs" / "iso160.nc").read_text()
+    (tmp_path / "program.nc").write_text(gcode)
+    (tmp_path / "stock.json").write_text((DATA_DIR / "programs" / "iso160.stock.json").read_text())
+    shipped = DATA_DIR / "programs" / "iso160.nc"
+    total = compensation_report.progress_total(len(load_program(shipped, require_spindle=True).interp), 2, 1.0, [0.8])
+
+    def fake(program, robot, poses, name, out, advance, **kw):
+        for _ in range(total // 1000):
+            advance(1000)
+        advance(total % 1000)
+        return {}
+
+    monkeypatch.setattr(compensation_report, "run_compensation", fake)
+    seen = []
+    req = {"program_source": "gcode", "stock_source": "stock", "robot": "max100",
+           "pose": json.loads((DATA_DIR / "poses" / "iso160.json").read_text())["poses"][0],
+           "friction": [], "options": {"iterations": 2, "check_scales": [0.8]}}
+    compensation.run(req, tmp_path, lambda frac, *a: seen.append(frac))
+    fracs = [f for f in seen if f is not None]
+    assert fracs[-1] == pytest.approx(0.95) and max(fracs) <= 0.95 + 1e-12
+    assert fracs[-2] < 0.95

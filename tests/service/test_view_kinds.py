@@ -30,8 +30,10 @@ BEST = {"name": "optimised", "candidate": "c7", "origin": "sampled", "xyz_m": [1
         "rpy_rad": [0.0, 0.0, 0.25], "score": 3.0, "in_tolerance": 7}
 
 
-def _circle_job(store, jobs_dir) -> str:
-    """A succeeded circle job whose files :func:`write_outputs` wrote from a synthetic result."""
+def _circle_job(store, jobs_dir, *, legacy: bool = False) -> str:
+    """A succeeded circle job whose files :func:`write_outputs` wrote from a synthetic result; ``legacy``:
+    its summary.json without ``largest_excursion_um`` (a job stored before that name, with only the
+    deprecated ``largest_spike_um``)."""
     from service.jobs import JobKind, JobState, folder_digests
     from simulate.evaluation.circle import CircleResult, ReversalSpike, write_outputs
 
@@ -47,6 +49,9 @@ def _circle_job(store, jobs_dir) -> str:
                "friction": True, "backlash": True, "friction_scale": 1.0, "ff_friction": False}
     info = write_outputs(res, jobs_dir / rec.id / "out", title="test",
                          info={"robot": "max100", "pose": "near", **options, "friction_models": {}})
+    if legacy:
+        del info["largest_excursion_um"]
+        (jobs_dir / rec.id / "out" / "summary.json").write_text(json.dumps(info, indent=1), encoding="utf-8")
     assert store.finish(rec.id, "test", JobState.succeeded, result=info, files=folder_digests(jobs_dir / rec.id))
     return rec.id
 
@@ -93,8 +98,9 @@ def _sections(client, prefix, job_id):
 
 
 # ---- API ---------------------------------------------------------------------------------------------------
-def test_circle_page_shows_the_circle_numbers(client):
-    job_id = _circle_job(client.app.state.store, client.app.state.manager.jobs_dir)
+@pytest.mark.parametrize("legacy", [False, True])
+def test_circle_page_shows_the_circle_numbers(client, legacy):
+    job_id = _circle_job(client.app.state.store, client.app.state.manager.jobs_dir, legacy=legacy)
     assert client.get(f"/circles/{job_id}/view", headers=HEADERS).status_code == 200
     secs = _sections(client, "/circles", job_id)
     by_type = {s["type"]: s for s in secs}
