@@ -133,6 +133,11 @@ def plot(result: CompensationResult, path: Path) -> None:
     save_png(fig, path, dpi=110)
 
 
+def _ratio(r: float | None) -> str:
+    """A sum ratio for the report; ``-`` where the original's sum was 0 (no ratio)."""
+    return "-" if r is None else f"{r:.3f}"
+
+
 def report_text(result: CompensationResult, info: dict, title: str, scale: float) -> str:
     ev = info["evaluation"]
     lines = [f"# Compensation: {title}", ""]
@@ -145,7 +150,7 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
             [(r["name"], f"{r['tolerance'] * 1e3:.0f}", f"{r['before'] * 1e3:+.1f}", f"{r['after'] * 1e3:+.1f}",
               f"{abs(r['after']) / abs(r['before']) if r['before'] else float('nan'):.2f}") for r in ev["rows_mm"]])
         lines += ["", f"Sum of |deviation|: before {ev['sum_before_mm'] * 1e3:.1f} µm, after "
-                      f"{ev['sum_after_mm'] * 1e3:.1f} µm, **ratio {ev['ratio']:.3f}**; score "
+                      f"{ev['sum_after_mm'] * 1e3:.1f} µm, **ratio {_ratio(ev['ratio'])}**; score "
                       f"{ev['score_before']:.2f} -> {ev['score_after']:.2f}. Rows worse than before by more than "
                       f"max(10 %, 2 µm): {', '.join(ev['rows_worse']) or 'none'}.", ""]
     checks = [c for c in info["checks"] if c is not None]   # None: no Table-2 rows (not a test-piece stock)
@@ -154,7 +159,7 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
         lines += markdown_table(
             ("stiffness scale", "sum before [µm]", "sum after [µm]", "ratio", "rows worse"),
             [(f"{c['stiffness_scale']:g}", f"{c['sum_before_mm'] * 1e3:.1f}", f"{c['sum_after_mm'] * 1e3:.1f}",
-              f"{c['ratio']:.3f}", ", ".join(c["rows_worse"]) or "none") for c in checks])
+              _ratio(c["ratio"]), ", ".join(c["rows_worse"]) or "none") for c in checks])
         lines.append("")
     lines += ["## Iterations (model stiffness)", ""]
     lines += markdown_table(

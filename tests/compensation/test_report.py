@@ -21,3 +21,9 @@ def test_a_check_with_table_rows_is_reported():
     text = report_text(None, dict(INFO, checks=[None, CHECK]), "small", 1.0)
     assert "## Robustness" in text
     assert "| 0.8 | 50.0 | 20.0 | 0.400 | none |" in text
+
+
+def test_a_check_of_an_original_without_deviation_has_no_ratio():
+    zero = dict(CHECK, sum_before_mm=0.0, sum_after_mm=0.0, ratio=None)
+    text = report_text(None, dict(INFO, checks=[None, zero]), "small", 1.0)
+    assert "| 0.8 | 0.0 | 0.0 | - | none |" in text
