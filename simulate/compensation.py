@@ -43,15 +43,16 @@ Choices where the method is vague (stated so they can be replaced):
 - **Corners.** On an arc whose radius is at most the tool radius (the tool turning round a convex
   corner of the part) the correction is blended between its neighbours' (:func:`blend_corners`).
 - **Choosing.** Iterate at most ``iterations`` times; stop after :data:`PATIENCE` iterations in a
-  row that do not lower the objective below the lowest so far, or at one outside the contract. The result is, among the
-  iterations within the contract that lower the objective (sum of |Table-2 deviation| when the stock
-  is a test piece, else the RMS normal path deviation) below the original's, the lowest objective of
-  those that leave no Table-2 row worse than the original's by more than max(10 %, 2 µm)
-  (:func:`worse_rows`), and only if there is none the lowest objective of all (:func:`better`): a
-  correction that makes a feature of the part worse is not what a user asks for, but where every
-  iteration does, trading much of the sum for one row fewer is no better (feasible first, then the
-  objective, as a constrained search ranks its candidates). The iteration's outcome swings between iterations (a
-  gear whose flank the corrected cut decides), so one worse step does not end it.
+  row that do not lower the objective below the lowest so far, or at one outside the contract. The
+  result is, among the iterations within the contract that lower the objective (sum of |Table-2
+  deviation| when the stock is a test piece, else the RMS normal path deviation) below the
+  original's, the lowest objective of those that leave no Table-2 row worse than the original's by
+  more than max(10 %, 2 µm) (:func:`worse_rows`), and only if there is none the lowest objective of
+  all (:func:`better`): a correction that makes a feature of the part worse is not what a user asks
+  for, but where every iteration does, trading much of the sum for one row fewer is no better
+  (feasible first, then the objective, as a constrained search ranks its candidates). The
+  iteration's outcome swings between iterations (a gear whose flank the corrected cut decides), so
+  one worse step does not end it.
 """
 from __future__ import annotations
 
