@@ -89,6 +89,8 @@ TRANSIENT_SCAN_DEG = 20.0
 MIN_RING_FIT_DEG = 15.0
 #: Frequency band [Hz] and decay time range [s] of the transient's oscillation.
 RING_HZ = (2.0, 20.0)
+#: Periods of the oscillation the fit must hold at least (slower ones are not told from the settled trace) [-].
+MIN_RING_PERIODS = 2.0
 RING_DECAY_S = (0.02, 1.0)
 #: Reversals closer than this along the circle count as one [deg].
 SAME_REVERSAL_DEG = 0.5
@@ -464,7 +466,10 @@ def _fit_settled_and_ring(x: np.ndarray, y: np.ndarray, deg_per_s: float) -> tup
 
     Variable projection: for fixed ``(f, tau)`` the rest is linear, so the residual of the oscillation
     against ``y`` with the harmonic projected out is minimised over a grid of ``f`` (0.25 Hz) and
-    ``tau`` (11 log-spaced) in ``RING_HZ`` x ``RING_DECAY_S``, the best point then refined within them."""
+    ``tau`` (11 log-spaced) in ``RING_HZ`` x ``RING_DECAY_S``, the best point then refined within them;
+    frequencies with fewer than ``MIN_RING_PERIODS`` periods in the fit are left out (over a short fit
+    a slow, slowly decaying oscillation and the harmonic trade off, and the settled trace's value at
+    the reversal, an extrapolation, would be arbitrary)."""
     from scipy.optimize import minimize
 
     h = _harmonic(x)
@@ -480,14 +485,16 @@ def _fit_settled_and_ring(x: np.ndarray, y: np.ndarray, deg_per_s: float) -> tup
         b = np.einsum("kni,n->ki", c, yp)
         return yp @ yp - np.einsum("ki,ki->k", b, np.linalg.solve(g, b[..., None])[..., 0])
 
-    hz_grid, tau_grid = np.meshgrid(np.arange(RING_HZ[0], RING_HZ[1] + 1e-9, 0.25),
+    # an oscillation with fewer than MIN_RING_PERIODS in the fit trades off against the harmonic
+    f_lo = min(RING_HZ[1], max(RING_HZ[0], MIN_RING_PERIODS * deg_per_s / max(float(x[-1]), 1e-9)))
+    hz_grid, tau_grid = np.meshgrid(np.linspace(f_lo, RING_HZ[1], 1 + round((RING_HZ[1] - f_lo) / 0.25)),
                                     np.geomspace(RING_DECAY_S[0], RING_DECAY_S[1], 11))
     r = residual(hz_grid.ravel(), tau_grid.ravel())
     i = int(np.argmin(r))
     lo, hi = math.log(RING_DECAY_S[0]), math.log(RING_DECAY_S[1])
     best = minimize(lambda p: float(residual(np.array([p[0]]), np.array([math.exp(p[1])]))[0]),
                     [hz_grid.ravel()[i], math.log(tau_grid.ravel()[i])], method="L-BFGS-B",
-                    bounds=[RING_HZ, (lo, hi)])
+                    bounds=[(f_lo, RING_HZ[1]), (lo, hi)])
     hz, tau = float(best.x[0]), math.exp(float(best.x[1]))
     om, env = 2.0 * np.pi * hz / deg_per_s, np.exp(-x / (tau * deg_per_s))
     a = np.column_stack([h, env * np.cos(om * x), env * np.sin(om * x)])
@@ -554,7 +561,9 @@ def split_reversal(trav_deg, dev, at_deg: float, *, deg_per_s: float, neighbours
     else:
         la_vals = lambda xx: np.full_like(np.asarray(xx, float), yf[0])   # noqa: E731
     la_x = np.asarray(la_vals(x), float)
-    s = float(np.asarray(la_vals(np.array([0.0])))[0] - lb(0.0))
+    # the step where the settled trace after starts (an extrapolation back to the reversal angle
+    # amplifies any misfit of the short fits a near neighbour leaves)
+    s = float(np.asarray(la_vals(np.array([x0])))[0] - lb(x0))
     other = np.where(x <= x0, lb(x), la_x - s)
     hi, lo = np.maximum(la_x, other), np.minimum(la_x, other)
     excess = np.where(y > hi, y - hi, np.where(y < lo, y - lo, 0.0))
