@@ -37,7 +37,8 @@ circle's plane:
     of degrees is not), ``f`` in ``RING_HZ`` (2-20 Hz: the loop's slow poles at 4-5 Hz and the
     A1-A3 link modes at 5-14 Hz; faster wrist modes are over within a few degrees) and ``tau`` in
     ``RING_DECAY_S`` (0.02-1 s: from spikes that return within a degree to A1's mode at a damping
-    ratio of 0.03 with twice its home inertia); the amplitudes and
+    ratio of 0.035 with twice its home inertia), ``f`` with at least ``MIN_RING_PERIODS`` (2)
+    periods in the fit (a slower oscillation trades off against the harmonic); the amplitudes and
     ``c`` by linear least squares for each ``(f, tau)`` of a grid, the best refined (bounded
     quasi-Newton on the residual, variable projection). ``x0`` is where ``|F - L_b|`` is largest
     within ``TRANSIENT_SCAN_DEG`` (20 deg) after the reversal: the flank impact (the step's top or
@@ -46,20 +47,25 @@ circle's plane:
     reversal, cut at the next reversal (whose effect on the trace starts only after it); where less
     than ``MIN_RING_FIT_DEG`` is left after ``x0`` the oscillation cannot be told from the trace and
     ``L_a`` is a line over what is left;
-  * **lost motion** ``s = L_a(0) - L_b(0)``: the step of the settled trace at the reversal;
+  * **lost motion** ``s = L_a(x0) - L_b(x0)``: the step of the settled trace where the trace after
+    starts (on a constant-lag trace the same as at the reversal; an extrapolation of ``L_a`` back
+    to the reversal would amplify the misfit of the short fits a near neighbour leaves);
   * **reversal spike** ``h``: the extreme of ``F`` beyond the band of the settled traces over the
     fit span, beyond the upper edge positive, below the lower negative (0 for a clean step). The
     band is ``[L_b(x), L_a(x)]`` (ordered) up to ``x0`` and ``[L_a(x) - s, L_a(x)]`` after it (the
     before trace carried along the curved settled trace, as a line extrapolated far is not). A pure
     step gives ``h = 0``, a spike that returns to the trace ``s = 0``.
 
-  The results converge with the fit span (they do not depend on where a window ends within 40-80
-  deg, tested on synthetic traces; the former fixed windows, a 15 deg spike window and a line over
-  the 10 deg after it, did). Reversals closer than ``SAME_REVERSAL_DEG`` count as one; otherwise the
-  before window stops at the previous reversal. The trace is closed (a full circle), so a reversal
-  near the start has its before window at the trace's end, and a joint reversing across the start
-  is found too. The extreme of ``F - F(reversal)`` within ``SPIKE_WINDOW_DEG`` after it
-  (``height_um``: lost motion and spike together) is kept as the reversal's *excursion*.
+  The results converge with the fit span (on a synthetic step with ringing on a curved trace they
+  change by less than 2 % between 40 and 80 deg, where the former fixed windows, a 15 deg spike
+  window and a line over the 10 deg after it, moved the spike by more than 30 %; the shipped robot's
+  figures are in ``docs/drive-model.md``). Its precision limit is the line before, whose curvature
+  error where the fit starts is 1-3 µm on a 100 µm constant-lag curve. Reversals closer than
+  ``SAME_REVERSAL_DEG`` count as one; otherwise the before window stops at the previous reversal.
+  The trace is closed (a full circle), so a reversal near the start has its before window at the
+  trace's end, and a joint reversing across the start is found too. The extreme of
+  ``F - F(reversal)`` within ``SPIKE_WINDOW_DEG`` after it (``height_um``: lost motion and spike
+  together) is kept as the reversal's *excursion*.
 """
 from __future__ import annotations
 

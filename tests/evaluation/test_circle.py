@@ -121,8 +121,9 @@ def test_reversal_split_pure_step_and_pure_spike():
 
 
 def test_reversal_windows_stop_short_of_the_next_reversal():
-    """Two reversals 12 deg apart (steps up and back down): each one's windows shrink so the other's
-    step does not enter its settled trace: lost motions +s and -s, no spikes."""
+    """Two reversals 12 deg apart (steps up and back down): the fit after the first ends at the second
+    and the second's before window starts after the first, so neither step enters the other's settled
+    trace: lost motions +s and -s, no spikes."""
     spec = CircleSpec(radius=0.05, feed=2000 / 6e4)
     p, qd = stepped(spec, 40e-6, bumps=[], at=(92.0, 104.0), width=0.3, lag=1.5)
     qd[:, 0] = np.where((np.arange(len(p)) * 360.0 / len(p) - 92.0) % 360.0 < 12.0, -1.0, 1.0)
@@ -208,6 +209,20 @@ def test_split_converges_with_the_fit_span_where_fixed_windows_do_not():
     (lm15, sp15), (lm30, sp30) = former_split(trav, dev, 90.0), former_split(trav, dev, 90.0, 30.0, 20.0)
     assert abs(sp30 - sp15) > 0.3 * peak
     assert max(abs(lm15 - 300.0), abs(lm30 - 300.0)) > 0.05 * 300.0
+
+def test_joint_reversals_across_the_start_of_a_closed_trace():
+    """One turn of a periodic motion whose joint 1 reverses between the last sample and the first
+    (velocity cos of the angle from 90.05 deg on in 0.1 deg steps: the sign changes at 90 deg, between
+    the end and the start): found with ``closed`` (at the first sample outside the dead band), not
+    without; its other reversal at 270 deg and joint 2's at 180 and 360 deg are found by both."""
+    th = 90.05 + np.arange(3600) * 0.1
+    qd = np.zeros((th.size, 6))
+    qd[:, 0] = np.cos(np.radians(th))
+    qd[:, 1] = np.sin(np.radians(th))
+    open_, closed = joint_reversals(qd), joint_reversals(qd, closed=True)
+    assert sorted(j for _, j in open_) == [0, 1, 1]
+    assert set(closed) - set(open_) == {(1, 0)}          # |cos(90.05 deg)| is inside the 1e-3 dead band
+
 
 def test_joint_reversals_deadband():
     t = np.linspace(0, 1, 1001)
