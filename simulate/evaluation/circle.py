@@ -601,7 +601,7 @@ def evaluate_circle(xyz, q, qd_cmd, spec: CircleSpec, *, window_deg: float = SPI
     d = np.hypot(p[:, 0] - fit.center[0], p[:, 1] - fit.center[1])
     dev = (d - spec.radius) * 1e6
     ang = np.degrees(np.arctan2(p[:, 1] - fit.center[1], p[:, 0] - fit.center[0])) % 360.0
-    # travelled angle along the path (unwrapped, increasing) for the spike windows
+    # travelled angle along the path (unwrapped, increasing) for the split and the excursion window
     trav = np.degrees(np.abs(np.unwrap(np.radians(ang)) - math.radians(ang[0])))
     spikes = []
     reversals = joint_reversals(qd_cmd, closed=True)
