@@ -95,9 +95,9 @@ TRANSIENT_SCAN_DEG = 20.0
 MIN_RING_FIT_DEG = 15.0
 #: Frequency band [Hz] and decay time range [s] of the transient's oscillation.
 RING_HZ = (2.0, 20.0)
+RING_DECAY_S = (0.02, 1.0)
 #: Periods of the oscillation the fit must hold at least (slower ones are not told from the settled trace) [-].
 MIN_RING_PERIODS = 2.0
-RING_DECAY_S = (0.02, 1.0)
 #: Reversals closer than this along the circle count as one [deg].
 SAME_REVERSAL_DEG = 0.5
 #: A joint reverses only where its commanded speed exceeds this share of its peak on both sides [-] ...
