@@ -486,9 +486,9 @@ def _fit_settled_and_ring(x: np.ndarray, y: np.ndarray, deg_per_s: float) -> tup
         om = 2.0 * np.pi * hz[:, None] / deg_per_s
         env = np.exp(-x[None, :] / (tau[:, None] * deg_per_s))
         c = np.stack([env * np.cos(om * x), env * np.sin(om * x)], 2)             # (k, n, 2)
-        c = c - np.einsum("nq,kqj->knj", qh, np.einsum("nq,knj->kqj", qh, c))
-        g = np.einsum("kni,knj->kij", c, c) + 1e-12 * np.eye(2)
-        b = np.einsum("kni,n->ki", c, yp)
+        c = c - qh @ (qh.T @ c)
+        g = np.swapaxes(c, 1, 2) @ c + 1e-12 * np.eye(2)
+        b = yp @ c
         return yp @ yp - np.einsum("ki,ki->k", b, np.linalg.solve(g, b[..., None])[..., 0])
 
     # an oscillation with fewer than MIN_RING_PERIODS in the fit trades off against the harmonic
