@@ -1,19 +1,22 @@
-"""The circle's reversal split against friction and the split's windows (docs/drive-model.md, section
-"Doubled friction in yz and zx").
+"""The circle's reversal split on the shipped robot (docs/drive-model.md, sections "The virtual circular
+test on the shipped robot" and "Doubled friction in yz and zx").
 
 Simulates the R 50 mm, 2000 mm/min circle of the shipped robot in the planes xy, yz and zx at the
-iso320 poses pose1 and pose3, with the robot file's friction, doubled friction levels and no friction,
-and prints as markdown:
+iso320 poses pose1..pose4 and the iso160 poses near and far_rotated, with the robot file's friction,
+doubled friction levels and no friction, and prints as markdown:
 
-- the largest reversal spike [µm], normal -> doubled friction (ratio), for several spike + settle
-  windows [deg] of :func:`simulate.evaluation.circle.split_reversal`;
-- the same with the transient modelled (:func:`transient_split`, a study, not the shipped split);
+- per plane and pose the largest reversal spike and lost motion [µm] of the shipped split
+  (:func:`simulate.evaluation.circle.split_reversal`, the transient modelled): no friction /
+  friction / doubled friction and the ratios;
+- the same spikes for fit spans of 40, 60 (shipped) and 80 deg (convergence);
+- the former fixed-window split (spike 15 deg, settled line over the 10 deg after it;
+  :func:`former_split`, kept here for comparison only) on the same runs;
 - at A1's first reversal (xy pose1) the step of A1's link error q_cmd - q [µrad] and its overshoot
   beyond the new level [µrad], with friction, doubled, 4x, without play and without friction.
 
 With ``--figure PATH`` it also draws yz pose3's reversals (radial deviation [µm] and the reversing
-joints' link errors [µrad] over the travelled angle [deg], normal and doubled friction, the shipped
-windows marked). About 10 s after the numba kernels are compiled.
+joints' link errors [µrad] over the travelled angle [deg], normal and doubled friction, the former
+windows and the shipped fit span marked). About a minute after the numba kernels are compiled.
 
     python scripts/circle_reversal_study.py [--figure docs/circle-reversal-yz.png]
 """
@@ -35,77 +38,51 @@ from simulate.toolpath.placement import load_poses, select_pose
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANES = ("xy", "yz", "zx")
-POSES = ("pose1", "pose3")
-#: spike + settle windows [deg] compared (the first is the shipped one)
-WINDOWS = ((C.SPIKE_WINDOW_DEG, C.SETTLE_WINDOW_DEG), (25.0, 15.0), (35.0, 20.0), (45.0, 25.0))
+CASES = (("iso320", "pose1"), ("iso320", "pose2"), ("iso320", "pose3"), ("iso320", "pose4"),
+         ("iso160", "near"), ("iso160", "far_rotated"))
+VARIANTS: dict[str, dict[str, Any]] = {"no friction": {"friction": False}, "normal": {},
+                                       "friction x2": {"friction_scale": 2.0}}
+#: the former fixed windows [deg]: spike window, settled line after it, line before the reversal
+FORMER = (15.0, 10.0, 10.0)
 
 
-def largest_spike(run: CircleRun, spike_deg: float, settle_deg: float) -> float:
-    """The largest |spike| [µm] of the run with the given windows [deg]."""
-    shipped = C.split_reversal
-
-    def split(*args: Any, **kw: Any) -> C.ReversalSplit:
-        kw.update(spike_deg=spike_deg, settle_deg=settle_deg)
-        return shipped(*args, **kw)
-
-    C.split_reversal = split    # evaluate_circle calls it by module name
-    try:
-        return C.evaluate_run(run).largest_reversal_spike_um
-    finally:
-        C.split_reversal = shipped
-
-
-def transient_split(trav_deg: Any, dev: Any, at_deg: float, *, neighbours: Any = (), span_deg: float = 60.0,
-                    deg_per_s: float = 2.0 / 60 / 0.05 * 180 / math.pi, **_: Any) -> C.ReversalSplit:
-    """A study, not the shipped split: the settled trace after the reversal fitted together with the
-    transient, ``F = quadratic + exp(-(x - x0) / (tau w)) (A cos + B sin)(2 pi f (x - x0) / w)`` over
-    ``span_deg`` after the reversal (less the next reversal's before window), from the first extreme
-    ``x0`` of ``F - L_b`` within 20 deg on; ``f`` 2..20 Hz and ``tau`` 0.05..0.8 s on a grid, the
-    polynomial and the oscillation's amplitudes by least squares (``w`` the circle's deg/s). Lost
-    motion and spike as the shipped split, with this quadratic as the settled trace after."""
+def former_split(trav_deg: Any, dev: Any, at_deg: float, *, neighbours: Any = (), **_: Any) -> C.ReversalSplit:
+    """The former split, for comparison only: least-squares lines over the 10 deg before the reversal and
+    over the 10 deg after a 15 deg spike window (windows shrunk in proportion where another reversal is
+    closer), the lost motion their step at the reversal, the spike the extreme beyond their band within
+    the spike window."""
+    spike_deg, settle_deg, before_deg = FORMER
     t, d = np.asarray(trav_deg, float), np.asarray(dev, float)
     te, de = np.concatenate([t - 360.0, t, t + 360.0]), np.concatenate([d, d, d])
     gaps = (np.asarray(neighbours, float) % 360.0 - at_deg) % 360.0
     gaps = gaps[gaps > 1e-9]
-    ahead = float(gaps.min()) if gaps.size else 360.0
-    behind = float((360.0 - gaps).min()) if gaps.size else 360.0
-    before = min(1.0, behind / C.BEFORE_WINDOW_DEG) * C.BEFORE_WINDOW_DEG
-    sel = (te >= at_deg - before) & (te < at_deg)
-    lb = np.poly1d(np.polyfit(te[sel] - at_deg, de[sel], 1))
-    end = min(span_deg, ahead - (C.BEFORE_WINDOW_DEG if gaps.size else 0.0))
-    idx = np.nonzero((te >= at_deg) & (te < at_deg + end))[0]
-    x, y = te[idx] - at_deg, de[idx]
-    scan = x < min(20.0, end / 2)
-    x0 = x[int(np.argmax(np.abs(y[scan] - lb(x[scan]))))]
-    xf, yf = x[x >= x0], y[x >= x0]
-    best: tuple[float, Any] | None = None
-    for hz in np.arange(2.0, 20.01, 0.25):
-        om = 2 * np.pi * hz / deg_per_s
-        for tau in (0.05, 0.1, 0.2, 0.3, 0.5, 0.8):
-            env = np.exp(-(xf - x0) / (tau * deg_per_s))
-            a = np.stack([np.ones_like(xf), xf, xf ** 2, env * np.cos(om * (xf - x0)), env * np.sin(om * (xf - x0))], 1)
-            coef = np.linalg.lstsq(a, yf, rcond=None)[0]
-            r = float(np.sum((a @ coef - yf) ** 2))
-            if best is None or r < best[0]:
-                best = (r, coef)
-    assert best is not None
-    la = np.poly1d(best[1][:3][::-1])
+    fa = min(1.0, (float(gaps.min()) if gaps.size else 360.0) / (spike_deg + settle_deg))
+    fb = min(1.0, (float((360.0 - gaps).min()) if gaps.size else 360.0) / before_deg)
+
+    def line(lo: float, hi: float) -> np.poly1d:
+        sel = (te >= lo) & (te < hi)
+        if np.count_nonzero(sel) < 2:
+            return np.poly1d([float(de[np.argmin(np.abs(te - lo))])])
+        return np.poly1d(np.polyfit(te[sel] - at_deg, de[sel], 1))
+
+    lb = line(at_deg - fb * before_deg, at_deg)
+    la = line(at_deg + fa * spike_deg, at_deg + fa * (spike_deg + settle_deg))
+    sel = np.nonzero((te >= at_deg) & (te <= at_deg + fa * spike_deg))[0]
+    x, y = te[sel] - at_deg, de[sel]
     hi, lo = np.maximum(la(x), lb(x)), np.minimum(la(x), lb(x))
     excess = np.where(y > hi, y - hi, np.where(y < lo, y - lo, 0.0))
     m = int(np.argmax(np.abs(excess)))
-    return C.ReversalSplit(lost_motion=float(la(0.0) - lb(0.0)), spike=float(excess[m]), index=int(idx[m] % t.size))
+    return C.ReversalSplit(lost_motion=float(la(0.0) - lb(0.0)), spike=float(excess[m]), index=int(sel[m] % t.size))
 
 
-def largest_transient_spike(run: CircleRun, span_deg: float) -> float:
-    """The largest |spike| [µm] of the run with :func:`transient_split`."""
+def evaluate_with(run: CircleRun, split: Any = None, **kw: Any) -> C.CircleResult:
+    """:func:`simulate.evaluation.circle.evaluate_run` with another split function or the shipped one's
+    keywords changed (``span_deg``)."""
     shipped = C.split_reversal
-
-    def split(*args: Any, **kw: Any) -> C.ReversalSplit:
-        return transient_split(*args, neighbours=kw.get("neighbours", ()), span_deg=span_deg)
-
-    C.split_reversal = split
+    fn = split or shipped
+    C.split_reversal = lambda *a, **k: fn(*a, **{**k, **kw})   # evaluate_circle calls it by module name
     try:
-        return C.evaluate_run(run).largest_reversal_spike_um
+        return C.evaluate_run(run)
     finally:
         C.split_reversal = shipped
 
@@ -144,8 +121,9 @@ def figure(runs: dict[str, CircleRun], path: Path) -> None:
             for j, style in zip([j for j in joints if j in (1, 2, 3)][:2], ("-", "--"), strict=False):
                 axes[1, i].plot(x[o][m], e[o][m][:, j - 1] * 1e6, style, color=colour, lw=1, label=f"{key}, A{j}")
         for ax in axes[:, i]:
-            for v in (-C.BEFORE_WINDOW_DEG, 0.0, C.SPIKE_WINDOW_DEG, C.SPIKE_WINDOW_DEG + C.SETTLE_WINDOW_DEG):
+            for v in (-FORMER[2], 0.0, FORMER[0], FORMER[0] + FORMER[1]):
                 ax.axvline(v, color="k", lw=0.5)
+            ax.axvline(C.FIT_SPAN_DEG, color="k", lw=0.5, ls="--")
             ax.grid(alpha=0.3)
         axes[0, i].set_title(f"reversal at {a_rev:.0f} deg: {'+'.join(f'A{j}' for j in joints)}", fontsize=10)
         axes[0, i].set_ylabel("radial deviation [µm]")
@@ -153,8 +131,8 @@ def figure(runs: dict[str, CircleRun], path: Path) -> None:
         axes[1, i].set_xlabel("travelled angle from the reversal [deg]")
         axes[0, i].legend(fontsize=7)
         axes[1, i].legend(fontsize=7)
-    fig.suptitle("yz, pose3, R 50 mm, F 2000 mm/min: vertical lines are the split's windows (before 10 deg, "
-                 "spike 15 deg, settled 10 deg)", fontsize=10)
+    fig.suptitle("yz, pose3, R 50 mm, F 2000 mm/min: solid lines the former split's windows (before 10 deg, "
+                 "spike 15 deg, settled 10 deg), dashed the shipped fit span (60 deg)", fontsize=10)
     save_png(fig, path, dpi=80)
 
 
@@ -163,43 +141,57 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--figure", type=Path, help="PNG of yz pose3's reversals")
     args = ap.parse_args(argv)
     robot = load_robot(ROOT / "data" / "robots" / "max100.toml")
-    poses = load_poses(ROOT / "data" / "poses" / "iso320.json")
-    variants: dict[str, dict[str, Any]] = {"normal": {}, "friction x2": {"friction_scale": 2.0},
-                                           "no friction": {"friction": False}}
-    runs = {(plane, pose, key): simulate_circle(robot, select_pose(poses, pose),
+    pose_sets = {name: load_poses(ROOT / "data" / "poses" / f"{name}.json") for name in ("iso320", "iso160")}
+    runs = {(plane, pose, key): simulate_circle(robot, select_pose(pose_sets[ps], pose),
                                                 CircleSpec(0.05, 2.0 / 60, Plane(plane)), **kw)
-            for plane in PLANES for pose in POSES for key, kw in variants.items()}
+            for plane in PLANES for ps, pose in CASES for key, kw in VARIANTS.items()}
+    keys = list(VARIANTS)
 
-    def cell(plane: str, pose: str, sw: float, aw: float) -> str:
-        a, b = (largest_spike(runs[plane, pose, key], sw, aw) for key in ("normal", "friction x2"))
-        return f"{a:.1f} -> {b:.1f} ({b / a:.2f})"
+    def figures(split: Any = None, **kw: Any) -> dict[tuple[str, str, str], tuple[float, float]]:
+        out = {}
+        for k, run in runs.items():
+            r = evaluate_with(run, split, **kw)
+            out[k] = (r.largest_reversal_spike_um, r.largest_lost_motion_um)
+        return out
 
-    print("Largest reversal spike [µm], normal -> doubled friction (ratio):\n")
-    print("\n".join(markdown_table(["windows spike + settle [deg]", *(f"{pl} {po}" for pl in PLANES for po in POSES)],
-                                   [[f"{sw:g} + {aw:g}", *(cell(pl, po, sw, aw) for pl in PLANES for po in POSES)]
-                                    for sw, aw in WINDOWS])))
-    def cell_t(plane: str, pose: str, span: float) -> str:
-        n0, a, b = (largest_transient_spike(runs[plane, pose, key], span)
-                    for key in ("no friction", "normal", "friction x2"))
-        return f"{n0:.1f} / {a:.1f} -> {b:.1f} ({b / a:.2f})"
+    def rows(fig: dict) -> list[list[str]]:
+        out = []
+        for plane in PLANES:
+            for _, pose in CASES:
+                sp = [fig[plane, pose, k][0] for k in keys]
+                lm = [fig[plane, pose, k][1] for k in keys]
+                out.append([plane, pose, " / ".join(f"{v:.1f}" for v in sp), f"{sp[1] / sp[0]:.1f}x",
+                            f"{sp[2] / sp[1]:.2f}x", " / ".join(f"{v:.0f}" for v in lm), f"{lm[1] / lm[0]:.1f}x",
+                            f"{lm[2] / lm[1]:.2f}x"])
+        return out
 
-    print("\nThe same with the transient modelled (transient_split, a study): largest reversal spike [µm],\n"
-          "no friction / normal -> doubled friction (ratio):\n")
-    print("\n".join(markdown_table(["fit span [deg]", *(f"{pl} {po}" for pl in PLANES for po in POSES)],
-                                   [[f"{span:g}", *(cell_t(pl, po, span) for pl in PLANES for po in POSES)]
-                                    for span in (40.0, 60.0, 80.0)])))
-    pose1 = select_pose(poses, "pose1")
+    header = ["plane", "pose", "spike µm: no friction / friction / x2", "friction / none", "x2 / friction",
+              "lost motion µm: no friction / friction / x2", "friction / none", "x2 / friction"]
+    shipped = figures()
+    print("Shipped split (transient modelled, fit span 60 deg), largest |spike| and |lost motion|:\n")
+    print("\n".join(markdown_table(header, rows(shipped))))
+    spans = {span: figures(span_deg=span) for span in (40.0, 80.0)}
+    print("\nLargest spike [µm], no friction / friction / x2, for fit spans of 40, 60 and 80 deg:\n")
+    print("\n".join(markdown_table(
+        ["plane", "pose", "40 deg", "60 deg", "80 deg"],
+        [[plane, pose, *(" / ".join(f"{f[plane, pose, k][0]:.1f}" for k in keys)
+                         for f in (spans[40.0], shipped, spans[80.0]))]
+         for plane in PLANES for _, pose in CASES])))
+    print("\nFormer split (fixed windows: spike 15 deg, settled line over the 10 deg after it):\n")
+    print("\n".join(markdown_table(header, rows(figures(former_split)))))
+    pose1 = select_pose(pose_sets["iso320"], "pose1")
     a1: dict[str, dict[str, Any]] = {"friction and play": {}, "friction x2": {"friction_scale": 2.0},
                                      "friction x4": {"friction_scale": 4.0}, "no play": {"backlash": False},
                                      "no friction": {"friction": False}}
-    rows = []
+    a1_rows = []
     for name, kw in a1.items():
         step, over = a1_step_and_overshoot(simulate_circle(robot, pose1, CircleSpec(0.05, 2.0 / 60, Plane.XY), **kw))
-        rows.append([name, f"{step * 1e6:.0f}", f"{over * 1e6:.1f}"])
+        a1_rows.append([name, f"{step * 1e6:.0f}", f"{over * 1e6:.1f}"])
     print("\nA1's first reversal, xy pose1: link error q_cmd - q [µrad]\n")
-    print("\n".join(markdown_table(["variant", "step [µrad]", "overshoot beyond the new level [µrad]"], rows)))
+    print("\n".join(markdown_table(["variant", "step [µrad]", "overshoot beyond the new level [µrad]"], a1_rows)))
     if args.figure:
-        figure({key: runs["yz", "pose3", key] for key in variants}, args.figure)
+        names = {"no friction": "no friction", "normal": "normal", "friction x2": "friction x2"}
+        figure({names[k]: runs["yz", "pose3", k] for k in keys}, args.figure)
         print(f"\nfigure: {args.figure}")
 
 

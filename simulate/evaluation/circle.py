@@ -23,20 +23,49 @@ circle's plane:
   "backlash" and "reversal spikes"; ISO 230-4:2005 Annex; Knapp, Precision Engineering 5(2), 1983;
   Kakino et al., 1993; ``docs/drive-model.md``):
 
-  * **lost motion** ``s = L_a(a_r) - L_b(a_r)``: the step between the settled trace before and
-    after the reversal, each a least-squares line in the travelled angle, ``L_b`` over the
-    ``BEFORE_WINDOW_DEG`` before the reversal angle ``a_r``, ``L_a`` over the
-    ``SETTLE_WINDOW_DEG`` that follow the spike window, both evaluated at ``a_r``;
-  * **reversal spike** ``h``: the transient peak beyond the settled trace within
-    ``SPIKE_WINDOW_DEG`` after the reversal, i.e. how far ``F`` leaves the band between ``L_b``
-    and ``L_a`` (beyond ``max(L_a, L_b)`` positive, below ``min(L_a, L_b)`` negative; 0 for a
-    clean step). A pure step gives ``h = 0``, a spike that returns to the trace ``s = 0``.
+  * **settled trace before** ``L_b``: a least-squares line of ``F`` over the
+    ``BEFORE_WINDOW_DEG`` before the reversal angle ``a_r`` (the trace is settled there unless
+    another joint reversed just before);
+  * **settled trace after** ``L_a``, fitted *together with the transient* (the link mode ringing
+    after the flank impact outlasts any fixed window: A1's 7-8 Hz mode at a damping ratio of about
+    0.08 decays by e in about 0.28 s, 11 deg at 2000 mm/min on R 50 mm, and starts only after the
+    stick time): from the transient's start ``x0`` to the end of the fit span,
+    ``F = L_a(x) + exp(-(x - x0) / (tau w)) (A cos + B sin)(2 pi f (x - x0) / w)`` with ``x`` the
+    travelled angle from the reversal, ``w`` the circle's angular speed [deg/s], ``L_a`` the
+    harmonic ``c0 + c1 sin x + c2 (1 - cos x)`` (exact for a constant in-plane lag, which projects
+    onto the radial direction as a sinusoid of the angle; a line or quadratic extrapolated over tens
+    of degrees is not), ``f`` in ``RING_HZ`` (2-20 Hz: the loop's slow poles at 4-5 Hz and the
+    A1-A3 link modes at 5-14 Hz; faster wrist modes are over within a few degrees) and ``tau`` in
+    ``RING_DECAY_S`` (0.02-1 s: from spikes that return within a degree to A1's mode at a damping
+    ratio of 0.035 with twice its home inertia), ``f`` with at least ``MIN_RING_PERIODS`` (2)
+    periods in the fit (a slower oscillation trades off against the harmonic); the amplitudes and
+    ``c`` by linear least squares for each ``(f, tau)`` of a grid, the best refined (bounded
+    quasi-Newton on the residual, variable projection). ``x0`` is where ``|F - L_b|`` is largest
+    within ``TRANSIENT_SCAN_DEG`` (20 deg) after the reversal: the flank impact (the step's top or
+    its overshoot), so the unmodelled play crossing before it is not fitted;
+  * the **fit span** is ``FIT_SPAN_DEG`` (60 deg, 5 e-folding lengths of A1's ringing) after the
+    reversal, cut at the next reversal (whose effect on the trace starts only after it); where less
+    than ``MIN_RING_FIT_DEG`` is left after ``x0`` the oscillation cannot be told from the trace and
+    ``L_a`` is a line over what is left;
+  * **lost motion** ``s = L_a(x0) - L_b(x0)``: the step of the settled trace where the trace after
+    starts (on a constant-lag trace the same as at the reversal; an extrapolation of ``L_a`` back
+    to the reversal would amplify the misfit of the short fits a near neighbour leaves);
+  * **reversal spike** ``h``: the extreme of ``F`` beyond the band of the settled traces over the
+    fit span, beyond the upper edge positive, below the lower negative (0 for a clean step). The
+    band is ``[L_b(x), L_a(x)]`` (ordered) up to ``x0`` and ``[L_a(x) - s, L_a(x)]`` after it (the
+    before trace carried along the curved settled trace, as a line extrapolated far is not). A pure
+    step gives ``h = 0``, a spike that returns to the trace ``s = 0``.
 
-  The windows shrink in proportion where another joint reverses closer than they reach, and
-  the trace is treated as closed (a full circle), so a reversal near the start has its before
-  window at the trace's end. The former single figure, the extreme of ``F - F(reversal)`` in the
-  spike window (``height_um``: lost motion and spike together), is kept as the reversal's
-  *excursion*.
+  The results converge with the fit span (on a synthetic step with ringing on a curved trace they
+  change by less than 2 % between 40 and 80 deg, where the former fixed windows, a 15 deg spike
+  window and a line over the 10 deg after it, moved the spike by more than 30 %; the shipped robot's
+  figures are in ``docs/drive-model.md``). Its precision limit is the line before, whose curvature
+  error where the fit starts is 1-3 µm on a 100 µm constant-lag curve. Reversals closer than
+  ``SAME_REVERSAL_DEG`` count as one; otherwise the before window stops at the previous reversal.
+  The trace is closed (a full circle), so a reversal near the start has its before window at the
+  trace's end, and a joint reversing across the start is found too. The extreme of
+  ``F - F(reversal)`` within ``SPIKE_WINDOW_DEG`` after it (``height_um``: lost motion and spike
+  together) is kept as the reversal's *excursion*.
 """
 from __future__ import annotations
 
@@ -54,12 +83,23 @@ from identify.errors import InputError
 _PLANES = {"xy": (17, (0, 1), 2), "zx": (18, (2, 0), 1), "yz": (19, (1, 2), 0)}
 #: Arc length of the lead-in and lead-out arcs [deg].
 LEAD_DEG = 90.0
-#: Window after a joint reversal in which its spike is measured [deg of the circle].
+#: Window after a joint reversal for the lumped excursion ``height_um`` [deg of the circle].
 SPIKE_WINDOW_DEG = 15.0
-#: Window after the spike window where the settled trace after a reversal is fitted [deg].
-SETTLE_WINDOW_DEG = 10.0
 #: Window before a reversal where the settled trace before it is fitted [deg].
 BEFORE_WINDOW_DEG = 10.0
+#: Span after a reversal over which the settled trace and the transient are fitted [deg] (cut at the next one).
+FIT_SPAN_DEG = 60.0
+#: Window after a reversal in which the transient's start (largest |F - L_b|) is searched [deg].
+TRANSIENT_SCAN_DEG = 20.0
+#: Shortest fit after the transient's start for the oscillation to be fitted [deg]; shorter: a line.
+MIN_RING_FIT_DEG = 15.0
+#: Frequency band [Hz] and decay time range [s] of the transient's oscillation.
+RING_HZ = (2.0, 20.0)
+RING_DECAY_S = (0.02, 1.0)
+#: Periods of the oscillation the fit must hold at least (slower ones are not told from the settled trace) [-].
+MIN_RING_PERIODS = 2.0
+#: Reversals closer than this along the circle count as one [deg].
+SAME_REVERSAL_DEG = 0.5
 #: A joint reverses only where its commanded speed exceeds this share of its peak on both sides [-] ...
 REVERSAL_DEADBAND = 1e-3
 #: ... and this absolute speed [rad/s] (a joint the circle does not move only shows round-off of the IK).
@@ -364,11 +404,13 @@ class CircleResult:
 
 
 def joint_reversals(qd: np.ndarray, deadband: float = REVERSAL_DEADBAND,
-                    min_speed: float = REVERSAL_MIN_SPEED) -> list[tuple[int, int]]:
+                    min_speed: float = REVERSAL_MIN_SPEED, *, closed: bool = False) -> list[tuple[int, int]]:
     """``(sample, joint)`` where a joint velocity [rad/s] changes sign (joint 0-based).
 
     Speeds below ``deadband`` times the joint's peak speed, or below ``min_speed`` [rad/s], count
     as no sign; a reversal is the first sample of the new sign (a joint that does not move has none).
+    ``closed``: the samples are one turn of a periodic motion (a full circle), so a sign change from
+    the last sample to the first is a reversal too (at the first signed sample).
     """
     qd = np.asarray(qd, float)
     out = []
@@ -378,7 +420,8 @@ def joint_reversals(qd: np.ndarray, deadband: float = REVERSAL_DEADBAND,
         if not peak > 0:
             continue
         s = np.where(np.abs(v) > max(deadband * peak, min_speed), np.sign(v), 0.0)
-        last = 0.0
+        signed = s[s != 0.0]
+        last = float(signed[-1]) if closed and signed.size else 0.0
         for k in range(len(s)):
             if s[k] == 0.0:
                 continue
@@ -400,16 +443,73 @@ class ReversalSplit:
         Peak beyond the band between the settled traces before and after, signed (0 inside it).
     index : int
         Sample of the spike's peak (of the trace passed in).
+    ring_hz : float
+        Frequency of the fitted transient's oscillation [Hz] (nan where the span was too short).
+    ring_decay_s : float
+        Its decay time [s] (nan where the span was too short).
+    fit_start_deg, fit_end_deg : float
+        Travelled angle from the reversal where the settled trace after it was fitted [deg].
     """
 
     lost_motion: float
     spike: float
     index: int
+    ring_hz: float = math.nan
+    ring_decay_s: float = math.nan
+    fit_start_deg: float = math.nan
+    fit_end_deg: float = math.nan
 
 
-def split_reversal(trav_deg, dev, at_deg: float, *, neighbours=(), spike_deg: float = SPIKE_WINDOW_DEG,
-                   settle_deg: float = SETTLE_WINDOW_DEG, before_deg: float = BEFORE_WINDOW_DEG) -> ReversalSplit:
-    """Lost motion and spike of a closed trace at one reversal (module docstring).
+def _harmonic(x_deg: np.ndarray) -> np.ndarray:
+    """Columns ``1, sin x, 1 - cos x`` of the settled trace (value ``c0`` at ``x = 0``)."""
+    r = np.radians(x_deg)
+    return np.stack([np.ones_like(r), np.sin(r), 1.0 - np.cos(r)], 1)
+
+
+def _fit_settled_and_ring(x: np.ndarray, y: np.ndarray, deg_per_s: float) -> tuple[np.ndarray, float, float]:
+    """Least squares of ``y(x) = harmonic + exp(-x / (tau w)) (A cos + B sin)(2 pi f x / w)`` (``x`` from
+    the transient's start [deg], ``w = deg_per_s``): the harmonic's coefficients, ``f`` [Hz], ``tau`` [s].
+
+    Variable projection: for fixed ``(f, tau)`` the rest is linear, so the residual of the oscillation
+    against ``y`` with the harmonic projected out is minimised over a grid of ``f`` (0.25 Hz) and
+    ``tau`` (11 log-spaced) in ``RING_HZ`` x ``RING_DECAY_S``, the best point then refined within them;
+    frequencies with fewer than ``MIN_RING_PERIODS`` periods in the fit are left out (over a short fit
+    a slow, slowly decaying oscillation and the harmonic trade off, and the settled trace's value at
+    the reversal, an extrapolation, would be arbitrary)."""
+    from scipy.optimize import minimize
+
+    h = _harmonic(x)
+    qh, _ = np.linalg.qr(h)
+    yp = y - qh @ (qh.T @ y)
+
+    def residual(hz: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        om = 2.0 * np.pi * hz[:, None] / deg_per_s
+        env = np.exp(-x[None, :] / (tau[:, None] * deg_per_s))
+        c = np.stack([env * np.cos(om * x), env * np.sin(om * x)], 2)             # (k, n, 2)
+        c = c - qh @ (qh.T @ c)
+        g = np.swapaxes(c, 1, 2) @ c + 1e-12 * np.eye(2)
+        b = yp @ c
+        return yp @ yp - np.einsum("ki,ki->k", b, np.linalg.solve(g, b[..., None])[..., 0])
+
+    # an oscillation with fewer than MIN_RING_PERIODS in the fit trades off against the harmonic
+    f_lo = min(RING_HZ[1], max(RING_HZ[0], MIN_RING_PERIODS * deg_per_s / max(float(x[-1]), 1e-9)))
+    hz_grid, tau_grid = np.meshgrid(np.linspace(f_lo, RING_HZ[1], 1 + round((RING_HZ[1] - f_lo) / 0.25)),
+                                    np.geomspace(RING_DECAY_S[0], RING_DECAY_S[1], 11))
+    r = residual(hz_grid.ravel(), tau_grid.ravel())
+    i = int(np.argmin(r))
+    lo, hi = math.log(RING_DECAY_S[0]), math.log(RING_DECAY_S[1])
+    best = minimize(lambda p: float(residual(np.array([p[0]]), np.array([math.exp(p[1])]))[0]),
+                    [hz_grid.ravel()[i], math.log(tau_grid.ravel()[i])], method="L-BFGS-B",
+                    bounds=[(f_lo, RING_HZ[1]), (lo, hi)])
+    hz, tau = float(best.x[0]), math.exp(float(best.x[1]))
+    om, env = 2.0 * np.pi * hz / deg_per_s, np.exp(-x / (tau * deg_per_s))
+    a = np.column_stack([h, env * np.cos(om * x), env * np.sin(om * x)])
+    return np.linalg.lstsq(a, y, rcond=None)[0][:3], hz, tau
+
+
+def split_reversal(trav_deg, dev, at_deg: float, *, deg_per_s: float, neighbours=(),
+                   span_deg: float = FIT_SPAN_DEG, before_deg: float = BEFORE_WINDOW_DEG) -> ReversalSplit:
+    """Lost motion and spike of a closed trace at one reversal, the transient modelled (module docstring).
 
     Parameters
     ----------
@@ -419,10 +519,14 @@ def split_reversal(trav_deg, dev, at_deg: float, *, neighbours=(), spike_deg: fl
         Radial deviation (any unit; the results are in the same unit).
     at_deg : float
         Travelled angle of the reversal [deg].
+    deg_per_s : float
+        Angular speed along the circle [deg/s] (feed over radius): converts the oscillation's
+        frequency and decay time into travelled angle.
     neighbours : array_like
-        Travelled angles of all reversals [deg]: the windows stop short of the next ones.
-    spike_deg, settle_deg, before_deg : float
-        Spike window after the reversal, settled-trace window after it, window before it [deg].
+        Travelled angles of all reversals [deg]: the before window and the fit span stop at the
+        previous and next ones (those closer than ``SAME_REVERSAL_DEG`` count as this one).
+    span_deg, before_deg : float
+        Fit span after the reversal, window before it [deg].
     """
     t = np.asarray(trav_deg, float)
     d = np.asarray(dev, float)
@@ -430,31 +534,48 @@ def split_reversal(trav_deg, dev, at_deg: float, *, neighbours=(), spike_deg: fl
     # the trace is closed: one turn either side gives every window its samples
     te = np.concatenate([t - 360.0, t, t + 360.0])
     de = np.concatenate([d, d, d])
-    others = np.asarray(neighbours, float) % 360.0
-    gaps = (others - at_deg) % 360.0
-    gaps = gaps[gaps > 1e-9]
+    gaps = (np.asarray(neighbours, float) % 360.0 - at_deg) % 360.0
+    gaps = gaps[(gaps > SAME_REVERSAL_DEG) & (gaps < 360.0 - SAME_REVERSAL_DEG)]
     ahead = float(gaps.min()) if gaps.size else 360.0
     behind = float((360.0 - gaps).min()) if gaps.size else 360.0
-    # shrink the windows in proportion where another reversal is closer than they reach
-    fa = min(1.0, ahead / (spike_deg + settle_deg))
-    fb = min(1.0, behind / before_deg)
-    s_end, a_end = at_deg + fa * spike_deg, at_deg + fa * (spike_deg + settle_deg)
 
-    def line(lo, hi):
-        sel = (te >= lo) & (te < hi)
-        if np.count_nonzero(sel) < 2:
-            return np.poly1d([float(np.mean(de[np.argmin(np.abs(te - lo))]))])
-        return np.poly1d(np.polyfit(te[sel] - at_deg, de[sel], 1))
-
-    lb = line(at_deg - fb * before_deg, at_deg)
-    la = line(s_end, a_end)
-    sel = np.nonzero((te >= at_deg) & (te <= s_end))[0]
-    x = te[sel] - at_deg
-    hi = np.maximum(la(x), lb(x))
-    lo = np.minimum(la(x), lb(x))
-    excess = np.where(de[sel] > hi, de[sel] - hi, np.where(de[sel] < lo, de[sel] - lo, 0.0))
+    sel = (te >= at_deg - min(before_deg, behind)) & (te < at_deg)
+    if np.count_nonzero(sel) >= 2:
+        lb = np.poly1d(np.polyfit(te[sel] - at_deg, de[sel], 1))
+    else:
+        lb = np.poly1d([float(de[np.argmin(np.abs(te - at_deg))])])
+    end = min(span_deg, ahead)
+    idx = np.nonzero((te >= at_deg) & (te < at_deg + end))[0]
+    if idx.size < 2:
+        k = int(np.argmin(np.abs(te - at_deg)))
+        return ReversalSplit(lost_motion=0.0, spike=0.0, index=k % n)
+    x, y = te[idx] - at_deg, de[idx]
+    scan = np.nonzero(x < min(TRANSIENT_SCAN_DEG, end))[0]
+    k0 = int(scan[np.argmax(np.abs(y[scan] - lb(x[scan])))])
+    x0, xf, yf = float(x[k0]), x[k0:], y[k0:]
+    hz = tau = math.nan
+    if xf[-1] - x0 >= MIN_RING_FIT_DEG:
+        coef, hz, tau = _fit_settled_and_ring(xf - x0, yf, deg_per_s)
+        # the harmonic in x - x0 re-expressed as one in x: same span {1, sin x, cos x}
+        c0, c1, c2 = coef
+        r0 = math.radians(x0)
+        la_vals = lambda xx: (c0 + c2 + c1 * np.sin(np.radians(xx) - r0)   # noqa: E731
+                              - c2 * np.cos(np.radians(xx) - r0))
+    elif xf.size >= 2:
+        line = np.poly1d(np.polyfit(xf, yf, 1))
+        la_vals = lambda xx: line(xx)                                      # noqa: E731
+    else:
+        la_vals = lambda xx: np.full_like(np.asarray(xx, float), yf[0])   # noqa: E731
+    la_x = np.asarray(la_vals(x), float)
+    # the step where the settled trace after starts (an extrapolation back to the reversal angle
+    # amplifies any misfit of the short fits a near neighbour leaves)
+    s = float(np.asarray(la_vals(np.array([x0])))[0] - lb(x0))
+    other = np.where(x <= x0, lb(x), la_x - s)
+    hi, lo = np.maximum(la_x, other), np.minimum(la_x, other)
+    excess = np.where(y > hi, y - hi, np.where(y < lo, y - lo, 0.0))
     m = int(np.argmax(np.abs(excess)))
-    return ReversalSplit(lost_motion=float(la(0.0) - lb(0.0)), spike=float(excess[m]), index=int(sel[m] % n))
+    return ReversalSplit(lost_motion=s, spike=float(excess[m]), index=int(idx[m] % n), ring_hz=hz,
+                         ring_decay_s=tau, fit_start_deg=x0, fit_end_deg=float(x[-1]))
 
 
 def evaluate_circle(xyz, q, qd_cmd, spec: CircleSpec, *, window_deg: float = SPIKE_WINDOW_DEG) -> CircleResult:
@@ -470,7 +591,7 @@ def evaluate_circle(xyz, q, qd_cmd, spec: CircleSpec, *, window_deg: float = SPI
         Commanded joint velocities [rad/s] (where they change sign, joints reverse).
     spec : CircleSpec
     window_deg : float
-        Spike window after a reversal [deg].
+        Window after a reversal for the lumped excursion ``height_um`` [deg].
     """
     from simulate.evaluation.fits import fit_circle_ls
 
@@ -480,16 +601,20 @@ def evaluate_circle(xyz, q, qd_cmd, spec: CircleSpec, *, window_deg: float = SPI
     d = np.hypot(p[:, 0] - fit.center[0], p[:, 1] - fit.center[1])
     dev = (d - spec.radius) * 1e6
     ang = np.degrees(np.arctan2(p[:, 1] - fit.center[1], p[:, 0] - fit.center[0])) % 360.0
-    # travelled angle along the path (unwrapped, increasing) for the spike windows
+    # travelled angle along the path (unwrapped, increasing) for the split and the excursion window
     trav = np.degrees(np.abs(np.unwrap(np.radians(ang)) - math.radians(ang[0])))
     spikes = []
-    reversals = joint_reversals(qd_cmd)
+    reversals = joint_reversals(qd_cmd, closed=True)
     at = np.unique([trav[k] for k, _ in reversals])
+    deg_per_s = math.degrees(spec.feed / spec.radius)
+    splits: dict[float, ReversalSplit] = {}
     for k, j in reversals:
         sel = np.nonzero((trav >= trav[k]) & (trav <= trav[k] + window_deg))[0]
         rel = dev[sel] - dev[k]
         m = int(np.argmax(np.abs(rel)))
-        split = split_reversal(trav, dev, trav[k], neighbours=at, spike_deg=window_deg)
+        if trav[k] not in splits:    # joints reversing at the same sample share one split
+            splits[trav[k]] = split_reversal(trav, dev, trav[k], deg_per_s=deg_per_s, neighbours=at)
+        split = splits[trav[k]]
         spikes.append(ReversalSpike(angle_deg=float(ang[k]), joint=j + 1, height_um=float(rel[m]),
                                     peak_angle_deg=float(ang[sel[m]]), spike_um=split.spike,
                                     lost_motion_um=split.lost_motion, spike_angle_deg=float(ang[split.index])))

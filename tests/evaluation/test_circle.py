@@ -19,6 +19,7 @@ from simulate.evaluation.circle import (
     evaluate_run,
     joint_reversals,
     simulate_circle,
+    split_reversal,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -120,8 +121,9 @@ def test_reversal_split_pure_step_and_pure_spike():
 
 
 def test_reversal_windows_stop_short_of_the_next_reversal():
-    """Two reversals 12 deg apart (steps up and back down): each one's windows shrink so the other's
-    step does not enter its settled trace: lost motions +s and -s, no spikes."""
+    """Two reversals 12 deg apart (steps up and back down): the fit after the first ends at the second
+    and the second's before window starts after the first, so neither step enters the other's settled
+    trace: lost motions +s and -s, no spikes."""
     spec = CircleSpec(radius=0.05, feed=2000 / 6e4)
     p, qd = stepped(spec, 40e-6, bumps=[], at=(92.0, 104.0), width=0.3, lag=1.5)
     qd[:, 0] = np.where((np.arange(len(p)) * 360.0 / len(p) - 92.0) % 360.0 < 12.0, -1.0, 1.0)
@@ -130,6 +132,96 @@ def test_reversal_windows_stop_short_of_the_next_reversal():
     assert [a for a, _, _ in lm] == pytest.approx([92.0, 104.0], abs=0.3)
     assert lm[0][1] == pytest.approx(40.0, abs=1.0) and lm[1][1] == pytest.approx(-40.0, abs=1.0)
     assert all(abs(h) < 1.0 for _, _, h in lm)
+
+
+W_DEG_S = math.degrees(2000 / 6e4 / 0.05)   # the circle's angular speed at 2000 mm/min on R 50 mm [deg/s]
+
+
+def ringing_trace(step=300.0, amp=40.0, hz=7.5, zeta=0.08, at=(90.0, 270.0), stick=10.0, lag=100.0, n=7200):
+    """Radial deviation [µm] over the travelled angle [deg] with known parts: a constant in-plane lag
+    projected onto the radial direction (``lag`` cos(th - 30 deg)), a step of ``step`` (up at ``at[0]``,
+    down at ``at[1]``; tanh of 0.2 deg, ``stick`` deg after the reversal) and from its centre a decaying
+    oscillation ``amp exp(-zeta om t) sin(om_d t)`` of ``hz`` (damped) with damping ratio ``zeta``, in the
+    step's direction. Returns (travelled angle, deviation, the oscillation's first peak [µm])."""
+    th = np.arange(n) * 360.0 / n
+    dev = lag * np.cos(np.radians(th - 30.0))
+    om_d = 2 * np.pi * hz
+    om_n = om_d / math.sqrt(1 - zeta ** 2)
+    dev += 0.5 * step * (np.tanh((th - at[0] - stick) / 0.2) - np.tanh((th - at[1] - stick) / 0.2) - 1.0)
+    for a, sign in zip(at, (1.0, -1.0), strict=True):
+        x = (th - a - stick + 180.0) % 360.0 - 180.0
+        t = np.clip(x, 0.0, None) / W_DEG_S
+        dev += sign * amp * np.exp(-zeta * om_n * t) * np.sin(om_d * t) * (x > 0)
+    t_peak = math.atan(om_d / (zeta * om_n)) / om_d            # d/dt [exp(-a t) sin(b t)] = 0
+    return th, dev, amp * math.exp(-zeta * om_n * t_peak) * math.sin(om_d * t_peak)
+
+
+def former_split(trav, dev, at, spike_deg=15.0, settle_deg=10.0, before_deg=10.0):
+    """The former fixed-window split (lines over 10 deg before and over ``settle_deg`` after a
+    ``spike_deg`` spike window), for comparison: (lost motion, spike)."""
+    def line(lo, hi):
+        sel = (trav >= lo) & (trav < hi)
+        return np.poly1d(np.polyfit(trav[sel] - at, dev[sel], 1))
+
+    lb, la = line(at - before_deg, at), line(at + spike_deg, at + spike_deg + settle_deg)
+    sel = (trav >= at) & (trav <= at + spike_deg)
+    x, y = trav[sel] - at, dev[sel]
+    hi, lo = np.maximum(la(x), lb(x)), np.minimum(la(x), lb(x))
+    ex = np.where(y > hi, y - hi, np.where(y < lo, y - lo, 0.0))
+    return la(0.0) - lb(0.0), ex[np.argmax(np.abs(ex))]
+
+
+def test_split_recovers_a_known_step_and_ringing_on_a_curved_trace():
+    """Step 300 µm, then a 7.5 Hz oscillation at a damping ratio of 0.08 (A1's link mode) of first peak
+    ~33 µm beyond the new level, on a trace curved by a constant lag: the split gives the step to 1.5 %
+    (the before trace is a line over 10 deg; extended to the flank impact 14 deg on, the curvature
+    makes about 3 µm) and the peak to 3 %, and the oscillation's frequency and decay time
+    (1 / (zeta omega_n))."""
+    trav, dev, peak = ringing_trace()
+    for a, sign in ((90.0, 1.0), (270.0, -1.0)):
+        s = split_reversal(trav, dev, a, deg_per_s=W_DEG_S, neighbours=[90.0, 270.0])
+        assert s.lost_motion == pytest.approx(sign * 300.0, rel=0.015)
+        assert s.spike == pytest.approx(sign * peak, rel=0.03)
+        assert s.ring_hz == pytest.approx(7.5, rel=0.02)
+        assert s.ring_decay_s == pytest.approx(math.sqrt(1 - 0.08 ** 2) / (0.08 * 2 * np.pi * 7.5), rel=0.05)
+
+
+def test_split_clean_step_has_no_spike_and_returning_ringing_no_lost_motion():
+    """A clean 300 µm step: spike below 2 µm; ringing that returns to the trace: lost motion below
+    2.5 µm and the peak to 2.5 µm (both the before line's curvature error 11 deg on, where the fit starts)."""
+    trav, dev, _ = ringing_trace(amp=0.0)
+    s = split_reversal(trav, dev, 90.0, deg_per_s=W_DEG_S, neighbours=[90.0, 270.0])
+    assert abs(s.spike) < 2.0 and s.lost_motion == pytest.approx(300.0, rel=0.015)
+    trav, dev, peak = ringing_trace(step=0.0)
+    s = split_reversal(trav, dev, 90.0, deg_per_s=W_DEG_S, neighbours=[90.0, 270.0])
+    assert abs(s.lost_motion) < 2.5 and s.spike == pytest.approx(peak, abs=2.5)
+
+
+def test_split_converges_with_the_fit_span_where_fixed_windows_do_not():
+    """The ringing outlasts a fixed window: on the known trace the modelled split changes by less than
+    2 % between fit spans of 40 and 80 deg; the former fixed windows (spike 15 + settled 10 deg against
+    30 + 20 deg) change the spike by more than 30 % and miss the step by more than 5 %."""
+    trav, dev, peak = ringing_trace()
+    short, long_ = (split_reversal(trav, dev, 90.0, deg_per_s=W_DEG_S, neighbours=[90.0, 270.0], span_deg=span)
+                    for span in (40.0, 80.0))
+    assert long_.spike == pytest.approx(short.spike, rel=0.02)
+    assert long_.lost_motion == pytest.approx(short.lost_motion, rel=0.02)
+    (lm15, sp15), (lm30, sp30) = former_split(trav, dev, 90.0), former_split(trav, dev, 90.0, 30.0, 20.0)
+    assert abs(sp30 - sp15) > 0.3 * peak
+    assert max(abs(lm15 - 300.0), abs(lm30 - 300.0)) > 0.05 * 300.0
+
+def test_joint_reversals_across_the_start_of_a_closed_trace():
+    """One turn of a periodic motion whose joint 1 reverses between the last sample and the first
+    (velocity cos of the angle from 90.05 deg on in 0.1 deg steps: the sign changes at 90 deg, between
+    the end and the start): found with ``closed`` (at the first sample outside the dead band), not
+    without; its other reversal at 270 deg and joint 2's at 180 and 360 deg are found by both."""
+    th = 90.05 + np.arange(3600) * 0.1
+    qd = np.zeros((th.size, 6))
+    qd[:, 0] = np.cos(np.radians(th))
+    qd[:, 1] = np.sin(np.radians(th))
+    open_, closed = joint_reversals(qd), joint_reversals(qd, closed=True)
+    assert sorted(j for _, j in open_) == [0, 1, 1]
+    assert set(closed) - set(open_) == {(1, 0)}          # |cos(90.05 deg)| is inside the 1e-3 dead band
 
 
 def test_joint_reversals_deadband():
@@ -205,7 +297,8 @@ def test_ideal_drives_trace_a_round_circle(runs):
 def test_friction_makes_the_reversal_spikes(runs):
     """The largest excursion with friction is at least 3x the one without (measured 17.9x); doubling
     the Coulomb and static levels raises it again (1.47x: the play's share does not scale). Split as
-    a ballbar does: spike 9.7x the frictionless one and 1.84x with doubled levels, lost motion 6.6x."""
+    a ballbar does (the transient modelled): spike 3.2x the frictionless one and 1.84x with doubled
+    levels, lost motion 10.2x."""
     base = runs["base"][1].largest_spike_um
     assert base >= 3 * runs["no_friction"][1].largest_spike_um
     assert runs["friction_x2"][1].largest_spike_um >= 1.3 * base
@@ -409,13 +502,14 @@ def test_cli_circle_with_fitted_greybox_and_lstm_models(tmp_path, few_epoch_mode
 @pytest.mark.parametrize("pose", ["pose1", "pose3"])
 @pytest.mark.parametrize("plane", ["xy", "yz", "zx"])
 def test_friction_and_play_split_on_every_plane(robot, plane, pose):
-    """Ballbar split on the three planes at two poses (docs/drive-model.md table): friction makes the
-    spikes and the lost motion (>= 3x both without it; measured 8-22x and 6-67x); doubling the
-    friction levels raises the lost motion (measured 1.18-2.03x: the play's part does not scale) and,
-    in xy, the spike >= 1.5x (1.80-1.84x; in yz and zx the split's fixed windows measure 0.07-0.62x,
-    window-dependent, and A1's overshoot does not grow with friction:
-    test_a1_reversal_friction_makes_the_step_the_play_makes_the_spike); without play A1's lost motion drops
-    by about b x lever (measured 0.90-1.32x of it: the step is read on the radial trace)."""
+    """Ballbar split on the three planes at two poses (docs/drive-model.md table; the split models the
+    transient, so the frictionless play crossings' ringing counts too): friction makes the lost motion
+    (>= 3x without it; measured 7.6-48x) and a larger spike (measured 1.3-4.7x: 3.2x in xy at pose1,
+    4.7x in zx at pose1); doubling the friction levels raises the lost motion (measured 1.50-1.58x: the
+    play's part does not scale) and, in xy, the spike >= 1.5x (1.80-1.84x; in yz and zx 0.94-1.12x:
+    A1's overshoot does not grow with friction,
+    test_a1_reversal_friction_makes_the_step_the_play_makes_the_spike); without play A1's lost motion
+    drops by b x lever (measured 0.99-1.01x of it)."""
     from simulate.robot.kinematics import fk
     from simulate.toolpath.placement import load_poses, select_pose
 
@@ -426,9 +520,11 @@ def test_friction_and_play_split_on_every_plane(robot, plane, pose):
                             "friction_x2": dict(friction_scale=2.0)}.items()}
     res = {key: evaluate_run(run) for key, run in runs.items()}
     base, nofr, x2 = res["base"], res["no_friction"], res["friction_x2"]
-    assert base.largest_reversal_spike_um >= 3 * nofr.largest_reversal_spike_um
+    assert base.largest_reversal_spike_um >= 1.2 * nofr.largest_reversal_spike_um
+    if pose == "pose1" and plane != "yz":
+        assert base.largest_reversal_spike_um >= 3 * nofr.largest_reversal_spike_um
     assert base.largest_lost_motion_um >= 3 * nofr.largest_lost_motion_um
-    assert x2.largest_lost_motion_um >= 1.15 * base.largest_lost_motion_um
+    assert x2.largest_lost_motion_um >= 1.4 * base.largest_lost_motion_um
     if plane == "xy":
         assert x2.largest_reversal_spike_um >= 1.5 * base.largest_reversal_spike_um
     a1 = [s for s in base.spikes if s.joint == 1]
@@ -442,4 +538,4 @@ def test_friction_and_play_split_on_every_plane(robot, plane, pose):
                          for k, j in joint_reversals(qd[sel]) if j == 0])
         drop = (max(abs(s.lost_motion_um) for s in a1)
                 - max(abs(s.lost_motion_um) for s in res["no_backlash"].spikes if s.joint == 1))
-        assert 0.8 <= drop / (robot.backlash[0] * lever * 1e6) <= 1.4
+        assert drop == pytest.approx(robot.backlash[0] * lever * 1e6, rel=0.05)
