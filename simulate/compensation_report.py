@@ -253,11 +253,16 @@ def check_scales_of(stiffness_scale: float, check_scales=()) -> list[float]:
     return sorted({float(stiffness_scale), *map(float, check_scales)} - {1.0})
 
 
+def simulation_count(iterations: int, stiffness_scale: float = 1.0, check_scales=()) -> int:
+    """Simulations :func:`run_compensation` runs at most: the original, every iteration and both
+    programs at every stiffness multiplier [-] other than 1."""
+    return iterations + 1 + 2 * len(check_scales_of(stiffness_scale, check_scales))
+
+
 def progress_total(steps: int, iterations: int, stiffness_scale: float = 1.0, check_scales=()) -> int:
     """The progress total of :func:`run_compensation` for a program of ``steps`` 2 ms steps: that
-    many per simulation (:class:`SimulationMeter`), for the original, every iteration and both
-    programs at every stiffness multiplier [-] other than 1."""
-    return steps * (iterations + 1 + 2 * len(check_scales_of(stiffness_scale, check_scales)))
+    many per simulation (:class:`SimulationMeter`) for each of :func:`simulation_count`."""
+    return steps * simulation_count(iterations, stiffness_scale, check_scales)
 
 
 class SimulationMeter:
@@ -344,7 +349,8 @@ def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir
     scales = check_scales_of(stiffness_scale, check_scales)
     from simulate.evaluation.cutter import robot_cutter
 
-    meter = SimulationMeter(advance or (lambda n=1: None), len(setup.interp), iterations + 1 + 2 * len(scales))
+    meter = SimulationMeter(advance or (lambda n=1: None), len(setup.interp),
+                            simulation_count(iterations, stiffness_scale, check_scales))
     sim = meter.wrap(pipeline_simulator(job, advance=meter.meter if advance else None))
     res = compensate(setup, sim, cs, checks=scales, require_spindle=True, tool_radius=robot_cutter(rob).radius,
                      header=f"compensated by greybench for robot {rob.name}, pose {placement.name}")

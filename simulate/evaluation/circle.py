@@ -559,17 +559,15 @@ def split_reversal(trav_deg, dev, at_deg: float, *, deg_per_s: float, neighbours
         # the harmonic in x - x0 re-expressed as one in x: same span {1, sin x, cos x}
         c0, c1, c2 = coef
         r0 = math.radians(x0)
-        la_vals = lambda xx: (c0 + c2 + c1 * np.sin(np.radians(xx) - r0)   # noqa: E731
-                              - c2 * np.cos(np.radians(xx) - r0))
-    elif xf.size >= 2:
-        line = np.poly1d(np.polyfit(xf, yf, 1))
-        la_vals = lambda xx: line(xx)                                      # noqa: E731
-    else:
-        la_vals = lambda xx: np.full_like(np.asarray(xx, float), yf[0])   # noqa: E731
-    la_x = np.asarray(la_vals(x), float)
+
+        def la(xx):
+            return c0 + c2 + c1 * np.sin(np.radians(xx) - r0) - c2 * np.cos(np.radians(xx) - r0)
+    else:   # too short for the oscillation: a line over what is left (a constant from one sample)
+        la = np.poly1d(np.polyfit(xf, yf, 1) if xf.size >= 2 else [float(yf[0])])
+    la_x = np.asarray(la(x), float)
     # the step where the settled trace after starts (an extrapolation back to the reversal angle
     # amplifies any misfit of the short fits a near neighbour leaves)
-    s = float(np.asarray(la_vals(np.array([x0])))[0] - lb(x0))
+    s = float(la(x0) - lb(x0))
     other = np.where(x <= x0, lb(x), la_x - s)
     hi, lo = np.maximum(la_x, other), np.minimum(la_x, other)
     excess = np.where(y > hi, y - hi, np.where(y < lo, y - lo, 0.0))
