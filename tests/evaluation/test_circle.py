@@ -539,3 +539,32 @@ def test_friction_and_play_split_on_every_plane(robot, plane, pose):
         drop = (max(abs(s.lost_motion_um) for s in a1)
                 - max(abs(s.lost_motion_um) for s in res["no_backlash"].spikes if s.joint == 1))
         assert drop == pytest.approx(robot.backlash[0] * lever * 1e6, rel=0.05)
+
+
+_SPIKE_TARGETS_UNMET = pytest.mark.xfail(strict=True, reason=(
+    "measured with the transient-modelled split: the frictionless play crossings ring too (friction "
+    "makes the spike 1.3-1.9x at xy pose3, yz, zx pose3), and A1's overshoot is the flank impact, which "
+    "does not grow with friction (doubled: 0.94-1.12x in yz and zx); docs/drive-model.md"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("plane", "pose"), [
+    ("xy", "pose1"),
+    pytest.param("xy", "pose3", marks=_SPIKE_TARGETS_UNMET),
+    pytest.param("yz", "pose1", marks=_SPIKE_TARGETS_UNMET),
+    pytest.param("yz", "pose3", marks=_SPIKE_TARGETS_UNMET),
+    pytest.param("zx", "pose1", marks=_SPIKE_TARGETS_UNMET),
+    pytest.param("zx", "pose3", marks=_SPIKE_TARGETS_UNMET),
+])
+def test_spike_targets_friction_3x_and_doubled_friction_1_5x(robot, plane, pose):
+    """The targets for the largest reversal spike, stated as they are: with friction at least 3x the one
+    without, doubled Coulomb and stiction levels at least 1.5x again. Met at xy pose1 (3.2x, 1.84x);
+    the other cases are strict expected failures, so the day they hold this test says so."""
+    from simulate.toolpath.placement import load_poses, select_pose
+
+    placement = select_pose(load_poses(POSES), pose)
+    spec = CircleSpec(radius=0.05, feed=2000 / 6e4, plane=plane)
+    spike = {key: evaluate_run(simulate_circle(robot, placement, spec, **kw)).largest_reversal_spike_um
+             for key, kw in {"base": {}, "none": dict(friction=False), "x2": dict(friction_scale=2.0)}.items()}
+    assert spike["base"] >= 3 * spike["none"]
+    assert spike["x2"] >= 1.5 * spike["base"]
