@@ -681,6 +681,8 @@ class SimulationRun:
         [s].
     friction : list of dict
         The friction model used per joint (``{"joint", "kind", "source"}``) when the pipeline says.
+    contact : ndarray (N, 6) of int or None
+        Each gear's state per cycle (+1 / -1 on a flank, 0 in the play) when the drives ran.
     """
 
     setup: ProgramSetup
@@ -689,6 +691,7 @@ class SimulationRun:
     trajectory: JointTrajectory | None = None
     wall_time: float = 0.0
     friction: list = field(default_factory=list)
+    contact: np.ndarray | None = None
 
 
 #: ``simulate(setup, stiffness_scale) -> SimulationRun``; ``stiffness_scale`` multiplies the model's.
@@ -708,7 +711,8 @@ def pipeline_simulator(job: MachiningJob, advance=None) -> Simulator:
         mo = run_job(replace(job, program=setup, robot=robot, settings=settings), advance=advance)
         st = mo.steps
         tip = np.asarray(mo.trajectory.xyz) + st.deflection + st.tracking_error
-        return SimulationRun(setup, tip, mo.table, mo.trajectory, time.perf_counter() - c0, list(mo.friction))
+        return SimulationRun(setup, tip, mo.table, mo.trajectory, time.perf_counter() - c0, list(mo.friction),
+                             mo.result.joint_contact)
 
     return simulate
 

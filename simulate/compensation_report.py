@@ -13,6 +13,10 @@ Files in the output folder:
   ``tau_f1_Nm .. tau_f6_Nm``, each joint's static friction curve at the commanded velocity, the
   torque the NC's friction feed-forward adds (``--ff-friction`` runs the programs with it);
 - ``report.md`` and ``deviation.png`` (normal deviation along the path before and after).
+
+``summary.json`` and the report also list the gears the corrected program leaves floating in their
+play (:mod:`simulate.evaluation.gear_play`): per program section and joint, flank changes before and
+after, where they rose; no path correction holds such a gear on a flank.
 """
 from __future__ import annotations
 
@@ -56,7 +60,7 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
                              "after": ra.deviation / 1e-3} for rb, ra in zip(b.table.rows, a.table.rows, strict=True)]}
 
     best = result.iterations[result.best]
-    return {"evaluation": pair(scale),
+    return {"evaluation": pair(scale), "gears_floating": gears_floating(result),
             "checks": [pair(sc) for sc in sorted(result.checks) if sc != scale],
             "best_iteration": result.best,
             "iterations": [{"index": it.index, "table_sum_mm": None if it.table_sum is None else it.table_sum / 1e-3,
@@ -66,6 +70,32 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
                             "rows_worse": it.rows_worse}
                            for it in result.iterations],
             "max_offset_mm": best.max_offset / 1e-3, "time_ratio": best.time_ratio, "speed_ratio": best.speed_ratio}
+
+
+def gears_floating(result: CompensationResult) -> list[dict]:
+    """Lines of the original program and joints whose gear changes flank far more often in the
+    compensated program than in the original (:func:`simulate.evaluation.gear_play.floating_gears`), at
+    the model's stiffness: ``section, line, text, joint, flank_changes_before, flank_changes_after,
+    in_play_before, in_play_after`` (shares of the line's 2 ms cycles [-]); the compensated program's
+    pieces are counted on the original line they were split from. Empty where the runs have no drive
+    states."""
+    from simulate.evaluation.gear_play import floating_gears, gear_play
+
+    b, a = result.before, result.after
+    if b.contact is None or a.contact is None or b.trajectory is None or a.trajectory is None:
+        return []
+    segs = result.path.segments
+    # each piece of the corrected program on the original line it was split from; other lines left out
+    to_original = {out: segs[i].line for out, (i, _ua, _ub) in result.program.pieces.items()}
+    a_lines = np.array([to_original.get(int(v), -1) for v in a.trajectory.line], np.int64)
+    text = result.path.text
+    pairs = floating_gears(gear_play(text, b.trajectory.line, b.contact, per_line=True),
+                           gear_play(text, a_lines, a.contact, per_line=True))
+    src = text.splitlines()
+    return [{"section": af.section, "line": af.line, "text": src[af.line - 1].strip() if af.line else "",
+             "joint": af.joint, "flank_changes_before": None if bf is None else bf.flank_changes,
+             "flank_changes_after": af.flank_changes, "in_play_before": None if bf is None else bf.in_play,
+             "in_play_after": af.in_play} for bf, af in pairs]
 
 
 def offsets_table(result: CompensationResult, robot, placement) -> pd.DataFrame:
@@ -138,6 +168,13 @@ def _ratio(r: float | None) -> str:
     return "-" if r is None else f"{r:.3f}"
 
 
+def _or_dash(v: float | None, scale: float | None = None) -> str:
+    """A count as it is, a share times ``scale`` to whole numbers; ``-`` for None."""
+    if v is None:
+        return "-"
+    return f"{v * scale:.0f}" if scale is not None else str(v)
+
+
 def report_text(result: CompensationResult, info: dict, title: str, scale: float) -> str:
     ev = info["evaluation"]
     lines = [f"# Compensation: {title}", ""]
@@ -160,6 +197,23 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
             ("stiffness scale", "sum before [µm]", "sum after [µm]", "ratio", "rows worse"),
             [(f"{c['stiffness_scale']:g}", f"{c['sum_before_mm'] * 1e3:.1f}", f"{c['sum_after_mm'] * 1e3:.1f}",
               _ratio(c["ratio"]), ", ".join(c["rows_worse"]) or "none") for c in checks])
+        lines.append("")
+    floating = info.get("gears_floating") or []
+    if floating:
+        lines += ["## Gears left floating in their play", "",
+                  "Lines of the original program (the corrected pieces counted on the line they were split from) "
+                  "where a joint's gear changes flank far more often after the correction: where the corrected cut's "
+                  "process torque about the joint about cancels its friction, the gear carries almost nothing, its "
+                  "link leaves the flank and comes back many times a second and the tool rattles by up to the play "
+                  "times the lever. No correction of the path holds such a gear on a flank (the corrected cut is the "
+                  "nominal one); another placement or the other milling direction loads it. A row of such a feature "
+                  "that got worse after the correction most likely got worse by it.", ""]
+        lines += markdown_table(
+            ("program section", "line", "joint", "flank changes before", "after", "in the play before [%]",
+             "after [%]"),
+            [(g["section"], f"{g['line']}: `{g['text']}`", f"A{g['joint']}", _or_dash(g["flank_changes_before"]),
+              g["flank_changes_after"], _or_dash(g["in_play_before"], 100.0), _or_dash(g["in_play_after"], 100.0))
+             for g in floating])
         lines.append("")
     lines += ["## Iterations (model stiffness)", ""]
     lines += markdown_table(
