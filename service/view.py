@@ -423,6 +423,19 @@ def compensation_sections(ctx: Context) -> list[dict]:
         out.append({"type": "before-after", "title": "Table 2 before / after compensation [µm]",
                     "rows": [{"name": r["name"], "tolerance_um": _um(r["tolerance"]), "before_um": _um(r["before"]),
                               "after_um": _um(r["after"])} for r in ev["rows_mm"]]})
+    floating = info.get("gears_floating") or []
+    if floating:
+        out.append({"type": "table", "title": "Gears left rattling in their play", "id": "gears",
+                    "columns": ["program section", "line", "joint", "flank changes before", "after",
+                                "in the play before [%]", "after [%]"],
+                    "rows": [[g.get("section"), f"{g.get('line')}: {g.get('text', '')}", f"A{g.get('joint')}",
+                              g.get("flank_changes_before"), g.get("flank_changes_after"),
+                              _pct(g.get("in_play_before")), _pct(g.get("in_play_after"))] for g in floating],
+                    "digits": [None, None, None, None, None, 0, 0],
+                    "note": "lines of the original program where a joint's gear changes flank many times a second "
+                            "after the correction: the corrected cut's process torque nearly cancels the joint's "
+                            "friction, the gear carries almost nothing and the tool rattles by up to the play times "
+                            "the lever; no path correction holds it on a flank, another placement can"})
     digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
     if "out/deviation.png" in digests:
         out.append({"type": "image", "title": "Tool deviation from the nominal path, before and after",
@@ -433,6 +446,10 @@ def compensation_sections(ctx: Context) -> list[dict]:
 
 def _um(mm):
     return None if mm is None else float(mm) * 1e3
+
+
+def _pct(share):
+    return None if share is None else float(share) * 100.0
 
 
 #: Most samples of a circle trace the page draws (the CSV has every one): every k-th sample kept, which at

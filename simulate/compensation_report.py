@@ -33,6 +33,7 @@ from identify.files import atomic_files
 from identify.records import markdown_table, write_table
 from simulate import defaults as DEFAULTS
 from simulate.compensation import MAX_OFFSET, TIME_RATIO, CompensationResult, table_sum, worse_rows
+from simulate.evaluation.gear_play import RATTLE_RATE, floating_gears, gear_play
 from simulate.figures import save_png
 
 UM = 1e-6
@@ -79,7 +80,6 @@ def gears_floating(result: CompensationResult) -> list[dict]:
     in_play_before, in_play_after`` (shares of the line's 2 ms cycles [-]); the compensated program's
     pieces are counted on the original line they were split from. Empty where the runs have no drive
     states."""
-    from simulate.evaluation.gear_play import floating_gears, gear_play
 
     b, a = result.before, result.after
     if b.contact is None or a.contact is None or b.trajectory is None or a.trajectory is None:
@@ -200,14 +200,15 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
         lines.append("")
     floating = info.get("gears_floating") or []
     if floating:
-        lines += ["## Gears left floating in their play", "",
+        lines += ["## Gears left rattling in their play", "",
                   "Lines of the original program (the corrected pieces counted on the line they were split from) "
-                  "where a joint's gear changes flank far more often after the correction: where the corrected cut's "
-                  "process torque about the joint about cancels its friction, the gear carries almost nothing, its "
-                  "link leaves the flank and comes back many times a second and the tool rattles by up to the play "
-                  "times the lever. No correction of the path holds such a gear on a flank (the corrected cut is the "
-                  "nominal one); another placement or the other milling direction loads it. A row of such a feature "
-                  "that got worse after the correction most likely got worse by it.", ""]
+                  f"where a joint's gear rattles after the correction (at least {RATTLE_RATE:g} flank changes a "
+                  "second and 1.5 times as many as before): where the corrected cut's process torque about the "
+                  "joint nearly cancels its friction, the gear carries almost nothing, its link leaves the flank "
+                  "and comes back many times a second and the tool rattles by up to the play times the lever. No "
+                  "correction of the path holds such a gear on a flank (the corrected cut is the nominal one); "
+                  "another placement or the other milling direction loads it. A row of such a feature that got "
+                  "worse after the correction most likely got worse by it.", ""]
         lines += markdown_table(
             ("program section", "line", "joint", "flank changes before", "after", "in the play before [%]",
              "after [%]"),

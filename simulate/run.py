@@ -751,8 +751,9 @@ def trace_workpiece(workpiece: Path, point: Sequence[float], radius: float, prog
 def compensation_summary(info: dict) -> tuple[list[Table], list[str]]:
     """``greybench compensate``'s summary of a run (:func:`simulate.compensation_report.run_compensation`'s
     dict): the Table-2 rows [µm] before and after with their sums, and lines: the ratio and the rows
-    worse than max(10 %, 2 µm), each stiffness check's sums [µm] and ratio, the chosen iteration, the
-    largest offset [µm], time and peak speed ratios, the report's path."""
+    worse than max(10 %, 2 µm), each stiffness check's sums [µm] and ratio, the gears the corrected
+    program leaves rattling in their play, the chosen iteration, the largest offset [µm], time and peak
+    speed ratios, the report's path."""
     from identify.workflows import Table
 
     tables, lines = [], []
@@ -768,6 +769,11 @@ def compensation_summary(info: dict) -> tuple[list[Table], list[str]]:
                      f"{', '.join(ev['rows_worse']) or 'none'}")
     lines += [f"stiffness x{c['stiffness_scale']:g}: sum {c['sum_before_mm'] * 1e3:.1f} -> "
               f"{c['sum_after_mm'] * 1e3:.1f} µm, ratio {c['ratio']:.3f}" for c in info.get("checks", []) if c]
+    floating = info.get("gears_floating") or []
+    if floating:
+        lines.append("gears left rattling in their play (flank changes before -> after, per line of the program): "
+                     + "; ".join(f"line {g['line']} A{g['joint']} {g['flank_changes_before'] or 0} -> "
+                                 f"{g['flank_changes_after']}" for g in floating))
     lines.append(f"best iteration {info['best_iteration']}; largest offset {info['max_offset_mm'] * 1e3:.1f} µm; "
                  f"time ratio {info['time_ratio']:.3f}; peak speed ratio {info['speed_ratio']:.3f}")
     lines += [f"report: {f}" for f in info.get("files", []) if f.endswith("report.md")]

@@ -3,7 +3,7 @@
 A gear changes its state (on the positive flank, in the play, on the negative flank; the drive's
 :class:`simulate.robot.drive.Contact`) where the torque it transmits changes sign. At a joint's
 velocity reversal that happens once or twice. Where the transmitted torque stays near zero for a
-while (in machining: the process torque about the joint about cancels its friction, as in climb
+while (in machining: the process torque about the joint nearly cancels its friction, as in climb
 milling along a wall), the link leaves its flank and comes back many times a second and the tool
 rattles by up to the play times the lever (docs/drive-model.md, "The 12-14 Hz gear rattle").
 
@@ -23,10 +23,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simulate import defaults as DEFAULTS
+
 #: a line holding only a comment, its text
 _COMMENT_LINE = re.compile(r"^\s*\(([^()]*)\)\s*$")
 #: longest section name kept [characters]
 NAME_CHARS = 60
+#: flank changes per second [1/s] from which a gear counts as rattling in its play: on iso160 the
+#: process-closed rattle of a gear that carries nothing (12-14 Hz, docs/drive-model.md) made 10-29
+#: per second along a wall, a slow drift through the play under a near-cancelling load 3-6 per
+#: second (as with a constant load and no process) and the reversals of a contour fewer; chosen
+#: between them
+RATTLE_RATE = 8.0
+#: shortest stretch [s] a rattle is looked for on: where a gear changes flank at a reversal (a
+#: step-over at the end of a pass) its contact bounces for a few tens of ms, every cycle a change
+MIN_STRETCH = 0.25
 
 
 @dataclass(frozen=True)
@@ -131,10 +142,12 @@ def gear_play(text: str, line, contact, *, per_line: bool = False) -> list[GearP
 
 
 def floating_gears(before: list[GearPlay], after: list[GearPlay], *, min_changes: int = 10,
-                   factor: float = 1.5) -> list[tuple[GearPlay | None, GearPlay]]:
-    """Sections and joints whose gear changes flank at least ``min_changes`` times after and at least
-    ``factor`` times as often as before: (before or None where the original has no such section, after),
-    in the order of the program after.
+                   min_rate: float = RATTLE_RATE, min_time: float = MIN_STRETCH, factor: float = 1.5,
+                   cycle: float = DEFAULTS.CYCLE) -> list[tuple[GearPlay | None, GearPlay]]:
+    """Sections or lines and joints whose gear rattles after: over a stretch of at least ``min_time``
+    [s] of cycles of ``cycle`` [s], at least ``min_changes`` flank changes, at least ``min_rate`` per
+    second [1/s], and at least ``factor`` times as many as before. Returns (before or None where the
+    original has no such stretch, after), in the order of the program after.
 
     Matched by section name, line and joint, the n-th of a kind with the n-th (the corrected program
     keeps the original's comments; count it per line of the original, :func:`gear_play`).
@@ -153,6 +166,8 @@ def floating_gears(before: list[GearPlay], after: list[GearPlay], *, min_changes
     out: list[tuple[GearPlay | None, GearPlay]] = []
     for key, a in keyed(after).items():
         was = b.get(key)
-        if a.flank_changes >= min_changes and a.flank_changes >= factor * (was.flank_changes if was else 0):
+        duration = a.cycles * cycle
+        if (duration >= min_time and a.flank_changes >= min_changes and a.flank_changes >= min_rate * duration
+                and a.flank_changes >= factor * (was.flank_changes if was else 0)):
             out.append((was, a))
     return out

@@ -83,6 +83,11 @@ COMPENSATED_ROWS = [{"name": "circle diameter", "tolerance": 0.02, "before": 0.0
                     {"name": "slope angle", "tolerance": 0.02, "before": -0.004, "after": -0.009}]
 
 
+#: a gear the corrected program leaves rattling, as simulate.compensation_report's summary gives it
+GEARS = [{"section": "square: contour at z = 0 mm", "line": 17, "text": "G1 X-55 Y-60 Z0", "joint": 1,
+          "flank_changes_before": 4, "flank_changes_after": 52, "in_play_before": 0.03, "in_play_after": 0.51}]
+
+
 def _fake_compensation(store, jobs_dir) -> str:
     """A succeeded compensation job with a summary and a deviation plot (the view reads only these)."""
     from PIL import Image
@@ -96,7 +101,7 @@ def _fake_compensation(store, jobs_dir) -> str:
     (out / "summary.json").write_text("{}")
     result = {"evaluation": {"rows_mm": COMPENSATED_ROWS, "sum_before_mm": 0.054, "sum_after_mm": 0.021,
                              "ratio": 0.021 / 0.054, "score_before": 2.7, "score_after": 1.05},
-              "best_iteration": 2, "max_offset_mm": 0.31, "time_ratio": 1.004}
+              "best_iteration": 2, "max_offset_mm": 0.31, "time_ratio": 1.004, "gears_floating": GEARS}
     assert store.finish(rec.id, "test", JobState.succeeded, result=result, files=folder_digests(jobs_dir / rec.id))
     return rec.id
 
@@ -113,6 +118,8 @@ def test_compensation_page_shows_before_and_after(client):
         assert got["before_um"] == pytest.approx(want["before"] * 1e3)
         assert got["after_um"] == pytest.approx(want["after"] * 1e3)
         assert got["tolerance_um"] == pytest.approx(want["tolerance"] * 1e3)
+    assert sections["table"]["rows"] == [["square: contour at z = 0 mm", "17: G1 X-55 Y-60 Z0", "A1", 4, 52,
+                                          pytest.approx(3.0), pytest.approx(51.0)]]
     image = client.get(sections["image"]["url"], headers=HEADERS)
     assert image.status_code == 200 and image.content[:4] == b"\x89PNG"
     assert {f["name"] for f in sections["files"]["files"]} == {"out/deviation.png", "out/summary.json"}
@@ -428,6 +435,9 @@ def test_compensation_page_in_chromium(job, browser):
     assert len(rows) == 1 + len(COMPENSATED_ROWS)
     assert rows[1].split("\t")[:4] == ["circle diameter", "20", "50.0", "12.0"]
     assert page.locator("section.before-after td.in-tol").count() == 3     # 12 µm; -4 and -9 µm of 20
+    gears = page.locator("table[data-id='gears'] tbody tr").all_inner_texts()
+    assert [r.split("\t") for r in gears] == [["square: contour at z = 0 mm", "17: G1 X-55 Y-60 Z0", "A1", "4", "52",
+                                               "3", "51"]]
     page.wait_for_function("document.querySelector('section.image img').naturalWidth === 60")
     assert not problems, problems
     page.close()
