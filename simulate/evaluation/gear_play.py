@@ -35,9 +35,11 @@ NAME_CHARS = 60
 #: second (as with a constant load and no process) and the reversals of a contour fewer; chosen
 #: between them
 RATTLE_RATE = 8.0
-#: shortest stretch [s] a rattle is looked for on: where a gear changes flank at a reversal (a
-#: step-over at the end of a pass) its contact bounces for a few tens of ms, every cycle a change
-MIN_STRETCH = 0.25
+#: shortest stretch [s] a rattle is looked for on: the cuts along which a gear floats (a test piece's
+#: walls, passes, circle and angle runs) take 2-11 s on iso160; corners, lead-ins and step-overs
+#: 0.1-0.5 s, where joints reverse and a gear's contact bounces as it changes flank, every cycle a
+#: change
+MIN_STRETCH = 0.5
 
 
 @dataclass(frozen=True)

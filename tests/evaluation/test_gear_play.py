@@ -56,7 +56,7 @@ def test_flank_changes_and_play_share_per_section_and_per_line():
         gear_play(PROGRAM, line[:-1], contact)
 
 
-def _play(line, joint, changes, cycles=200):
+def _play(line, joint, changes, cycles=300):
     return GearPlay("wall", line, joint, changes, 0.5, cycles)
 
 
@@ -64,14 +64,14 @@ def test_floating_needs_enough_changes_and_a_rise():
     before = [_play(6, 1, 4), _play(6, 2, 9), _play(7, 1, 0)]
     after = [_play(6, 1, 12), _play(6, 2, 12), _play(7, 1, 9), _play(8, 1, 10)]
     got = floating_gears(before, after)
-    # 4 -> 12 rose 3x (30 per second); 9 -> 12 only 1.33x; 0 -> 9 below 10 changes; line 8 had no counterpart
+    # 4 -> 12 rose 3x (20 per second); 9 -> 12 only 1.33x; 0 -> 9 below 10 changes; line 8 had no counterpart
     assert [(a.line, a.joint, None if b is None else b.flank_changes) for b, a in got] == [(6, 1, 4), (8, 1, None)]
     assert floating_gears(before, after, factor=1.2, min_changes=9) == [
         (before[0], after[0]), (before[1], after[1]), (before[2], after[2]), (None, after[3])]
     # a slow drift: 15 changes over 1000 cycles of 2 ms (7.5 per second) is no rattle, 16 are; a contact
-    # bouncing at a reversal (20 changes in 0.24 s) neither
-    slow = [_play(6, 1, 15, cycles=1000), _play(7, 1, 16, cycles=1000), _play(8, 1, 20, cycles=120),
-            _play(9, 1, 20, cycles=125)]
+    # bouncing at a reversal (20 changes in 0.48 s) neither
+    slow = [_play(6, 1, 15, cycles=1000), _play(7, 1, 16, cycles=1000), _play(8, 1, 20, cycles=240),
+            _play(9, 1, 20, cycles=250)]
     assert [a.line for _, a in floating_gears([], slow)] == [7, 9]
 
 
@@ -111,16 +111,16 @@ def test_the_report_counts_the_corrected_pieces_on_their_original_line():
     # line 6 split into output lines 7 and 8, line 7 written as output line 9
     segs = [SimpleNamespace(line=6), SimpleNamespace(line=7)]
     pieces = {7: (0, 0.0, 0.5), 8: (0, 0.5, 1.0), 9: (1, 0.0, 1.0)}
-    quiet = np.ones((400, 6), int)
+    quiet = np.ones((600, 6), int)
     rattle = quiet.copy()
-    rattle[:200, 0] = np.tile([1, 0], 100)                    # A1: 199 changes on the first wall (0.4 s)
-    before = SimpleNamespace(trajectory=SimpleNamespace(line=np.repeat([6, 7], 200)), contact=quiet)
-    after = SimpleNamespace(trajectory=SimpleNamespace(line=np.repeat([7, 8, 9, 9], 100)), contact=rattle)
+    rattle[:300, 0] = np.tile([1, 0], 150)                    # A1: 299 changes on the first wall (0.6 s)
+    before = SimpleNamespace(trajectory=SimpleNamespace(line=np.repeat([6, 7], 300)), contact=quiet)
+    after = SimpleNamespace(trajectory=SimpleNamespace(line=np.repeat([7, 8, 9, 9], 150)), contact=rattle)
     result = SimpleNamespace(before=before, after=after, path=SimpleNamespace(text=PROGRAM, segments=segs),
                              program=SimpleNamespace(pieces=pieces))
     got = gears_floating(result)
     assert got == [{"section": "wall: contour at z = 0 mm", "line": 6, "text": "G1 X10 Y0 F500 (first wall)",
-                    "joint": 1, "flank_changes_before": 0, "flank_changes_after": 199, "in_play_before": 0.0,
+                    "joint": 1, "flank_changes_before": 0, "flank_changes_after": 299, "in_play_before": 0.0,
                     "in_play_after": 0.5}]
     info = {"evaluation": None, "checks": [], "best_iteration": 0, "iterations": [], "max_offset_mm": 0.0,
             "time_ratio": 1.0, "speed_ratio": 1.0, "gears_floating": got}
@@ -128,8 +128,8 @@ def test_the_report_counts_the_corrected_pieces_on_their_original_line():
     from simulate.run import compensation_summary
 
     _, lines = compensation_summary(info)
-    assert any(line.endswith("line 6 A1 0 -> 199") for line in lines)
-    assert "| wall: contour at z = 0 mm | 6: `G1 X10 Y0 F500 (first wall)` | A1 | 0 | 199 | 0 | 50 |" in text
+    assert any(line.endswith("line 6 A1 0 -> 299") for line in lines)
+    assert "| wall: contour at z = 0 mm | 6: `G1 X10 Y0 F500 (first wall)` | A1 | 0 | 299 | 0 | 50 |" in text
     assert "rattling" not in report_text(None, dict(info, gears_floating=[]), "small", 1.0)
     # runs without drive states: nothing to list
     assert gears_floating(SimpleNamespace(before=SimpleNamespace(contact=None, trajectory=None), after=after)) == []
