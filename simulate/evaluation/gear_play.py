@@ -146,10 +146,11 @@ def gear_play(text: str, line, contact, *, per_line: bool = False) -> list[GearP
 def floating_gears(before: list[GearPlay], after: list[GearPlay], *, min_changes: int = 10,
                    min_rate: float = RATTLE_RATE, min_time: float = MIN_STRETCH, factor: float = 1.5,
                    cycle: float = DEFAULTS.CYCLE) -> list[tuple[GearPlay | None, GearPlay]]:
-    """Sections or lines and joints whose gear rattles after: over a stretch of at least ``min_time``
-    [s] of cycles of ``cycle`` [s], at least ``min_changes`` flank changes, at least ``min_rate`` per
-    second [1/s], and at least ``factor`` times as many as before. Returns (before or None where the
-    original has no such stretch, after), in the order of the program after.
+    """Sections or lines and joints whose gear rattles after: on a stretch that took at least
+    ``min_time`` [s] before (cycles of ``cycle`` [s]; after, where there is no before), at least
+    ``min_changes`` flank changes after, at least ``min_rate`` per second [1/s] of the stretch after,
+    and at least ``factor`` times as many as before. Returns (before or None where the original has no
+    such stretch, after), in the order of the program after.
 
     Matched by section name, line and joint, the n-th of a kind with the n-th (the corrected program
     keeps the original's comments; count it per line of the original, :func:`gear_play`).
@@ -169,7 +170,9 @@ def floating_gears(before: list[GearPlay], after: list[GearPlay], *, min_changes
     for key, a in keyed(after).items():
         was = b.get(key)
         duration = a.cycles * cycle
-        if (duration >= min_time and a.flank_changes >= min_changes and a.flank_changes >= min_rate * duration
+        # the move's own length decides what it is (a corrected program may slow a step-over down)
+        nominal = (was.cycles if was is not None else a.cycles) * cycle
+        if (nominal >= min_time and a.flank_changes >= min_changes and a.flank_changes >= min_rate * duration
                 and a.flank_changes >= factor * (was.flank_changes if was else 0)):
             out.append((was, a))
     return out

@@ -73,6 +73,8 @@ def test_floating_needs_enough_changes_and_a_rise():
     slow = [_play(6, 1, 15, cycles=1000), _play(7, 1, 16, cycles=1000), _play(8, 1, 20, cycles=240),
             _play(9, 1, 20, cycles=250)]
     assert [a.line for _, a in floating_gears([], slow)] == [7, 9]
+    # a step-over of 0.1 s the corrected program slows down to 0.6 s is still a reversal
+    assert floating_gears([_play(8, 1, 2, cycles=50)], [_play(8, 1, 20, cycles=300)]) == []
 
 
 def _drive_floats(load_offset: float) -> tuple[int, float]:
