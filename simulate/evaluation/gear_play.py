@@ -1,4 +1,4 @@
-"""Where the gears float in their play: each joint's flank changes per program section.
+"""Where the gears float in their play: each joint's flank changes per program section or line.
 
 A gear changes its state (on the positive flank, in the play, on the negative flank; the drive's
 :class:`simulate.robot.drive.Contact`) where the torque it transmits changes sign. At a joint's
@@ -9,8 +9,9 @@ rattles by up to the play times the lever (docs/drive-model.md, "The 12-14 Hz ge
 
 No correction of the path holds such a gear on a flank: the correction puts the tool on the
 nominal surface, so the cut there, and with it the process torque, is the nominal one
-(docs/compensation.md). The compensation report therefore lists, per program section and joint,
-the flank changes before and after, where the corrected program makes a gear float.
+(docs/compensation.md). The compensation report therefore lists, per line of the original program
+and joint, the flank changes before and after where the corrected program leaves a gear rattling
+(:func:`floating_gears`).
 
 Sections are named by the program's own comments: a section starts at a line that holds only a
 comment and runs to the line before the next such line (a run of comment lines is one section,
@@ -53,7 +54,7 @@ class Section:
 
 @dataclass(frozen=True)
 class GearPlay:
-    """One joint's gear over one program section.
+    """One joint's gear over one program section or line.
 
     Attributes
     ----------
@@ -67,9 +68,9 @@ class GearPlay:
         Changes of the gear's state between consecutive 2 ms cycles (leaving a flank or reaching
         one: a crossing of the play from flank to flank counts twice) [-].
     in_play : float
-        Share of the section's cycles with the gear in its play [-].
+        Share of the stretch's cycles with the gear in its play [-].
     cycles : int
-        The section's cycles [-].
+        The stretch's 2 ms cycles [-].
     """
 
     section: str
