@@ -16,8 +16,7 @@ def bench_compensate(
     pose_name: str = typer.Option("near", "--pose", help="Pose of data/poses/iso160.json."),
 ) -> None:
     """Time per iteration and the reduction of the Table-2 sum on the 160 test piece, one pose."""
-    from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
-    from simulate.compensation_report import compensation_job
+    from simulate.compensation import CompensationSettings, compensate, compensation_job, pipeline_simulator
 
     program = DATA_DIR / "programs" / "iso160.nc"
     poses = DATA_DIR / "poses" / "iso160.json"

@@ -118,7 +118,7 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
 def run(request: dict, job_dir: Path, progress) -> dict:
     """The job body: fetch the friction models, compensate, write the files into ``<job>/out``."""
     from service.pipeline import DATA_DIR, PoseTask, _model_folders, pose_tasks
-    from simulate.compensation_report import progress_total, run_compensation
+    from simulate.compensation import progress_total, run_compensation
 
     req = dict(request, poses=[request["pose"]])
     task: PoseTask = pose_tasks(req, job_dir, progress)[0]

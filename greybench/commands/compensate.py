@@ -1,5 +1,5 @@
 """``greybench compensate``: pre-compensate a program from the
-machining simulation (:mod:`simulate.compensation`, outputs :mod:`simulate.compensation_report`)."""
+machining simulation (:mod:`simulate.compensation`, outputs :mod:`simulate.compensation.report`)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -48,7 +48,7 @@ def compensate_cmd(
 ) -> None:
     """Pre-compensate a program from the simulation: correct the commanded path against the predicted
     tool deviation (deflection, tracking error with friction and backlash) and iterate."""
-    from simulate.compensation_report import run_compensation
+    from simulate.compensation import run_compensation
 
     steps = compensation_steps(program, iterations, stiffness_scale, check_scale or ())
     with progress("compensating", total=steps) as adv:

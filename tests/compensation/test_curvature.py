@@ -6,15 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simulate.compensation import (
-    CompensationSettings,
-    Correction,
-    NominalPath,
-    SimulationRun,
-    curvature_limit,
-    limit_curvature,
-    path_deviation,
-)
+from simulate.compensation.measure import SimulationRun, path_deviation
+from simulate.compensation.path import Correction, NominalPath
+from simulate.compensation.settings import CompensationSettings
+from simulate.compensation.update import curvature_limit, limit_curvature
 from simulate.pipeline import load_program
 from simulate.toolpath.interpolation import PathLimits
 
@@ -83,7 +78,7 @@ def test_a_correction_within_the_limit_is_left_alone(small):
 
 def _rattling(amplitude, freq):
     """Tip = command + D + a wave in time (a drive's own oscillation, not a function of the path)."""
-    from simulate.compensation import SimulationRun
+    from simulate.compensation.measure import SimulationRun
 
     def sim(setup, scale=1.0):
         t = np.asarray(setup.interp.t)
@@ -103,11 +98,11 @@ def test_a_drive_oscillation_is_not_written_into_the_program(small, monkeypatch,
     (G61, zero acceleration at every junction), is slower than the contract allows. (Under G64, the
     default, the lifted-limit program kept its time, 1.0006x: there the limit keeps the drive's own
     oscillation out of the program, see test_blended_program_keeps_the_feed.)"""
-    import simulate.compensation as comp
-    from simulate.compensation import compensate
+    import simulate.compensation.update as update
+    from simulate.compensation.iterate import compensate
 
     if shares is not None:
-        monkeypatch.setattr(comp, "CURVATURE_SHARES", shares)
+        monkeypatch.setattr(update, "CURVATURE_SHARES", shares)
     prog, _ = small
     setup = load_program(prog)
     res = compensate(setup, _rattling(60e-6, 5.0), CompensationSettings(iterations=1, secant=False, keep_speed=True,
@@ -130,7 +125,7 @@ def test_a_drive_oscillation_is_not_written_into_the_program(small, monkeypatch,
 def test_blended_program_keeps_the_feed(small):
     """G64 (the default): the corrected pieces carry speed and acceleration across their junctions, so the
     corrected program runs at the original's speed wherever the original cruises, without keep_speed."""
-    from simulate.compensation import compensate
+    from simulate.compensation.iterate import compensate
 
     prog, _ = small
     setup = load_program(prog)
@@ -151,7 +146,7 @@ def test_blended_limits_are_the_interpolators_blending_rule(small):
     """Under G64 the correction's limits are the interpolator's blending rule dt (v / T^2 + A / T) <= beta J
     (closed form), and a junction turning by the compensation's junction limit is blended by the
     interpolator while one turning 1.2 times as much is not."""
-    from simulate.compensation import _junction_limit
+    from simulate.compensation.program import junction_limit
     from simulate.toolpath.gcode import parse_program
     from simulate.toolpath.interpolation import _blocks, _segment_limits
 
@@ -163,7 +158,7 @@ def test_blended_limits_are_the_interpolators_blending_rule(small):
     bj = lim.junction_jerk_share * lim.jerk
     np.testing.assert_allclose(curvature_limit(path, r, g[mid], blend=True), 0.9 * bj * T / (v * (v + A * T)),
                                rtol=1e-6)   # 37.5 1/m
-    turn = _junction_limit(v, lim, blend=True)
+    turn = junction_limit(v, lim, blend=True)
     np.testing.assert_allclose(turn, 0.9 * bj / (v / T ** 2 + A / T), rtol=1e-12)
     for factor, blended in ((1.0, True), (1.2 / 0.9, False)):
         a = turn * factor
@@ -200,12 +195,12 @@ def test_written_pieces_through_a_spline_stay_blended(small, monkeypatch, smooth
     pieces: through the spline of the grid every junction is blended and the line keeps its feed; read
     linearly, each 0.1 mm grid node is a kink of 1.85 mrad, beyond the 1.5 mrad a blended junction passes,
     and the program slows down there."""
-    import simulate.compensation as comp
+    from simulate.compensation.program import write_program
     from simulate.toolpath.gcode import parse_program
     from simulate.toolpath.interpolation import interpolate
 
     if not smooth:
-        monkeypatch.setattr(comp.Correction, "smooth", lambda self: self)
+        monkeypatch.setattr(Correction, "smooth", lambda self: self)
     prog, _ = small
     path = NominalPath.of(load_program(prog))
     r, g, mid = _line_run(path)
@@ -213,7 +208,7 @@ def test_written_pieces_through_a_spline_stay_blended(small, monkeypatch, smooth
     _, h, _ = path.frame(r, g)
     w = np.clip((g - g[0] - 10e-3) / 4e-3, 0.0, 1.0)   # in from zero after the run's start
     corr.values[r] = (w * w * (3 - 2 * w) * 30e-6 * np.sin(2 * np.pi * (g - g[0]) / 8e-3))[:, None] * h
-    text = comp.write_program(path, corr, CompensationSettings()).text
+    text = write_program(path, corr, CompensationSettings()).text
     ip = interpolate(parse_program(text))
     x = ip.xyz[:, 0]
     cruise = (x > 6e-3) & (x < 17e-3) & (np.abs(ip.xyz[:, 1] - 24.5e-3) < 1e-4)   # the corrected line, cruising

@@ -13,15 +13,11 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from simulate.compensation import (
-    CompensationSettings,
-    Correction,
-    NominalPath,
-    SimulationRun,
-    compensate,
-    path_deviation,
-    write_program,
-)
+from simulate.compensation.iterate import compensate
+from simulate.compensation.measure import SimulationRun, path_deviation
+from simulate.compensation.path import Correction, NominalPath
+from simulate.compensation.program import write_program
+from simulate.compensation.settings import CompensationSettings
 from simulate.pipeline import load_program
 from simulate.toolpath.gcode import parse_program
 
@@ -109,9 +105,9 @@ def test_written_program_keeps_feed_words_and_stays_on_the_corrected_path(small)
     for line_no, (i, _ua, ub) in wp.pieces.items():
         seg = [x for x in out.segments if x.line == line_no][0]
         nominal = path.segments[i]
-        from simulate.compensation import _seg_point
+        from simulate.compensation.path import seg_point
 
-        target = _seg_point(nominal, np.array([ub]))[0] + corr.at(int(path.run[i]),
+        target = seg_point(nominal, np.array([ub]))[0] + corr.at(int(path.run[i]),
                                                                   np.array([path.sigma0[i] + ub * nominal.length]))[0]
         assert np.linalg.norm(seg.end - target) < 2e-9
 
@@ -130,7 +126,7 @@ def test_the_update_starts_from_the_realised_correction_so_nothing_winds_up(smal
 def test_corner_arc_correction_is_blended_between_the_walls(small):
     """The small program turns round the block's corner on an arc of 4.5 mm (below the 5 mm tool
     radius): there the sideways correction goes linearly from the first wall's to the second's."""
-    from simulate.compensation import blend_corners
+    from simulate.compensation.update import blend_corners
     from simulate.toolpath.gcode import Arc
 
     prog, _ = small
@@ -162,7 +158,7 @@ def test_a_sensitivity_that_is_not_positive_gets_the_mirror_step():
     local response, e.g. a gear that changed flank) the step is the mirror step ``c - e``; where the
     tip followed by half (de = -50 µm) it is ``c - e / 0.5``. Clipping g = -0.5 to 0.25 would step
     ``c - 4 e``."""
-    from simulate.compensation import update_correction
+    from simulate.compensation.update import update_correction
 
     s = CompensationSettings()
     g = np.arange(0.0, 100e-3 + 1e-9, 0.1e-3)        # 0.1 mm grid over 100 mm

@@ -2,7 +2,7 @@
 stock) has no sums to report; the report leaves it out instead of failing."""
 from __future__ import annotations
 
-from simulate.compensation_report import report_text
+from simulate.compensation.report import report_text
 
 ITERATION = {"index": 0, "table_sum_mm": None, "score": None, "path_rms_um": 12.0, "path_max_um": 30.0,
              "max_offset_um": 0.0, "time_ratio": 1.0, "speed_ratio": 1.0, "pieces": 3, "wall_time_s": 0.5,

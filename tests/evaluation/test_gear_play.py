@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from simulate.compensation_report import gears_floating, report_text
+from simulate.compensation.report import gears_floating, report_text
 from simulate.evaluation.gear_play import GearPlay, floating_gears, gear_play, program_sections
 
 ROBOT = Path(__file__).resolve().parents[2] / "data" / "robots" / "max100.toml"

@@ -74,7 +74,7 @@ def test_job_body_passes_robot_file_and_models(tmp_path, monkeypatch):
     """The job body hands run_compensation the shipped robot file and the fetched model folders per axis."""
     from service import compensation
     from service.paths import DATA_DIR
-    from simulate import compensation_report
+    from simulate.compensation import report as compensation_report
 
     seen = {}
 
@@ -105,7 +105,7 @@ def test_job_progress_ends_where_run_compensation_counts_to(tmp_path, monkeypatc
     it all brings the job to 95 % (the rest is writing the files), never past."""
     from service import compensation
     from service.paths import DATA_DIR
-    from simulate import compensation_report
+    from simulate.compensation import report as compensation_report
     from simulate.pipeline import load_program
 
     gcode = (DATA_DIR / "programs" / "iso160.nc").read_text()

@@ -78,12 +78,12 @@ def test_unfinished_job_is_a_clear_409_page(client):
     assert client.get(f"/compensations/{rec.id}/view", headers=HEADERS).status_code == 404
 
 
-#: Table-2 rows of a finished compensation [mm], as simulate.compensation_report's summary gives them.
+#: Table-2 rows of a finished compensation [mm], as simulate.compensation.report's summary gives them.
 COMPENSATED_ROWS = [{"name": "circle diameter", "tolerance": 0.02, "before": 0.05, "after": 0.012},
                     {"name": "slope angle", "tolerance": 0.02, "before": -0.004, "after": -0.009}]
 
 
-#: a gear the corrected program leaves rattling, as simulate.compensation_report's summary gives it
+#: a gear the corrected program leaves rattling, as simulate.compensation.report's summary gives it
 GEARS = [{"section": "square: contour at z = 0 mm", "line": 17, "text": "G1 X-55 Y-60 Z0", "joint": 1,
           "flank_changes_before": 4, "flank_changes_after": 52, "in_play_before": 0.03, "in_play_after": 0.51}]
 

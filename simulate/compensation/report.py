@@ -32,7 +32,9 @@ from identify.errors import InputError
 from identify.files import atomic_files
 from identify.records import markdown_table, write_table
 from simulate import defaults as DEFAULTS
-from simulate.compensation import MAX_OFFSET, TIME_RATIO, CompensationResult, table_sum, worse_rows
+from simulate.compensation.iterate import CompensationResult, worse_rows
+from simulate.compensation.measure import table_sum
+from simulate.compensation.settings import MAX_OFFSET, TIME_RATIO
 from simulate.evaluation.gear_play import RATTLE_RATE, floating_gears, gear_play
 from simulate.figures import save_png
 
@@ -178,7 +180,7 @@ def _or_dash(v: float | None, scale: float | None = None) -> str:
 def report_text(result: CompensationResult, info: dict, title: str, scale: float) -> str:
     ev = info["evaluation"]
     lines = [f"# Compensation: {title}", ""]
-    lines += ["Mirror compensation from the machining simulation, iterated (simulate/compensation.py, "
+    lines += ["Mirror compensation from the machining simulation, iterated (simulate/compensation/, "
               "docs/compensation.md). Deviations: ISO 10791-7 Table-2 rows of the virtual CMM, µm.", ""]
     if ev is not None:
         lines += [f"## Table 2 before / after (robot stiffness x{scale:g} against the model)", ""]
@@ -352,7 +354,7 @@ class SimulationMeter:
             self._count(units)
 
     def wrap(self, simulate):
-        """``simulate`` (a :data:`simulate.compensation.Simulator`) counted as one simulation per call."""
+        """``simulate`` (a :data:`simulate.compensation.measure.Simulator`) counted as one simulation per call."""
 
         def metered(setup, scale: float = 1.0):
             # the loop reports steps 1..N-1 of the N it simulates
@@ -385,9 +387,11 @@ def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir
     ``ff_friction``: the NC runs with its friction feed-forward (``feedforward.csv``) in the
     iteration and in every evaluation, of both programs (``rank-poses --ff-friction``);
     ``backlash_comp`` likewise with its backlash compensation (``rank-poses --backlash-comp``).
-    Returns the summary (:func:`simulate.compensation_report.summary`) with the files.
+    Returns the summary (:func:`summary`) with the files.
     """
-    from simulate.compensation import CompensationSettings, compensate, pipeline_simulator
+    from simulate.compensation.iterate import compensate
+    from simulate.compensation.measure import pipeline_simulator
+    from simulate.compensation.settings import CompensationSettings
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():

@@ -1,0 +1,149 @@
+"""Simulating a program and measuring the tool's deviation from the nominal path.
+
+- **Normal deviation only.** The component of the deviation along the nominal path tangent is
+  dropped: a shift along the tool's own path changes when a point is cut, not the cut surface, and
+  correcting it would re-time the program (the correction must keep the program's feed and time).
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from simulate.compensation.path import Correction, NominalPath, box, first_index, seg_point, seg_tangent
+from simulate.pipeline import MachiningJob, ProgramSetup, run_job
+
+if TYPE_CHECKING:
+    from simulate.compensation.program import WrittenProgram
+    from simulate.evaluation.features import FeatureTable
+    from simulate.toolpath.placement import JointTrajectory
+
+
+@dataclass
+class SimulationRun:
+    """One simulated program.
+
+    Attributes
+    ----------
+    setup : ProgramSetup
+        The program simulated (its interpolation).
+    tip : ndarray (N, 3)
+        Predicted tool tip per 2 ms cycle [m, workpiece frame]: command + deflection + tracking error.
+    table : simulate.evaluation.features.FeatureTable or None
+        Table-2 deviations (test-piece stock).
+    trajectory : simulate.toolpath.placement.JointTrajectory or None
+        Commanded joints [rad] per cycle.
+    wall_time : float
+        [s].
+    friction : list of dict
+        The friction model used per joint (``{"joint", "kind", "source"}``) when the pipeline says.
+    contact : ndarray (N, 6) of int or None
+        Each gear's state per cycle (+1 / -1 on a flank, 0 in the play) when the drives ran.
+    """
+
+    setup: ProgramSetup
+    tip: np.ndarray
+    table: FeatureTable | None = None
+    trajectory: JointTrajectory | None = None
+    wall_time: float = 0.0
+    friction: list = field(default_factory=list)
+    contact: np.ndarray | None = None
+
+
+#: ``simulate(setup, stiffness_scale) -> SimulationRun``; ``stiffness_scale`` multiplies the model's.
+Simulator = Callable[[ProgramSetup, float], SimulationRun]
+
+
+def pipeline_simulator(job: MachiningJob, advance=None) -> Simulator:
+    """The machining pipeline (:func:`simulate.pipeline.run_job`) with ``job``'s robot, placement,
+    friction, components and settings, for any program (same stock)."""
+    from simulate.pipeline import _robot
+
+    robot = _robot(job.robot)
+
+    def simulate(setup: ProgramSetup, scale: float = 1.0) -> SimulationRun:
+        c0 = time.perf_counter()
+        settings = replace(job.settings, stiffness_scale=job.settings.stiffness_scale * scale)
+        mo = run_job(replace(job, program=setup, robot=robot, settings=settings), advance=advance)
+        st = mo.steps
+        tip = np.asarray(mo.trajectory.xyz) + st.deflection + st.tracking_error
+        return SimulationRun(setup, tip, mo.table, mo.trajectory, time.perf_counter() - c0, list(mo.friction),
+                             mo.result.joint_contact)
+
+    return simulate
+
+
+def table_sum(table) -> float:
+    """Sum of |deviation| over the Table-2 rows [m]."""
+    return float(sum(abs(r.deviation) for r in table.rows))
+
+
+def path_deviation(path: NominalPath, written: WrittenProgram | None, run: SimulationRun, points=None):
+    """Deviation of the predicted tip from the nominal path, normal to it, per cycle of ``run``.
+
+    Returns (run index (N,) int, -1 off the feed runs; nominal arc length (N,) [m]; normal
+    deviation (N, 3) [m]). A cycle of a corrected program is mapped to the nominal path through the
+    fraction of the piece it executes. ``points`` (N, 3) [m] replaces the predicted tip (the
+    command gives the correction the written program realises).
+    """
+    tip = run.tip if points is None else np.asarray(points, float)
+    segs = run.setup.parsed.segments
+    it = run.setup.interp
+    seg = np.asarray(it.segment, np.int64)
+    first = first_index(segs)
+    lengths = np.array([s.length for s in segs])
+    cum = np.concatenate(([0.0], np.cumsum(lengths[first:])))
+    s0 = np.zeros(len(segs))
+    s0[first:] = cum[:-1]
+    u = np.clip((np.asarray(it.s) - s0[seg]) / np.maximum(lengths[seg], 1e-15), 0.0, 1.0)
+    n = len(seg)
+    if written is None:
+        nseg, unom = seg, u
+    else:
+        nseg = np.full(n, -1, np.int64)
+        unom = np.zeros(n)
+        for j in np.unique(seg):
+            p = written.pieces.get(segs[j].line)
+            if p is None:
+                continue
+            m = seg == j
+            nseg[m] = p[0]
+            unom[m] = p[1] + u[m] * (p[2] - p[1])
+    runs = np.where(nseg >= 0, path.run[np.maximum(nseg, 0)], -1)
+    sigma = np.zeros(n)
+    dev = np.zeros((n, 3))
+    nom = path.segments
+    for i in np.unique(nseg[runs >= 0]):
+        m = nseg == i
+        x = seg_point(nom[i], unom[m])
+        t = seg_tangent(nom[i], unom[m])
+        d = tip[m] - x
+        dev[m] = d - np.sum(d * t, axis=1, keepdims=True) * t
+        sigma[m] = path.sigma0[i] + unom[m] * nom[i].length
+    return runs, sigma, dev
+
+
+def deviation_field(path: NominalPath, written: WrittenProgram | None, run: SimulationRun,
+                    smoothing: float, points=None) -> Correction:
+    """The normal deviation of ``run`` (or of ``points``) on the correction grid of every feed run,
+    smoothed [m]."""
+    runs, sigma, dev = path_deviation(path, written, run, points)
+    grid = Correction.zero(path)
+    for r, g in enumerate(grid.grids):
+        m = runs == r
+        if m.sum() < 2:
+            continue
+        order = np.argsort(sigma[m], kind="stable")
+        sg, dv = sigma[m][order], dev[m][order]
+        vals = np.stack([np.interp(g, sg, dv[:, k]) for k in range(3)], axis=1)
+        # smoothed in the path's own frame (sideways, upwards), so that a deviation that turns with
+        # the path round a corner is not shortened by averaging directions; two box passes: a
+        # triangular kernel, which also suppresses the force ripple of the dexel grid
+        _, h, v = path.frame(r, g)
+        side = box(box(np.sum(vals * h, axis=1), smoothing), smoothing)
+        up = box(box(np.sum(vals * v, axis=1), smoothing), smoothing)
+        grid.values[r] = side[:, None] * h + up[:, None] * v
+    return grid
