@@ -433,9 +433,10 @@ def compensation_sections(ctx: Context) -> list[dict]:
                               _pct(g.get("in_play_before")), _pct(g.get("in_play_after"))] for g in floating],
                     "digits": [None, None, None, None, None, 0, 0],
                     "note": "lines of the original program where a joint's gear changes flank many times a second "
-                            "after the correction: the corrected cut's process torque nearly cancels the joint's "
-                            "friction, the gear carries almost nothing and the tool rattles by up to the play times "
-                            "the lever; no path correction holds it on a flank, another placement can"})
+                            "after the correction: mostly where the corrected cut's process torque nearly cancels "
+                            "the joint's friction, so that the gear carries almost nothing and the tool rattles by up "
+                            "to the play times the lever; no path correction holds it on a flank, another placement "
+                            "can"})
     digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
     if "out/deviation.png" in digests:
         out.append({"type": "image", "title": "Tool deviation from the nominal path, before and after",

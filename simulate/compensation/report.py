@@ -14,9 +14,9 @@ Files in the output folder:
   torque the NC's friction feed-forward adds (``--ff-friction`` runs the programs with it);
 - ``report.md`` and ``deviation.png`` (normal deviation along the path before and after).
 
-``summary.json`` and the report also list the gears the corrected program leaves floating in their
-play (:mod:`simulate.evaluation.gear_play`): per program section and joint, flank changes before and
-after, where they rose; no path correction holds such a gear on a flank.
+``summary.json`` and the report also list the gears the corrected program leaves rattling in their
+play (:mod:`simulate.evaluation.gear_play`): per line of the original program and joint, flank changes
+before and after; no path correction holds such a gear on a flank.
 """
 from __future__ import annotations
 
@@ -76,13 +76,11 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
 
 
 def gears_floating(result: CompensationResult) -> list[dict]:
-    """Lines of the original program and joints whose gear changes flank far more often in the
-    compensated program than in the original (:func:`simulate.evaluation.gear_play.floating_gears`), at
-    the model's stiffness: ``section, line, text, joint, flank_changes_before, flank_changes_after,
-    in_play_before, in_play_after`` (shares of the line's 2 ms cycles [-]); the compensated program's
-    pieces are counted on the original line they were split from. Empty where the runs have no drive
-    states."""
-
+    """Lines of the original program and joints whose gear rattles in the compensated program and did
+    not in the original (:func:`simulate.evaluation.gear_play.floating_gears`), at the model's stiffness:
+    ``section, line, text, joint, flank_changes_before, flank_changes_after, in_play_before, in_play_after``
+    (shares of the line's 2 ms cycles [-]); the compensated program's pieces are counted on the
+    original line they were split from. Empty where the runs have no drive states."""
     b, a = result.before, result.after
     if b.contact is None or a.contact is None or b.trajectory is None or a.trajectory is None:
         return []
@@ -205,12 +203,13 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
         lines += ["## Gears left rattling in their play", "",
                   "Lines of the original program (the corrected pieces counted on the line they were split from) "
                   f"where a joint's gear rattles after the correction (at least {RATTLE_RATE:g} flank changes a "
-                  "second and 1.5 times as many as before): where the corrected cut's process torque about the "
-                  "joint nearly cancels its friction, the gear carries almost nothing, its link leaves the flank "
-                  "and comes back many times a second and the tool rattles by up to the play times the lever. No "
-                  "correction of the path holds such a gear on a flank (the corrected cut is the nominal one); "
-                  "another placement or the other milling direction loads it. A row of such a feature that got "
-                  "worse after the correction most likely got worse by it.", ""]
+                  "second and 1.5 times as many as before). A gear rattles where the torque it carries stays near "
+                  "zero: mostly where the corrected cut's process torque about the joint nearly cancels its "
+                  "friction (the link then leaves the flank and comes back many times a second and the tool "
+                  "rattles by up to the play times the lever), or where the NC functions move a nearly still "
+                  "joint's setpoint back and forth. No correction of the path holds such a gear on a flank (the "
+                  "corrected cut is the nominal one); another placement or the other milling direction loads it. "
+                  "A row of such a feature that got worse after the correction most likely got worse by it.", ""]
         lines += markdown_table(
             ("program section", "line", "joint", "flank changes before", "after", "in the play before [%]",
              "after [%]"),
