@@ -748,6 +748,10 @@ def trace_workpiece(workpiece: Path, point: Sequence[float], radius: float, prog
     return trace_point(VirtualWorkpiece.load(f), np.asarray(point, float), radius, program=prog)
 
 
+#: rattling gears the compensation summary names (the report lists them all)
+RATTLE_LINES = 8
+
+
 def compensation_summary(info: dict) -> tuple[list[Table], list[str]]:
     """``greybench compensate``'s summary of a run (:func:`simulate.compensation.report.run_compensation`'s
     dict): the Table-2 rows [µm] before and after with their sums, and lines: the ratio and the rows
@@ -771,9 +775,11 @@ def compensation_summary(info: dict) -> tuple[list[Table], list[str]]:
               f"{c['sum_after_mm'] * 1e3:.1f} µm, ratio {c['ratio']:.3f}" for c in info.get("checks", []) if c]
     floating = info.get("gears_floating") or []
     if floating:
+        shown = floating[:RATTLE_LINES]
+        more = f"; {len(floating) - len(shown)} more in report.md" if len(floating) > len(shown) else ""
         lines.append("gears left rattling in their play (flank changes before -> after, per line of the program): "
                      + "; ".join(f"line {g['line']} A{g['joint']} {g['flank_changes_before'] or 0} -> "
-                                 f"{g['flank_changes_after']}" for g in floating))
+                                 f"{g['flank_changes_after']}" for g in shown) + more)
     lines.append(f"best iteration {info['best_iteration']}; largest offset {info['max_offset_mm'] * 1e3:.1f} µm; "
                  f"time ratio {info['time_ratio']:.3f}; peak speed ratio {info['speed_ratio']:.3f}")
     lines += [f"report: {f}" for f in info.get("files", []) if f.endswith("report.md")]

@@ -127,10 +127,14 @@ def test_the_report_counts_the_corrected_pieces_on_their_original_line():
     info = {"evaluation": None, "checks": [], "best_iteration": 0, "iterations": [], "max_offset_mm": 0.0,
             "time_ratio": 1.0, "speed_ratio": 1.0, "gears_floating": got}
     text = report_text(None, info, "small", 1.0)
-    from simulate.run import compensation_summary
+    from simulate.run import RATTLE_LINES, compensation_summary
 
     _, lines = compensation_summary(info)
     assert any(line.endswith("line 6 A1 0 -> 299") for line in lines)
+    # a long list is cut after RATTLE_LINES entries, naming how many more the report has
+    _, lines = compensation_summary(dict(info, gears_floating=got * (RATTLE_LINES + 3)))
+    (line,) = [x for x in lines if x.startswith("gears left rattling")]
+    assert line.count("line 6 A1") == RATTLE_LINES and line.endswith("; 3 more in report.md")
     assert "| wall: contour at z = 0 mm | 6: `G1 X10 Y0 F500 (first wall)` | A1 | 0 | 299 | 0 | 50 |" in text
     assert "rattling" not in report_text(None, dict(info, gears_floating=[]), "small", 1.0)
     # runs without drive states: nothing to list
