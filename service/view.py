@@ -423,14 +423,14 @@ def compensation_sections(ctx: Context) -> list[dict]:
         out.append({"type": "before-after", "title": "Table 2 before / after compensation [µm]",
                     "rows": [{"name": r["name"], "tolerance_um": _um(r["tolerance"]), "before_um": _um(r["before"]),
                               "after_um": _um(r["after"])} for r in ev["rows_mm"]]})
-    floating = info.get("gears_floating") or []
-    if floating:
+    rattling = info.get("gears_rattling") or []
+    if rattling:
         out.append({"type": "table", "title": "Gears left rattling in their play", "id": "gears",
                     "columns": ["program section", "line", "joint", "flank changes before", "after",
                                 "in the play before [%]", "after [%]"],
                     "rows": [[g.get("section"), f"{g.get('line')}: {g.get('text', '')}", f"A{g.get('joint')}",
                               g.get("flank_changes_before"), g.get("flank_changes_after"),
-                              _pct(g.get("in_play_before")), _pct(g.get("in_play_after"))] for g in floating],
+                              _pct(g.get("in_play_before")), _pct(g.get("in_play_after"))] for g in rattling],
                     "digits": [None, None, None, None, None, 0, 0],
                     "note": "lines of the original program where a joint's gear changes flank many times a second "
                             "after the correction: mostly where the corrected cut's process torque nearly cancels "

@@ -773,10 +773,10 @@ def compensation_summary(info: dict) -> tuple[list[Table], list[str]]:
                      f"{', '.join(ev['rows_worse']) or 'none'}")
     lines += [f"stiffness x{c['stiffness_scale']:g}: sum {c['sum_before_mm'] * 1e3:.1f} -> "
               f"{c['sum_after_mm'] * 1e3:.1f} µm, ratio {c['ratio']:.3f}" for c in info.get("checks", []) if c]
-    floating = info.get("gears_floating") or []
-    if floating:
-        shown = floating[:RATTLE_LINES]
-        more = f"; {len(floating) - len(shown)} more in report.md" if len(floating) > len(shown) else ""
+    rattling = info.get("gears_rattling") or []
+    if rattling:
+        shown = rattling[:RATTLE_LINES]
+        more = f"; {len(rattling) - len(shown)} more in report.md" if len(rattling) > len(shown) else ""
         lines.append("gears left rattling in their play (flank changes before -> after, per line of the program): "
                      + "; ".join(f"line {g['line']} A{g['joint']} {g['flank_changes_before'] or 0} -> "
                                  f"{g['flank_changes_after']}" for g in shown) + more)

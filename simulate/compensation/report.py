@@ -35,7 +35,7 @@ from simulate import defaults as DEFAULTS
 from simulate.compensation.iterate import CompensationResult, worse_rows
 from simulate.compensation.measure import table_sum
 from simulate.compensation.settings import MAX_OFFSET, TIME_RATIO
-from simulate.evaluation.gear_play import RATTLE_RATE, floating_gears, gear_play
+from simulate.evaluation.gear_play import RATTLE_RATE, gear_play, rattling_gears
 from simulate.figures import save_png
 
 UM = 1e-6
@@ -63,7 +63,7 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
                              "after": ra.deviation / 1e-3} for rb, ra in zip(b.table.rows, a.table.rows, strict=True)]}
 
     best = result.iterations[result.best]
-    return {"evaluation": pair(scale), "gears_floating": gears_floating(result),
+    return {"evaluation": pair(scale), "gears_rattling": gears_rattling(result),
             "checks": [pair(sc) for sc in sorted(result.checks) if sc != scale],
             "best_iteration": result.best,
             "iterations": [{"index": it.index, "table_sum_mm": None if it.table_sum is None else it.table_sum / 1e-3,
@@ -75,9 +75,9 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
             "max_offset_mm": best.max_offset / 1e-3, "time_ratio": best.time_ratio, "speed_ratio": best.speed_ratio}
 
 
-def gears_floating(result: CompensationResult) -> list[dict]:
+def gears_rattling(result: CompensationResult) -> list[dict]:
     """Lines of the original program and joints whose gear rattles in the compensated program and did
-    not in the original (:func:`simulate.evaluation.gear_play.floating_gears`), at the model's stiffness:
+    not in the original (:func:`simulate.evaluation.gear_play.rattling_gears`), at the model's stiffness:
     ``section, line, text, joint, flank_changes_before, flank_changes_after, in_play_before, in_play_after``
     (shares of the line's 2 ms cycles [-]); the compensated program's pieces are counted on the
     original line they were split from. Empty where the runs have no drive states."""
@@ -89,7 +89,7 @@ def gears_floating(result: CompensationResult) -> list[dict]:
     to_original = {out: segs[i].line for out, (i, _ua, _ub) in result.program.pieces.items()}
     a_lines = np.array([to_original.get(int(v), -1) for v in a.trajectory.line], np.int64)
     text = result.path.text
-    pairs = floating_gears(gear_play(text, b.trajectory.line, b.contact, per_line=True),
+    pairs = rattling_gears(gear_play(text, b.trajectory.line, b.contact, per_line=True),
                            gear_play(text, a_lines, a.contact, per_line=True))
     src = text.splitlines()
     return [{"section": af.section, "line": af.line, "text": src[af.line - 1].strip() if af.line else "",
@@ -198,8 +198,8 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
             [(f"{c['stiffness_scale']:g}", f"{c['sum_before_mm'] * 1e3:.1f}", f"{c['sum_after_mm'] * 1e3:.1f}",
               _ratio(c["ratio"]), ", ".join(c["rows_worse"]) or "none") for c in checks])
         lines.append("")
-    floating = info.get("gears_floating") or []
-    if floating:
+    rattling = info.get("gears_rattling") or []
+    if rattling:
         lines += ["## Gears left rattling in their play", "",
                   "Lines of the original program (the corrected pieces counted on the line they were split from) "
                   f"where a joint's gear rattles after the correction (at least {RATTLE_RATE:g} flank changes a "
@@ -215,7 +215,7 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
              "after [%]"),
             [(g["section"], f"{g['line']}: `{g['text']}`", f"A{g['joint']}", _or_dash(g["flank_changes_before"]),
               g["flank_changes_after"], _or_dash(g["in_play_before"], 100.0), _or_dash(g["in_play_after"], 100.0))
-             for g in floating])
+             for g in rattling])
         lines.append("")
     lines += ["## Iterations (model stiffness)", ""]
     lines += markdown_table(

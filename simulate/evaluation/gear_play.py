@@ -11,7 +11,7 @@ No correction of the path holds such a gear on a flank: the correction puts the 
 nominal surface, so the cut there, and with it the process torque, is the nominal one
 (docs/compensation.md). The compensation report therefore lists, per line of the original program
 and joint, the flank changes before and after where the corrected program leaves a gear rattling
-(:func:`floating_gears`).
+(:func:`rattling_gears`).
 
 Sections are named by the program's own comments: a section starts at a line that holds only a
 comment and runs to the line before the next such line (a run of comment lines is one section,
@@ -144,7 +144,7 @@ def gear_play(text: str, line, contact, *, per_line: bool = False) -> list[GearP
     return out
 
 
-def floating_gears(before: list[GearPlay], after: list[GearPlay], *, min_changes: int = 10,
+def rattling_gears(before: list[GearPlay], after: list[GearPlay], *, min_changes: int = 10,
                    min_rate: float = RATTLE_RATE, min_time: float = MIN_STRETCH, factor: float = 1.5,
                    cycle: float = DEFAULTS.CYCLE) -> list[tuple[GearPlay | None, GearPlay]]:
     """Sections or lines and joints whose gear rattles after: on a stretch that took at least

@@ -10,8 +10,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from simulate.compensation.report import gears_floating, report_text
-from simulate.evaluation.gear_play import GearPlay, floating_gears, gear_play, program_sections
+from simulate.compensation.report import gears_rattling, report_text
+from simulate.evaluation.gear_play import GearPlay, gear_play, program_sections, rattling_gears
 
 ROBOT = Path(__file__).resolve().parents[2] / "data" / "robots" / "max100.toml"
 PROGRAM = """%
@@ -60,21 +60,21 @@ def _play(line, joint, changes, cycles=300):
     return GearPlay("wall", line, joint, changes, 0.5, cycles)
 
 
-def test_floating_needs_enough_changes_and_a_rise():
+def test_rattling_needs_enough_changes_and_a_rise():
     before = [_play(6, 1, 4), _play(6, 2, 9), _play(7, 1, 0)]
     after = [_play(6, 1, 12), _play(6, 2, 12), _play(7, 1, 9), _play(8, 1, 10)]
-    got = floating_gears(before, after)
+    got = rattling_gears(before, after)
     # 4 -> 12 rose 3x (20 per second); 9 -> 12 only 1.33x; 0 -> 9 below 10 changes; line 8 had no counterpart
     assert [(a.line, a.joint, None if b is None else b.flank_changes) for b, a in got] == [(6, 1, 4), (8, 1, None)]
-    assert floating_gears(before, after, factor=1.2, min_changes=9) == [
+    assert rattling_gears(before, after, factor=1.2, min_changes=9) == [
         (before[0], after[0]), (before[1], after[1]), (before[2], after[2]), (None, after[3])]
     # a slow drift: 15 changes over 1000 cycles of 2 ms (7.5 per second) is no rattle, 16 are; a contact
     # bouncing at a reversal (20 changes in 0.48 s) neither
     slow = [_play(6, 1, 15, cycles=1000), _play(7, 1, 16, cycles=1000), _play(8, 1, 20, cycles=240),
             _play(9, 1, 20, cycles=250)]
-    assert [a.line for _, a in floating_gears([], slow)] == [7, 9]
+    assert [a.line for _, a in rattling_gears([], slow)] == [7, 9]
     # a step-over of 0.1 s the corrected program slows down to 0.6 s is still a reversal
-    assert floating_gears([_play(8, 1, 2, cycles=50)], [_play(8, 1, 20, cycles=300)]) == []
+    assert rattling_gears([_play(8, 1, 2, cycles=50)], [_play(8, 1, 20, cycles=300)]) == []
 
 
 def _drive_floats(load_offset: float) -> tuple[int, float]:
@@ -120,22 +120,22 @@ def test_the_report_counts_the_corrected_pieces_on_their_original_line():
     after = SimpleNamespace(trajectory=SimpleNamespace(line=np.repeat([7, 8, 9, 9], 150)), contact=rattle)
     result = SimpleNamespace(before=before, after=after, path=SimpleNamespace(text=PROGRAM, segments=segs),
                              program=SimpleNamespace(pieces=pieces))
-    got = gears_floating(result)
+    got = gears_rattling(result)
     assert got == [{"section": "wall: contour at z = 0 mm", "line": 6, "text": "G1 X10 Y0 F500 (first wall)",
                     "joint": 1, "flank_changes_before": 0, "flank_changes_after": 299, "in_play_before": 0.0,
                     "in_play_after": 0.5}]
     info = {"evaluation": None, "checks": [], "best_iteration": 0, "iterations": [], "max_offset_mm": 0.0,
-            "time_ratio": 1.0, "speed_ratio": 1.0, "gears_floating": got}
+            "time_ratio": 1.0, "speed_ratio": 1.0, "gears_rattling": got}
     text = report_text(None, info, "small", 1.0)
     from simulate.run import RATTLE_LINES, compensation_summary
 
     _, lines = compensation_summary(info)
     assert any(line.endswith("line 6 A1 0 -> 299") for line in lines)
     # a long list is cut after RATTLE_LINES entries, naming how many more the report has
-    _, lines = compensation_summary(dict(info, gears_floating=got * (RATTLE_LINES + 3)))
+    _, lines = compensation_summary(dict(info, gears_rattling=got * (RATTLE_LINES + 3)))
     (line,) = [x for x in lines if x.startswith("gears left rattling")]
     assert line.count("line 6 A1") == RATTLE_LINES and line.endswith("; 3 more in report.md")
     assert "| wall: contour at z = 0 mm | 6: `G1 X10 Y0 F500 (first wall)` | A1 | 0 | 299 | 0 | 50 |" in text
-    assert "rattling" not in report_text(None, dict(info, gears_floating=[]), "small", 1.0)
+    assert "rattling" not in report_text(None, dict(info, gears_rattling=[]), "small", 1.0)
     # runs without drive states: nothing to list
-    assert gears_floating(SimpleNamespace(before=SimpleNamespace(contact=None, trajectory=None), after=after)) == []
+    assert gears_rattling(SimpleNamespace(before=SimpleNamespace(contact=None, trajectory=None), after=after)) == []

@@ -101,7 +101,7 @@ def _fake_compensation(store, jobs_dir) -> str:
     (out / "summary.json").write_text("{}")
     result = {"evaluation": {"rows_mm": COMPENSATED_ROWS, "sum_before_mm": 0.054, "sum_after_mm": 0.021,
                              "ratio": 0.021 / 0.054, "score_before": 2.7, "score_after": 1.05},
-              "best_iteration": 2, "max_offset_mm": 0.31, "time_ratio": 1.004, "gears_floating": GEARS}
+              "best_iteration": 2, "max_offset_mm": 0.31, "time_ratio": 1.004, "gears_rattling": GEARS}
     assert store.finish(rec.id, "test", JobState.succeeded, result=result, files=folder_digests(jobs_dir / rec.id))
     return rec.id
 
