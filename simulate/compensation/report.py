@@ -10,8 +10,8 @@ Files in the output folder:
   ``dq1_rad .. dq6_rad`` (the joint offsets that realise it with the tool orientation kept, from the
   inverse kinematics of the corrected points minus that of the nominal points);
 - ``feedforward.csv``: one row per cycle of the *compensated* program: ``t_s, line`` and
-  ``tau_f1_Nm .. tau_f6_Nm``, each joint's static friction curve at the commanded velocity, the
-  torque the NC's friction feed-forward adds (``--ff-friction`` runs the programs with it);
+  ``tau_f1_Nm .. tau_f6_Nm``, the friction each joint's model predicts along the commanded joints,
+  the torque the NC's friction feed-forward adds (``--ff-friction`` runs the programs with it);
 - ``report.md`` and ``deviation.png`` (normal deviation along the path before and after).
 
 ``summary.json`` and the report also list the gears the corrected program leaves rattling in their
@@ -117,20 +117,22 @@ def offsets_table(result: CompensationResult, robot, placement) -> pd.DataFrame:
 
 
 def feedforward_table(result: CompensationResult, robot) -> pd.DataFrame:
-    """Per cycle of the compensated program: t_s, line, tau_f1_Nm..tau_f6_Nm, each joint's static
-    friction curve [Nm] at the commanded joint velocity: what the NC's friction feed-forward
+    """Per cycle of the compensated program: t_s, line, tau_f1_Nm..tau_f6_Nm, the friction [Nm] each
+    joint's model predicts along the commanded joints (:func:`simulate.robot.drive.nc_friction`, the
+    model's own dynamics; the steady curve at a held speed): what the NC's friction feed-forward
     (``--ff-friction``, :data:`simulate.robot.drive.DriveFlags.FF_FRICTION`) adds to the motor torque
-    when it runs the compensated program (the drive evaluates the same curve at its substeps)."""
-    from simulate.robot.drive import command_velocity, drive_friction
-    from simulate.robot.loop_friction import static_friction
+    when it runs the compensated program (the drive interpolates it linearly within a cycle)."""
+    from simulate.robot.drive import DriveFlags, command_velocity, drive_friction, load_torques, nc_friction
 
     jt = result.after.trajectory
     assert jt is not None  # the pipeline simulator records every run's joints
-    fp = drive_friction(robot)
-    v = command_velocity(np.asarray(jt.t, float), np.asarray(jt.q, float))
+    t, q = np.asarray(jt.t, float), np.asarray(jt.q, float)
+    v = command_velocity(t, q)
+    model, _ = load_torques(robot, q, v, command_velocity(t, v))
+    ff = nc_friction(drive_friction(robot), t, q, v, model, int(DriveFlags.FF_FRICTION))
     cols = {"t_s": jt.t, "line": jt.line}
     for j in range(6):
-        cols[f"tau_f{j + 1}_Nm"] = np.array([static_friction(fp, j, float(x)) for x in v[:, j]])
+        cols[f"tau_f{j + 1}_Nm"] = ff[:, j]
     return pd.DataFrame(cols)
 
 

@@ -232,6 +232,7 @@ DriveLoop = namedtuple("DriveLoop", [
     "v",         # (N, 6) commanded joint velocities [rad/s]
     "a",         # (N, 6) commanded joint accelerations [rad/s^2]
     "model",     # (N, 6) load the NC's feed-forward knows along the command [Nm] (gravity, inertia)
+    "ff",        # (N, 6) the NC's friction feed-forward along the command [Nm] (zeros without FF_FRICTION)
     "jac",       # (N, 3, 6) translational Jacobian at the commanded joints, workpiece frame [m/rad]
     "scratch",   # (4, 6): the cycle's process torque, load at its start and end [Nm], link inertia [kg m^2]
     "dq",        # (N, 6) out: joint error q_cmd - q_link [rad]
@@ -260,7 +261,7 @@ def drive_cycle(dr, k, dt, force):
     for jj in range(6):
         l1[jj] = l0[jj] + dr.model[k, jj] - dr.model[k - 1, jj]
     cy = CycleInput(dr.q[k - 1], dr.q[k], dr.v[k - 1], dr.v[k], dr.a[k - 1], dr.a[k], l0, l1, dr.model[k - 1],
-                    dr.model[k], jl)
+                    dr.model[k], jl, dr.ff[k - 1], dr.ff[k])
     drive_step(dr.params, dr.friction, dr.st, dr.fst, cy, dt, dr.n_sub, dr.flags)
     for jj in range(6):
         dr.dq[k, jj] = dr.q[k, jj] - dr.st.q[jj]
@@ -595,7 +596,7 @@ def _no_drive():
                     side=np.zeros(6, np.int64))
     z = np.zeros((1, 6))
     return DriveLoop(False, p, fp, drive_state(), new_state(fp), 0, np.ones(6, np.int64), dyn_params_empty(), z, z,
-                     z, z, np.zeros((1, 3, 6)), np.zeros((4, 6)), z, z, np.zeros((1, 6), np.int8))
+                     z, z, z, np.zeros((1, 3, 6)), np.zeros((4, 6)), z, z, np.zeros((1, 6), np.int8))
 
 
 def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substeps: int | None = None,
@@ -619,6 +620,7 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
         drive_params,
         dyn_params,
         load_torques,
+        nc_friction,
         substeps_for,
     )
     from simulate.robot.drive import new_state as drive_state
@@ -644,5 +646,6 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
     dq[0] = q[0] - st.q   # the gear's play and windup at the start (the loop steps from k = 1)
     contact = np.zeros((n, 6), np.int8)
     contact[0] = st.contact
-    return DriveLoop(True, p, friction, st, fst, flags, n_sub, dyn_params(robot, payload), q, v, a, model, jac,
+    ff = nc_friction(friction, t, q, v, model, flags)
+    return DriveLoop(True, p, friction, st, fst, flags, n_sub, dyn_params(robot, payload), q, v, a, model, ff, jac,
                      np.zeros((4, 6)), dq, np.zeros((n, 6)), contact)

@@ -15,9 +15,9 @@ Technical Manual, ``MP750.x`` backlash traversed within the compensation time ``
 changes sign, not the velocity (Nordin and Gutman, *Controlling mechanical systems with backlash -
 a survey*, Automatica 38(10):1633-1649, 2002), so the sign is taken from the predicted torque.
 Here the NC predicts the gear torque from what it knows along the command,
-``tau_pred = J_l r_dd + tau_model + g(r_d)``: the link's own inertia, gravity and inertial coupling
-as in its torque feed-forward, and the friction curve where the friction acts on the link side
-(the gear carries it); not the process force.
+``tau_pred = J_l r_dd + tau_model + f``: the link's own inertia, gravity and inertial coupling
+as in its torque feed-forward, and the friction its friction feed-forward predicts where the friction
+acts on the link side (the gear carries it); not the process force.
 
 Choices (the sources leave them open):
 
@@ -42,10 +42,12 @@ SMOOTHING = 0.015
 
 def predicted_gear_torque(robot, t, q, friction=None) -> np.ndarray:
     """Gear torque [Nm] (N, 6) the NC predicts along the command ``q`` (N, 6) [rad] at ``t`` (N,) [s]:
-    ``J_l r_dd + tau_model + g(r_d)``, the friction curve ``g`` (:func:`loop_friction.static_friction`
-    of ``friction``, default the robot file's) where the friction acts on the link side."""
+    ``J_l r_dd + tau_model + f``, the friction ``f`` its model predicts along the command
+    (:func:`loop_friction.command_friction` of ``friction``, default the robot file's; the model's own
+    dynamics, so a still joint's wiggle within the pre-sliding range flips nothing) where the friction
+    acts on the link side."""
     from simulate.robot.drive import FrictionSide, command_velocity, drive_friction, load_torques
-    from simulate.robot.loop_friction import static_friction
+    from simulate.robot.loop_friction import command_friction
 
     t = np.asarray(t, float)
     q = np.asarray(q, float)
@@ -53,12 +55,9 @@ def predicted_gear_torque(robot, t, q, friction=None) -> np.ndarray:
     a = command_velocity(t, v)
     model, jl = load_torques(robot, q, v, a)
     tau = jl * a + model
-    fp = drive_friction(robot, friction)
-    side = np.asarray(robot.drive.friction_side)
-    for j in range(6):
-        if side[j] == FrictionSide.JOINT:
-            tau[:, j] += np.array([static_friction(fp, j, float(x)) for x in v[:, j]])
-    return tau
+    f = command_friction(drive_friction(robot, friction), t, q, v, tau)
+    joint_side = np.asarray(robot.drive.friction_side) == FrictionSide.JOINT
+    return tau + np.where(joint_side, f, 0.0)
 
 
 def _box(x: np.ndarray, n: int) -> np.ndarray:

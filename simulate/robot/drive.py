@@ -22,13 +22,15 @@ gear ratio ``N``; equations and sources in ``docs/drive-model.md``)::
 * **Control** as an NC drive, evaluated every substep: position P from the motor encoder,
   velocity PI on the motor speed, velocity and torque feed-forward::
 
-      theta_r = r + [WINDUP] (tau_g - (d/c) d/dt tau_g + [FF_FRICTION, joint side] g(r_d)) / c
+      theta_r = r + [WINDUP] (tau_g - (d/c) d/dt tau_g + [FF_FRICTION, joint side] f_ff) / c
       v_cmd   = kv (theta_r - theta) + ff_vel * d/dt theta_r
       u       = kp (v_cmd - omega) + ki int(v_cmd - omega) dt
-                + ff_tau ((J_m' + J_l) r_dd + tau_model) + [FF_FRICTION] g(r_d)
+                + ff_tau ((J_m' + J_l) r_dd + tau_model) + [FF_FRICTION] f_ff
 
   with ``tau_g = ff_tau (J_l r_dd + tau_model)`` the torque the NC's model expects through the
-  gear and ``tau_model`` the load the NC knows (gravity and inertia; not the process force).
+  gear and ``tau_model`` the load the NC knows (gravity and inertia; not the process force);
+  ``f_ff`` the friction the NC's model predicts along the command, each joint's model run with its
+  own dynamics (:func:`simulate.robot.loop_friction.command_friction`; linear within a cycle).
   The reference ``r`` is the cubic Hermite interpolant of the commanded link positions and
   velocities at the cycle ends; the acceleration ``r_dd`` of the feed-forward is linear between
   the commanded accelerations at the cycle ends (the Hermite's own jerk would triple the error of
@@ -61,7 +63,7 @@ from numba import njit
 
 from identify.errors import InputError
 from simulate.robot.dynamics import _rnea_kernel
-from simulate.robot.loop_friction import bristle_rates, friction_torque, static_friction
+from simulate.robot.loop_friction import bristle_rates, friction_torque
 
 N_AXES = 6
 CYCLE = 0.002   # s, interpolation cycle
@@ -78,7 +80,7 @@ class DriveFlags(IntFlag):
     BACKLASH = 2       #: gear play on (off: b = 0, a linear spring-damper)
     FF_VEL = 4         #: velocity feed-forward (factor ``ff_vel`` per joint)
     FF_TAU = 8         #: torque feed-forward (factor ``ff_tau`` per joint)
-    FF_FRICTION = 16   #: friction feed-forward g(r_d) from the NC's friction model (off in an NC by default)
+    FF_FRICTION = 16   #: friction feed-forward from the NC's friction model along the command (off by default)
     WINDUP = 32        #: gear windup compensation of the motor setpoint by the model torque
 
     @classmethod
@@ -129,8 +131,9 @@ DriveState = namedtuple("DriveState", "theta omega q qd integ u tau_s tau_f cont
 #: r0, r1 commanded link positions [rad]; v0, v1 commanded velocities [rad/s]; a0, a1 commanded
 #: accelerations [rad/s^2] (linear within the cycle, for the feed-forward); load0, load1 actual
 #: load torque on the link [Nm]; model0, model1 load torque the NC's feed-forward knows [Nm];
-#: jl link inertia M_jj(q) [kg m^2].
-CycleInput = namedtuple("CycleInput", "r0 r1 v0 v1 a0 a1 load0 load1 model0 model1 jl")
+#: jl link inertia M_jj(q) [kg m^2]; ff0, ff1 the friction the NC's model predicts along the command [Nm]
+#: (:func:`simulate.robot.loop_friction.command_friction`; used with ``FF_FRICTION``).
+CycleInput = namedtuple("CycleInput", "r0 r1 v0 v1 a0 a1 load0 load1 model0 model1 jl ff0 ff1")
 
 
 # --------------------------------------------------------------------------- per-step kernels
@@ -242,7 +245,6 @@ def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
             sm = (i + 0.5) / ns
             r = h0 + sa * (h1 + sa * (h2 + sa * h3))
             rd = (h1 + sa * (2.0 * h2 + 3.0 * sa * h3)) / T
-            rdm = (h1 + sm * (2.0 * h2 + 3.0 * sm * h3)) / T
             rdd = cy.a0[j] + jerk * sa * T
             rddm = cy.a0[j] + jerk * sm * T
             mod_a = cy.model0[j] + dmod * sa * T
@@ -257,14 +259,14 @@ def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
                 th_rd += tg_d / c
                 if flags & F_FF_FRICTION and side == 0:
                     # joint-side friction the NC expects also passes the gear: its windup too
-                    # (position only: its derivative is an impulse at each reversal)
-                    th_r += static_friction(fp, j, rd) / c
+                    # (position only: its derivative is steep at each reversal)
+                    th_r += (cy.ff0[j] + (cy.ff1[j] - cy.ff0[j]) * sa) / c
             vcmd = p.kv[j] * (th_r - theta) + ffv * th_rd
             ev = vcmd - omega
             integ += p.ki[j] * ev * h
             uff = fft * ((jm + jl) * rddm + mod_m)
             if flags & F_FF_FRICTION:
-                uff += static_friction(fp, j, rdm)
+                uff += cy.ff0[j] + (cy.ff1[j] - cy.ff0[j]) * sm
             u = p.kp[j] * ev + integ + uff
             # friction on the simulated motion of its side now (gearbox load: the gear torque), held
             # over the substep
@@ -300,15 +302,16 @@ def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
 
 
 @njit(cache=True)
-def _run_kernel(p, fp, st, fst, ref, load, model, jl, t, n_sub, flags, out_f, out_c):
-    """Run the drives along a whole command; out_f (6, M, 6): q, theta, tau_s, tau_f, u; out_c (M, 6)."""
+def _run_kernel(p, fp, st, fst, ref, load, model, jl, ff, t, n_sub, flags, out_f, out_c):
+    """Run the drives along a whole command (``ff``: the NC's friction feed-forward per cycle [Nm]);
+    out_f (6, M, 6): q, theta, tau_s, tau_f, u; out_c (M, 6)."""
     m = t.shape[0]
     r, v, a = ref[0], ref[1], ref[2]
     drive_init(p, st, fst, r[0], v[0], load[0], model[0], jl[0], flags)
     for k in range(m):
         if k > 0:
             cy = CycleInput(r[k - 1], r[k], v[k - 1], v[k], a[k - 1], a[k], load[k - 1], load[k], model[k - 1],
-                            model[k], 0.5 * (jl[k - 1] + jl[k]))
+                            model[k], 0.5 * (jl[k - 1] + jl[k]), ff[k - 1], ff[k])
             drive_step(p, fp, st, fst, cy, t[k] - t[k - 1], n_sub, flags)
         for j in range(N_AXES):
             out_f[0, k, j] = st.q[j]
@@ -320,6 +323,17 @@ def _run_kernel(p, fp, st, fst, ref, load, model, jl, t, n_sub, flags, out_f, ou
 
 
 # --------------------------------------------------------------------------- Python side
+
+def nc_friction(fp, t, q, v, model, flags: int) -> np.ndarray:
+    """The NC's friction feed-forward [Nm] (N, 6) along the command ``q`` [rad], ``v`` [rad/s] at ``t`` [s]
+    with ``FF_FRICTION`` in ``flags`` (:func:`simulate.robot.loop_friction.command_friction`, the gearbox
+    load the model torque ``model`` [Nm]), zeros without it."""
+    from simulate.robot.loop_friction import command_friction
+
+    if not int(flags) & F_FF_FRICTION:
+        return np.zeros(np.shape(q))
+    return np.ascontiguousarray(command_friction(fp, t, q, v, model))
+
 
 def new_state() -> DriveState:
     """A zeroed :class:`DriveState` (use :func:`drive_init` to put it at equilibrium)."""
@@ -662,6 +676,7 @@ def simulate_drive(robot, t, q_cmd, *, tau_load=None, tau_model=None, link_inert
     out = np.empty((5, m, N_AXES))
     oc = np.empty((m, N_AXES), dtype=np.int8)
     st = new_state()
-    _run_kernel(p, fp, st, friction_state(fp), np.stack([q, v, a]), tl, tm, jl, t, n_sub, int(flags), out, oc)
+    ff = nc_friction(fp, t, q, v, tm, int(flags))
+    _run_kernel(p, fp, st, friction_state(fp), np.stack([q, v, a]), tl, tm, jl, ff, t, n_sub, int(flags), out, oc)
     return DriveResult(t=t, q_cmd=q, q=out[0], theta=out[1], tau_gear=out[2], tau_friction=out[3], tau_motor=out[4],
                        contact=oc, tau_load=tl, substeps=n_sub, flags=flags)

@@ -622,6 +622,37 @@ def describe(rows: Sequence[dict | None]) -> list[str]:
     return [FrictionKind(r["kind"]).name.lower().replace("_", "-") if r is not None else "none" for r in rows]
 
 
+def command_friction(p: LoopFriction, t, q, v, load) -> np.ndarray:
+    """The friction torque [Nm] (N, 6) an NC's friction model predicts along the command: each joint's
+    model run along the commanded velocity ``v`` [rad/s], position ``q`` [rad] and gearbox load ``load``
+    [Nm] (N, 6) at ``t`` (N,) [s] with its own dynamics (:func:`friction_series`, fresh state); an LSTM
+    contributes nothing (no model an NC could run; :func:`static_friction` gives it 0 too).
+
+    Why not the steady curve :func:`static_friction` at the commanded velocity: that steps by twice the
+    friction level wherever the commanded velocity crosses zero, also where a nearly still joint's
+    command only wiggles within the friction's pre-sliding range (a corrected program's small offsets
+    on a wrist axis), so a feed-forward of it flips the motor torque and, through the gear windup, the
+    setpoint back and forth. A dynamic model reverses only with the motion (Canudas de Wit, Olsson,
+    Åström, Lischinsky, *A new model for control of systems with friction*, IEEE TAC 40(3), 1995:
+    friction compensation with the model's own state), as a controller's friction feed-forward ramps
+    its level in over a small velocity (ABB's servo tuning ``TUNE_FRIC_LEV`` / ``TUNE_FRIC_RAMP``).
+    At a held speed it equals the steady curve."""
+    t = np.asarray(t, float)
+    q = np.ascontiguousarray(q, dtype=float)
+    v = np.ascontiguousarray(v, dtype=float)
+    load = np.ascontiguousarray(np.broadcast_to(np.asarray(load, float), v.shape))
+    out = np.zeros(v.shape)
+    if len(t) == 0:
+        return out
+    dt = np.diff(t, prepend=t[0])
+    state = new_state(p)
+    for j in range(6):
+        if p.kind[j] not in (FrictionKind.NONE, FrictionKind.LSTM):
+            out[:, j] = friction_series(p, j, state, np.ascontiguousarray(v[:, j]), np.ascontiguousarray(q[:, j]),
+                                        np.ascontiguousarray(load[:, j]), dt)
+    return out
+
+
 @njit(cache=True)
 def friction_series(p, j, state, v, q, load, dt):
     """:func:`friction_torque` along a motion: samples ``v`` [rad/s], ``q`` [rad], ``load`` [Nm], ``dt[k]``

@@ -68,7 +68,8 @@ def coulomb_viscous(mu, nu):
 
 
 def cycle(**kw) -> CycleInput:
-    base = dict(r0=Z6, r1=Z6, v0=Z6, v1=Z6, a0=Z6, a1=Z6, load0=Z6, load1=Z6, model0=Z6, model1=Z6, jl=JL)
+    base = dict(r0=Z6, r1=Z6, v0=Z6, v1=Z6, a0=Z6, a1=Z6, load0=Z6, load1=Z6, model0=Z6, model1=Z6, jl=JL, ff0=Z6,
+                ff1=Z6)
     base.update(kw)
     return CycleInput(**{k: np.ascontiguousarray(np.asarray(v, float)) for k, v in base.items()})
 
@@ -337,6 +338,26 @@ def test_friction_feed_forward_alone_supplies_the_friction_torque():
     np.testing.assert_allclose(res.error[-1], e, rtol=1e-4)
 
 
+def test_friction_feed_forward_is_linear_within_the_cycle():
+    """The NC's friction feed-forward is given at the cycle ends and taken linearly between them at each
+    substep's midpoint: with no feedback (kv = kp = ki = 0) and nothing else, the last substep's motor
+    torque is ff0 + (ff1 - ff0) (n - 1/2) / n."""
+    p = params(kv=Z6, kp=Z6, ki=Z6, fft=Z6, ffv=Z6)
+    n_sub = np.array([1, 2, 3, 4, 5, 6], np.int64)
+    ff0 = np.array([10.0, -20.0, 5.0, 0.0, 3.0, -1.0])
+    ff1 = np.array([30.0, 40.0, -5.0, 8.0, 3.0, 2.0])
+    st, fst = new_state(), friction_state(no_friction())
+    flags = int(DriveFlags.FF_FRICTION)
+    drive_init(p, st, fst, Z6, Z6, Z6, Z6, JL, flags)
+    drive_step(p, no_friction(), st, fst, cycle(ff0=ff0, ff1=ff1), T, n_sub, flags)
+    np.testing.assert_allclose(st.u, ff0 + (ff1 - ff0) * (n_sub - 0.5) / n_sub, rtol=1e-12)
+    # without the flag the feed-forward is not applied
+    st2 = new_state()
+    drive_init(p, st2, fst, Z6, Z6, Z6, Z6, JL, 0)
+    drive_step(p, no_friction(), st2, fst, cycle(ff0=ff0, ff1=ff1), T, n_sub, 0)
+    np.testing.assert_array_equal(st2.u, 0.0)
+
+
 def test_cubic_command_with_exact_cycle_inputs_is_followed_exactly():
     """r = k t^3 with its exact velocity and acceleration at the cycle ends (the Hermite reference
     and the linear acceleration are then exact), full feed-forward and windup compensation, no play,
@@ -600,8 +621,9 @@ def test_drive_friction_scales_and_checks_the_feed_forward(robot):
 
 def test_simulate_drive_feeds_each_cycle_its_own_ends():
     """simulate_drive against drive_init + drive_step driven by hand: cycle k gets the command, its
-    central-difference velocity and acceleration, the load and model torque at both ends and the mean
-    link inertia of the two ends; outputs per sample are the state after the cycle ending there."""
+    central-difference velocity and acceleration, the load, model torque and friction feed-forward at
+    both ends and the mean link inertia of the two ends; outputs per sample are the state after the
+    cycle ending there."""
     rng = np.random.default_rng(31)
     m = 7
     t = np.cumsum(np.r_[0.0, rng.uniform(0.8, 1.0, m - 1) * T])
@@ -617,12 +639,14 @@ def test_simulate_drive_feeds_each_cycle_its_own_ends():
                          flags=flags, substeps=n_sub)
     v = np.gradient(q, t, axis=0, edge_order=2)
     a = np.gradient(v, t, axis=0, edge_order=2)
+    ff = 3.0 * np.sign(v) + 1.0 * v          # the NC's friction feed-forward: the coulomb-viscous model
     st, fst = new_state(), friction_state(fp)
     drive_init(p, st, fst, q[0], v[0], load[0], model[0], jl[0], int(flags))
     for k in range(m):
         if k:
             cy = cycle(r0=q[k - 1], r1=q[k], v0=v[k - 1], v1=v[k], a0=a[k - 1], a1=a[k], load0=load[k - 1],
-                       load1=load[k], model0=model[k - 1], model1=model[k], jl=0.5 * (jl[k - 1] + jl[k]))
+                       load1=load[k], model0=model[k - 1], model1=model[k], jl=0.5 * (jl[k - 1] + jl[k]),
+                       ff0=ff[k - 1], ff1=ff[k])
             drive_step(p, fp, st, fst, cy, t[k] - t[k - 1], n_sub, int(flags))
         for name, got in (("q", res.q), ("theta", res.theta), ("tau_s", res.tau_gear), ("tau_f", res.tau_friction),
                           ("u", res.tau_motor)):

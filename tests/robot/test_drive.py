@@ -230,6 +230,48 @@ def test_friction_feed_forward_reduces_the_spike(robot, params):
     assert np.abs(on.error[win, 0]).max() < 0.5 * np.abs(off.error[win, 0]).max()
 
 
+def test_friction_feed_forward_follows_the_motion_not_a_still_joints_wiggle(robot):
+    """The NC's friction feed-forward runs each joint's model along the command with its own dynamics
+    (robot file's LuGre: fc 60, fs 80 Nm, s0 6e5 Nm/rad on A1). At a held speed it is the steady curve
+    sign(v) g(v) + nu v; where a still joint's command wiggles by +-1 µrad about zero velocity (within the
+    pre-sliding range fs / s0 = 133 µrad) it moves by about s0 times the wiggle, not by 2 g as the steady
+    curve at the commanded velocity would; after a real reversal it has flipped."""
+    from simulate.robot.drive import drive_friction, nc_friction
+    from simulate.robot.loop_friction import static_friction
+
+    fp = drive_friction(robot)
+    t = np.arange(0.0, 3.0, T)
+    # 0.1 rad/s for 1 s, then still with a +-1 µrad 5 Hz wiggle, then -0.1 rad/s
+    v1 = np.where(t < 1.0, 0.1, np.where(t < 2.0, 2 * math.pi * 5 * 1e-6 * np.cos(2 * math.pi * 5 * (t - 1.0)), -0.1))
+    q1 = np.concatenate([[0.0], np.cumsum(0.5 * (v1[1:] + v1[:-1]) * T)])
+    q = np.zeros((len(t), 6))
+    q[:, 0] = q1
+    v = np.zeros_like(q)
+    v[:, 0] = v1
+    ff = nc_friction(fp, t, q, v, np.zeros_like(q), int(DriveFlags.FF_FRICTION))
+    steady = (t > 0.5) & (t < 1.0)
+    np.testing.assert_allclose(ff[steady, 0], static_friction(fp, 0, 0.1), rtol=1e-6)
+    wiggle = (t > 1.2) & (t < 2.0)
+    static = np.array([static_friction(fp, 0, x) for x in v1[wiggle]])
+    assert np.ptp(static) > 150.0                        # the steady curve flips by 2 g at each crossing
+    assert np.ptp(ff[wiggle, 0]) < 0.05 * np.ptp(static)
+    assert ff[-1, 0] == pytest.approx(static_friction(fp, 0, -0.1), rel=1e-6)
+    np.testing.assert_array_equal(nc_friction(fp, t, q, v, np.zeros_like(q), 0), 0.0)   # off: nothing
+
+    def reversal(dt):
+        """A1 through a reversal (0.02 rad/s cosine at 1 Hz, turning at 0.25 s) sampled every dt [s]."""
+        ts = np.arange(0.0, 1.0, dt)
+        qs, vs = np.zeros((len(ts), 6)), np.zeros((len(ts), 6))
+        qs[:, 0] = 0.02 / (2 * math.pi) * np.sin(2 * math.pi * ts)
+        vs[:, 0] = 0.02 * np.cos(2 * math.pi * ts)
+        return ts, nc_friction(fp, ts, qs, vs, np.zeros_like(qs), int(DriveFlags.FF_FRICTION))[:, 0]
+
+    # the model's own time: sampled at 1 and 2 ms the transient through the reversal agrees (0.9 % here)
+    (t1, f1), (t2, f2) = reversal(0.001), reversal(0.002)
+    near = (t2 > 0.2) & (t2 < 0.4)
+    assert np.abs(np.interp(t2, t1, f1) - f2)[near].max() < 0.02 * np.ptp(f2[near])
+
+
 def test_load_torques_split_own_inertia(robot):
     """tau_load + J_l qdd equals the full Newton-Euler torque (rotor excluded)."""
     from simulate.robot.dynamics import rnea
@@ -346,7 +388,8 @@ def test_step_api_matches_simulate_drive(robot, params):
     flags = int(DriveFlags.default())
     drive_init(params, st, fst, q[0], v[0], load, load, JL, flags)
     for k in range(1, len(t)):
-        cy = CycleInput(q[k - 1], q[k], v[k - 1], v[k], a[k - 1], a[k], load, load, load, load, JL)
+        no_ff = np.zeros(6)   # no friction feed-forward (default flags)
+        cy = CycleInput(q[k - 1], q[k], v[k - 1], v[k], a[k - 1], a[k], load, load, load, load, JL, no_ff, no_ff)
         drive_step(params, fp, st, fst, cy, t[k] - t[k - 1], ref.substeps, flags)
     np.testing.assert_allclose(st.q, ref.q[-1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(st.tau_s, ref.tau_gear[-1], rtol=1e-9, atol=1e-6)
