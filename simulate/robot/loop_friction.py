@@ -396,7 +396,8 @@ def friction_torque(p, j, state, v, q, load, dt):
 def static_friction(p, j, v):
     """Steady-state friction curve of joint ``j`` at a held velocity ``v`` [rad/s] -> [Nm].
 
-    What an NC's friction feed-forward would use: ``sign(v) g(v) + nu v`` for the LuGre forms and
+    The level the NC's friction feed-forward (:func:`command_friction`) reaches at a held speed:
+    ``sign(v) g(v) + nu v`` for the LuGre forms and
     the grey-box (its MLP level), the closed forms of coulomb-viscous and Stribeck, the LuGre base
     of a residual model, and the direction asymmetry of a lugre-extended one (its load factor at
     the reference load). An LSTM has no static curve of its own: 0.

@@ -83,10 +83,10 @@ def test_loop_friction_equals_the_models_predict(record, tmp_path, kind):
 
 
 def test_static_curve_is_the_held_velocity_steady_state_and_scales():
-    """static_friction (the NC's feed-forward curve) equals each form's friction after a long held
-    velocity (closed forms for coulomb-viscous and Stribeck, the relaxed bristles for LuGre and the
-    direction asymmetry of lugre-extended); scale_levels doubles it minus the viscous part; an LSTM
-    has no level to scale."""
+    """static_friction (the level the NC's feed-forward reaches at a held speed) equals each form's
+    friction after a long held velocity (closed forms for coulomb-viscous and Stribeck, the relaxed
+    bristles for LuGre and the direction asymmetry of lugre-extended); scale_levels doubles it minus
+    the viscous part; an LSTM has no level to scale."""
     from simulate.robot import loop_friction as lf
 
     rows = []
