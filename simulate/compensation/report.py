@@ -128,8 +128,9 @@ def feedforward_table(result: CompensationResult, robot) -> pd.DataFrame:
     assert jt is not None  # the pipeline simulator records every run's joints
     t, q = np.asarray(jt.t, float), np.asarray(jt.q, float)
     v = command_velocity(t, q)
-    model, _ = load_torques(robot, q, v, command_velocity(t, v))
-    ff = nc_friction(drive_friction(robot), t, q, v, model, int(DriveFlags.FF_FRICTION))
+    a = command_velocity(t, v)
+    model, jl = load_torques(robot, q, v, a)
+    ff = nc_friction(drive_friction(robot), t, q, v, model + jl * a, int(DriveFlags.FF_FRICTION))
     cols = {"t_s": jt.t, "line": jt.line}
     for j in range(6):
         cols[f"tau_f{j + 1}_Nm"] = ff[:, j]

@@ -646,6 +646,6 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
     dq[0] = q[0] - st.q   # the gear's play and windup at the start (the loop steps from k = 1)
     contact = np.zeros((n, 6), np.int8)
     contact[0] = st.contact
-    ff = nc_friction(friction, t, q, v, model, flags)
+    ff = nc_friction(friction, t, q, v, model + jl * a, flags)
     return DriveLoop(True, p, friction, st, fst, flags, n_sub, dyn_params(robot, payload), q, v, a, model, ff, jac,
                      np.zeros((4, 6)), dq, np.zeros((n, 6)), contact)

@@ -324,15 +324,17 @@ def _run_kernel(p, fp, st, fst, ref, load, model, jl, ff, t, n_sub, flags, out_f
 
 # --------------------------------------------------------------------------- Python side
 
-def nc_friction(fp, t, q, v, model, flags: int) -> np.ndarray:
+def nc_friction(fp, t, q, v, gear_load, flags: int) -> np.ndarray:
     """The NC's friction feed-forward [Nm] (N, 6) along the command ``q`` [rad], ``v`` [rad/s] at ``t`` [s]
-    with ``FF_FRICTION`` in ``flags`` (:func:`simulate.robot.loop_friction.command_friction`, the gearbox
-    load the model torque ``model`` [Nm]), zeros without it."""
+    with ``FF_FRICTION`` in ``flags`` (:func:`simulate.robot.loop_friction.command_friction`), zeros
+    without it. ``gear_load`` [Nm] (N, 6) is the torque the NC's model expects through the gear,
+    ``J_l r_dd + tau_model`` (the gearbox load of a load-dependent friction model), the same the
+    backlash compensation predicts with (:func:`simulate.robot.backlash.predicted_gear_torque`)."""
     from simulate.robot.loop_friction import command_friction
 
     if not int(flags) & F_FF_FRICTION:
         return np.zeros(np.shape(q))
-    return np.ascontiguousarray(command_friction(fp, t, q, v, model))
+    return np.ascontiguousarray(command_friction(fp, t, q, v, gear_load))
 
 
 def new_state() -> DriveState:
@@ -676,7 +678,7 @@ def simulate_drive(robot, t, q_cmd, *, tau_load=None, tau_model=None, link_inert
     out = np.empty((5, m, N_AXES))
     oc = np.empty((m, N_AXES), dtype=np.int8)
     st = new_state()
-    ff = nc_friction(fp, t, q, v, tm, int(flags))
+    ff = nc_friction(fp, t, q, v, tm + jl * a, int(flags))
     _run_kernel(p, fp, st, friction_state(fp), np.stack([q, v, a]), tl, tm, jl, ff, t, n_sub, int(flags), out, oc)
     return DriveResult(t=t, q_cmd=q, q=out[0], theta=out[1], tau_gear=out[2], tau_friction=out[3], tau_motor=out[4],
                        contact=oc, tau_load=tl, substeps=n_sub, flags=flags)

@@ -358,6 +358,33 @@ def test_friction_feed_forward_is_linear_within_the_cycle():
     np.testing.assert_array_equal(st2.u, 0.0)
 
 
+def test_friction_feed_forward_sees_the_gear_load_the_nc_expects():
+    """A load-dependent friction model (lugre-extended, level g (1 + k |L|)) in the NC's friction
+    feed-forward gets as its gearbox load L the torque the NC expects through the gear, the model torque
+    plus the link's own inertia torque J_l r_dd (as the backlash compensation predicts it): at a constant
+    acceleration A with no feedback and no other feed-forward, the motor torque is fc (1 + k |M + J_l A|)
+    on top of the load M the integrator holds from the start (drive_init; no integral action after)."""
+    from simulate.robot import loop_friction as lf
+
+    k, fc, acc = 0.002, 30.0, 20.0   # J_l A: 0.4-100 Nm against M of 0-80 Nm
+    rows = []
+    for _ in range(6):
+        row = lf._empty()
+        row["kind"] = int(FrictionKind.LUGRE_EXTENDED)
+        sc = row["scal"]
+        sc[[lf.FC, lf.FS, lf.VS, lf.DELTA, lf.S0, lf.S1, lf.NU]] = [fc, fc, 0.05, 2.0, 1e7, 0.0, 0.0]
+        sc[lf.K_LOAD], sc[lf.LOAD_REF], sc[lf.EXT_FLAGS] = k, 0.0, float(lf.EXT_LOAD)
+        rows.append(row)
+    fp = lf.assemble(rows)
+    p = params(kv=Z6, kp=Z6, ki=Z6, fft=Z6, ffv=Z6)
+    t = np.arange(0.0, 1.0 + T / 2, T)
+    v0 = np.abs(V)
+    q = v0 * t[:, None] + 0.5 * acc * t[:, None] ** 2
+    res = simulate_drive(None, t, q, params=p, loop_friction=fp, tau_load=np.broadcast_to(MODEL, q.shape),
+                         tau_model=np.broadcast_to(MODEL, q.shape), link_inertia=JL, flags=DriveFlags.FF_FRICTION)
+    np.testing.assert_allclose(res.tau_motor[-1], MODEL + fc * (1 + k * np.abs(MODEL + JL * acc)), rtol=1e-3)
+
+
 def test_cubic_command_with_exact_cycle_inputs_is_followed_exactly():
     """r = k t^3 with its exact velocity and acceleration at the cycle ends (the Hermite reference
     and the linear acceleration are then exact), full feed-forward and windup compensation, no play,
