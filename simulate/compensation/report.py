@@ -86,8 +86,11 @@ def gears_rattling(result: CompensationResult) -> list[dict]:
         return []
     segs = result.path.segments
     # each piece of the corrected program on the original line it was split from; other lines left out
-    to_original = {out: segs[i].line for out, (i, _ua, _ub) in result.program.pieces.items()}
-    a_lines = np.array([to_original.get(int(v), -1) for v in a.trajectory.line], np.int64)
+    a_line = np.asarray(a.trajectory.line, np.int64)
+    to_original = np.full(max(int(a_line.max(initial=0)), max(result.program.pieces, default=0)) + 1, -1, np.int64)
+    for out, (i, _ua, _ub) in result.program.pieces.items():
+        to_original[out] = segs[i].line
+    a_lines = to_original[np.clip(a_line, 0, None)]
     text = result.path.text
     pairs = rattling_gears(gear_play(text, b.trajectory.line, b.contact, per_line=True),
                            gear_play(text, a_lines, a.contact, per_line=True))
