@@ -33,8 +33,8 @@ Friction = Annotated[list[str] | None, typer.Option(
     "--friction", help="AXIS=MODEL: friction model reference for a joint (saved folder, runs:/<id>/model, "
                        "models:/<name>@<alias>), repeatable; others keep the robot file's.")]
 FfFriction = Annotated[bool, typer.Option(
-    "--ff-friction", help="The NC's friction feed-forward: each joint's static friction curve [Nm] at the commanded "
-                          "velocity added to the motor torque (compensate: in the iteration and every evaluation).")]
+    "--ff-friction", help="The NC's friction feed-forward: each joint's friction model [Nm] run along the commanded "
+                          "motion, added to the motor torque (compensate: in the iteration and every evaluation).")]
 BacklashComp = Annotated[bool, typer.Option(
     "--backlash-comp", help="The NC's backlash compensation: each drive's setpoint moved by half its play [rad] "
                             "towards the flank the predicted gear torque loads.")]

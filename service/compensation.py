@@ -47,7 +47,7 @@ class CompensationOptions(Strict):
     check_scales: list[float] = Field(default_factory=list, max_length=4,
                                       description="further stiffness multipliers [-] to evaluate both programs with")
     ff_friction: bool = Field(False, description="run both programs with the NC's friction feed-forward (each "
-                                                 "joint's static friction curve [Nm] at the commanded velocity)")
+                                                 "joint's friction model [Nm] run along the commanded motion)")
     backlash_comp: bool = Field(False, description="run both programs with the NC's backlash compensation (each "
                                                    "drive's setpoint moved by half its play [rad] towards the "
                                                    "flank the predicted gear torque loads)")

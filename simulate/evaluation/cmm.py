@@ -218,12 +218,10 @@ def probe(workpiece, piece: TestPiece, spacing: float = 0.002, search: float = 0
             i, j, k = (int(v) for v in ijk)
             nx, ny, _ = (int(v) for v in shape)
             ray = (k * ny + j) if ax == 0 else (k * nx + i) if ax == 1 else (j * nx + i)
-            if (ax, ray) in seen:  # several nominal points on one ray: one contact
-                continue
-            seen.add((ax, ray))
             fam = wp.families[int(ax)]
             c = int(fam.count[ray])
-            ends = (fam.hi if n_vec[ax] > 0 else fam.lo)[ray, :c]
+            exit_end = bool(n_vec[ax] > 0)
+            ends = (fam.hi if exit_end else fam.lo)[ray, :c]
             if c == 0:
                 miss += 1
                 continue
@@ -232,6 +230,11 @@ def probe(workpiece, piece: TestPiece, spacing: float = 0.002, search: float = 0
             if d[m] > search:
                 miss += 1
                 continue
+            # several nominal points on one contact (one end of one ray): one point. A ray may cross
+            # a feature twice (an x-ray through both sides of the circle boss): two contacts.
+            if (ax, ray, exit_end, m) in seen:
+                continue
+            seen.add((ax, ray, exit_end, m))
             q = lower + (ijk + 0.5) * s
             q[ax] = ends[m]
             pts.append(q)

@@ -69,8 +69,8 @@ class RankSettings:
     size : int
         Test piece size, mm (160 or 320): which nominal geometry is measured.
     ff_friction : bool
-        The NC's friction feed-forward on (each joint's static friction curve at the commanded
-        velocity, :data:`simulate.robot.drive.DriveFlags.FF_FRICTION`); off: the NC does not know the friction.
+        The NC's friction feed-forward on (each joint's friction model run along the commanded
+        motion, :data:`simulate.robot.drive.DriveFlags.FF_FRICTION`); off: the NC does not know the friction.
     backlash_comp : bool
         The NC's load-dependent backlash compensation (:mod:`simulate.robot.backlash`).
     """

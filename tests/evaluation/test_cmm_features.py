@@ -88,3 +88,41 @@ def test_probe_outside_grid_is_an_error(piece160):
     wp = nominal_workpiece(piece160, [0.2, 0.2, 0.0], [0.25, 0.25, 0.02], 0.002)
     with pytest.raises(InputError, match="outside the dexel grid"):
         probe(wp, piece160)
+
+
+def test_the_circle_wall_is_probed_on_both_sides_of_a_ray(piece160, grid):
+    # An x-ray through the circle boss meets its wall twice (entry on the left, exit on the right):
+    # both contacts count. A 30 um dent on the left, 140-175 deg, where the x-rays also serve the
+    # right side (5-40 deg), must be seen: the scan holds a point 30 um inside, and a narrow dent of
+    # depth d gives a minimum-zone roundness of at least d / 2 (the zone's centre can move away from
+    # the dent by d / 2 at most before the opposite side leaves it).
+    lower, upper, s = grid(piece160, 0.001)
+    wp = nominal_workpiece(piece160, lower, upper, s)
+    fam = wp.families[0]
+    y, z = wp.ray_coords(0)
+    cx, cy = piece160.circle_center
+    r = piece160.circle_diameter / 2
+    dent = 30e-6
+    band = (z > piece160.circle_z[0]) & (z < piece160.circle_z[1])
+    rays = np.flatnonzero(band & (np.abs(y - cy) < r))
+    dented = 0
+    for ray in rays:
+        x_left = cx - math.sqrt(r * r - (y[ray] - cy) ** 2)
+        angle = math.degrees(math.atan2(y[ray] - cy, x_left - cx))
+        if not 140 <= angle <= 175:
+            continue
+        m = int(np.argmin(np.abs(fam.lo[ray, :fam.count[ray]] - x_left)))
+        assert abs(fam.lo[ray, m] - x_left) < 1e-9
+        fam.lo[ray, m] += dent
+        dented += 1
+    assert dented > 10
+    scan = probe(wp, piece160, spacing=0.002)
+    wall = scan["circle_wall"]
+    angles = np.sort(np.degrees(np.arctan2(wall[:, 1] - cy, wall[:, 0] - cx)))
+    gaps = np.diff(np.concatenate([angles, angles[:1] + 360]))
+    assert gaps.max() < 4.0    # 2 mm probes on a 54.5 mm radius: 2.1 deg apart, contacts up to s / 2 aside
+    left = wall[wall[:, 0] < cx]
+    inward = left[:, 0] - (cx - np.sqrt(r * r - (left[:, 1] - cy) ** 2))   # along the x-ray [m]
+    assert inward.max() == pytest.approx(dent, abs=1e-9)
+    table = evaluate_scan(scan, piece160)
+    assert dent / 2 - 1e-7 <= table["circle roundness"].deviation <= dent + 1e-9
