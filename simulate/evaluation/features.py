@@ -23,7 +23,13 @@ Choices where the paper is vague (stated so they can be replaced):
 - *Heights zMZ*: each height is the distance along z between two minimum-zone planes (the zone's
   mid-planes), the feature's top face and the floor the finishing pass cut beside it, evaluated at
   the feature centre (slope: at its low end). Using two probed planes, not the workpiece frame, makes
-  the value independent of how a real CMM frame was set up.
+  the value independent of how a real CMM frame was set up. The slope's floor is the band the inner
+  wall's finishing pass cut beside the slope (probed 1.5-3.5 mm from the wall), so its plane is
+  evaluated at the low end on the centre line of its probe points, the face's on the face's centre
+  line: a plane is not extrapolated across its narrow direction. (Evaluating the floor on the face's
+  centre line, 9 mm from the floor's centre line, turned a tilt across the 2.5 mm band into 3.5 times
+  its height: on iso160 a floor cut 0-200 µm low across the band gave a slope height of -1.28 mm
+  where the face sat 0.17 mm below the floor beside it.)
 - *Angles*: ISO 10791-7 states angular tolerances as a length (mm over the feature), so an angle
   error (rad) is multiplied by the length of the edge (angled edges) or of the slope. The 30/60 deg
   edges are measured from the least-squares line of the square's +y wall (the part's own x datum)
@@ -253,10 +259,12 @@ def evaluate_scan(scan: Scan, piece: TestPiece) -> FeatureTable:
     # slope
     face = np.concatenate([_need(scan, f"slope_line_{i}", 2) for i in (1, 2, 3)])
     plane = fit_plane_mz(face)
-    floor = fit_plane_mz(_need(scan, "slope_floor", 3))
+    floor_pts = _need(scan, "slope_floor", 3)
+    floor = fit_plane_mz(floor_pts)
     x0 = piece.slope_x[0]
     y_mid = 0.5 * (piece.slope_y[0] + piece.slope_y[1])
-    h = plane.z_at(x0, y_mid) - floor.z_at(x0, y_mid)
+    # each plane where it was probed (module docstring): the floor band is a few mm wide
+    h = plane.z_at(x0, y_mid) - floor.z_at(x0, float(floor_pts[:, 1].mean()))
     rows.append(FeatureRow("slope height zMZ", piece.slope_z0, "m", tol["slope height zMZ"], h - piece.slope_z0,
                            {"height": h - piece.slope_z0}, "height", h))
     length_x = piece.slope_x[1] - piece.slope_x[0]

@@ -129,11 +129,11 @@ def test_slope_rows(pts, piece):
     p2[len(p2) // 2, 2] += 3 * UM                     # one bump on line 2
     pts["slope_floor"][:, 2] += 2e-4 * pts["slope_floor"][:, 1]   # floor tilted in y
     t = _table(pts, piece)
-    y_mid = 0.5 * (piece.slope_y[0] + piece.slope_y[1])
+    y_floor = pts["slope_floor"][:, 1].mean()     # the floor's plane on the centre line of its band
     h = t["slope height zMZ"]
     # the face's zone mid-plane sits half the 3 um bump above the face
-    assert h.deviation == pytest.approx(6.5 * UM - 2e-4 * y_mid, abs=2e-8)
-    assert h.measured == pytest.approx(piece.slope_z0 + 6.5 * UM - 2e-4 * y_mid, abs=2e-8)
+    assert h.deviation == pytest.approx(6.5 * UM - 2e-4 * y_floor, abs=2e-8)
+    assert h.measured == pytest.approx(piece.slope_z0 + 6.5 * UM - 2e-4 * y_floor, abs=2e-8)
     ang = math.atan(math.tan(piece.slope_angle) + kappa)
     a = t["slope angle"]
     assert a.measured == pytest.approx(ang, abs=1e-7)
