@@ -11,22 +11,25 @@ Dexel spacing, one value per purpose:
   ``explain``, the service's explain jobs). At 1 mm the grid alone differed by 9 um RMS from a
   0.25 mm scan of the same part and was blamed on the tool radius by ``explain``; at 0.25 mm a
   machine-made scan explained with the same robot file names no cause.
-- :data:`RANKING_DEXEL_SPACING` (0.5 mm) for *ranking placements* (``rank-poses``, the service's
-  simulation jobs): it orders the placements as 0.25 mm does, at less than half the time, but a row's
-  value carries a grid error of up to several tolerances. Measured with the two-mass drives (iso320,
-  max100, 4 poses, 15 s against 36 s): the same best pose, scores within 2.4 %, rows within 86 µm of
-  the 0.25 mm value (the angles row; the square side length up to 51 µm); iso160: rows within 128 µm, while
-  0.25 mm stays within 25 µm of 0.125 mm (``docs/ideal-part.md``). The finishing passes take a 0.5 mm
-  radial allowance, one dexel at 0.5 mm: the cutting force integrates over the dexels inside the
-  tool, so coarse grids make force and deflection jump as whole dexels enter and leave the cutter.
-  (An earlier measurement, with the rigid servo, had every row within 0.02 mm.)
+- :data:`RANKING_DEXEL_SPACING` (0.25 mm) for *ranking placements* and *compensating* (``rank-poses``,
+  ``compensate``, ``optimize-pose``, the service's simulation, compensation and placement jobs):
+  a row's value there must be right to about a tolerance, since the compensation corrects against it
+  and the acceptance judges it. Measured with the two-mass drives (iso160, max100): 0.25 mm stays
+  within 25 µm of 0.125 mm on every row, while 0.5 mm was up to 128 µm off (near's angles row). The
+  finishing passes take a 0.5 mm radial allowance, one dexel at 0.5 mm: on the 30/60 deg edges, which
+  cross the grid obliquely, the cutting force then jumped by 45 N (standard deviation along an edge,
+  9 N at 0.25 mm) as whole dexels entered and left the cutter, and the drives' play turned that into
+  a 250 µm over-cut where 0.25 mm predicts 70 µm left standing. 0.5 mm orders iso320's four poses
+  as 0.25 mm does (scores within 2.4 %, rows within 86 µm) at 15 s against 36 s; an earlier
+  measurement, with the rigid servo, had every row within 0.02 mm at 0.5 mm, which is why that was
+  the default (``docs/ideal-part.md``).
 """
 from __future__ import annotations
 
 #: Dexel spacing [m] for simulating one part (module docstring).
 DEXEL_SPACING = 0.25e-3
 #: Dexel spacing [m] for ranking workpiece placements (module docstring).
-RANKING_DEXEL_SPACING = 0.5e-3
+RANKING_DEXEL_SPACING = 0.25e-3
 #: Largest accepted dexel spacing [m]: coarser grids cannot resolve the 6 mm test-piece features.
 MAX_DEXEL_SPACING = 5e-3
 #: Virtual CMM probe point distance along a feature [m].
