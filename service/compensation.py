@@ -30,6 +30,7 @@ from pydantic import Field, model_validator
 
 from identify.errors import InputError
 from service.schemas import ErrorBody, JobStatus, Name, Responses, SinglePoseJob, Strict
+from simulate.compensation.settings import CompensationSettings
 from simulate.defaults import RANKING_DEXEL_SPACING
 
 #: Files a finished job serves, with their media types.
@@ -41,7 +42,8 @@ FILES = {"compensated.nc": "text/plain", "compensated.stock.json": "application/
 class CompensationOptions(Strict):
     spacing_mm: float = Field(RANKING_DEXEL_SPACING * 1e3, gt=0.05, le=5.0,
                               description="dexel spacing of the virtual workpiece [mm] (default: the ranking's)")
-    iterations: int = Field(4, ge=1, le=8, description="largest number of corrected programs simulated")
+    iterations: int = Field(CompensationSettings.iterations, ge=1, le=8,
+                            description="largest number of corrected programs simulated")
     stiffness_scale: float = Field(1.0, gt=0, le=100, description="joint stiffness multiplier [-] of the robot "
                                                                   "the before/after evaluation simulates")
     check_scales: list[float] = Field(default_factory=list, max_length=4,
@@ -142,11 +144,12 @@ def run(request: dict, job_dir: Path, progress) -> dict:
 
         interp = load_program(program, require_spindle=True, source=task.program_source).interp
         # run_compensation counts up to exactly this total (the original's steps per simulation)
-        total = [progress_total(len(interp.t), int(opts.get("iterations", 4)), float(opts.get("stiffness_scale", 1.0)),
+        iterations = int(opts.get("iterations", CompensationSettings.iterations))
+        total = [progress_total(len(interp.t), iterations, float(opts.get("stiffness_scale", 1.0)),
                                 opts.get("check_scales", []))]
         try:
             info = run_compensation(program, robot, poses, task.pose["name"], job_dir / "out",
-                                    iterations=int(opts.get("iterations", 4)),
+                                    iterations=iterations,
                                     stiffness_scale=float(opts.get("stiffness_scale", 1.0)),
                                     check_scales=tuple(opts.get("check_scales", [])),
                                     spacing_mm=float(opts.get("spacing_mm", RANKING_DEXEL_SPACING * 1e3)),

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 from identify.errors import InputError, read_json
 from identify.progress import Advance, Progress, quiet
 from simulate import defaults
+from simulate.compensation.settings import CompensationSettings
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -354,7 +355,7 @@ def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *
 
 
 # ---- compensation, explain --------------------------------------------------------------------
-def compensation_steps(program: Path, iterations: int = 4, stiffness_scale: float = 1.0,
+def compensation_steps(program: Path, iterations: int = CompensationSettings.iterations, stiffness_scale: float = 1.0,
                        check_scales: Sequence[float] = ()) -> int:
     """The progress total of :func:`simulate.compensation.report.run_compensation`
     (:func:`simulate.compensation.report.progress_total`: the original program's 2 ms steps per

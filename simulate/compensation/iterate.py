@@ -181,7 +181,8 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
         As for :func:`simulate.pipeline.load_program` of the corrected programs.
     tool_radius : float, optional
         Cutter radius [m]: arcs of at most this radius get the correction blended between their
-        neighbours' (:func:`blend_corners`).
+        neighbours' (:func:`blend_corners`), and the upward deviation is the lower envelope over this
+        distance along the path (``settings.floor_envelope``, :mod:`simulate.compensation.measure`).
     """
     s = settings or CompensationSettings()
     s.validate()
@@ -193,8 +194,9 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
     v_nom = feed_peak_speed(nominal)
     corr = Correction.zero(path)
     run = simulate(nominal, 1.0)
+    floor = tool_radius if tool_radius and s.floor_envelope else 0.0
     raw = deviation_field(path, None, run, GRID)
-    dev = deviation_field(path, None, run, s.smoothing)
+    dev = deviation_field(path, None, run, s.smoothing, floor_window=floor)
     rms, mx = _path_stats(raw)
     it0 = Iteration(0, table_sum(run.table) if run.table is not None else None,
                     run.table.score if run.table is not None else None, rms, mx, 0.0, 1.0, 1.0, 0, run.wall_time,
@@ -221,7 +223,7 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
                                          Path(tmp) / f"iteration{k}.nc", load, t_nom)
             run = simulate(setup, 1.0)
             raw = deviation_field(path, wp, run, GRID)
-            dev = deviation_field(path, wp, run, s.smoothing)
+            dev = deviation_field(path, wp, run, s.smoothing, floor_window=floor)
             # the correction the pieces realise (a run starts at an uncorrected rapid end): the update
             # starts from it, so what the program cannot realise does not wind up
             real = deviation_field(path, wp, run, GRID, points=setup.interp.xyz)

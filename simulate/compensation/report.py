@@ -377,7 +377,7 @@ class SimulationMeter:
 
 
 def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir: Path, *,
-                     iterations: int = 4, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
+                     iterations: int | None = None, stiffness_scale: float = 1.0, check_scales=(), gain: float = 1.0,
                      spacing_mm: float = DEFAULTS.RANKING_DEXEL_SPACING * 1e3,
                      probe_spacing_mm: float = DEFAULTS.PROBE_SPACING * 1e3, size: int | None = None,
                      friction: dict | None = None, ff_friction: bool = False, backlash_comp: bool = False,
@@ -392,6 +392,7 @@ def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir
     ``ff_friction``: the NC runs with its friction feed-forward (``feedforward.csv``) in the
     iteration and in every evaluation, of both programs (``rank-poses --ff-friction``);
     ``backlash_comp`` likewise with its backlash compensation (``rank-poses --backlash-comp``).
+    ``iterations``: None takes :class:`CompensationSettings`'s.
     Returns the summary (:func:`summary`) with the files.
     """
     from simulate.compensation.iterate import compensate
@@ -404,7 +405,9 @@ def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir
     for v, opt in [(stiffness_scale, "stiffness-scale")] + [(c, "check-scale") for c in check_scales]:
         if isinstance(v, bool) or not (isinstance(v, (int, float)) and v == v and 0 < v < float("inf")):
             raise InputError(f"must be > 0, got {v!r}", field=opt)
-    cs = CompensationSettings(iterations=iterations, gain=gain)
+    cs = CompensationSettings(gain=gain)
+    if iterations is not None:
+        cs = replace(cs, iterations=iterations)
     cs.validate()
     setup, job, placement, rob = compensation_job(program, robot, pose, name, spacing_mm=spacing_mm,
                                                   probe_spacing_mm=probe_spacing_mm, size=size,
@@ -414,7 +417,7 @@ def run_compensation(program: Path, robot, pose: Path, name: str | None, out_dir
     from simulate.evaluation.cutter import robot_cutter
 
     meter = SimulationMeter(advance or (lambda n=1: None), len(setup.interp),
-                            simulation_count(iterations, stiffness_scale, check_scales))
+                            simulation_count(cs.iterations, stiffness_scale, check_scales))
     sim = meter.wrap(pipeline_simulator(job, advance=meter.meter if advance else None))
     res = compensate(setup, sim, cs, checks=scales, require_spindle=True, tool_radius=robot_cutter(rob).radius,
                      header=f"compensated by greybench for robot {rob.name}, pose {placement.name}")

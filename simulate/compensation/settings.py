@@ -54,6 +54,10 @@ class CompensationSettings:
         acceleration across their junctions and the program keeps its feed, as an NC's compressor /
         look-ahead switched on by the program does. Off: the pieces run under the default ``G61`` (zero
         acceleration at every junction).
+    floor_envelope : bool
+        Correct the lower envelope of the tip's height over the tool radius along the path instead of
+        its mean (:mod:`simulate.compensation.measure`, *Floors*): the end face cuts a floor to the
+        tip's lowest passes. Needs the tool radius (:func:`simulate.compensation.iterate.compensate`).
     keep_speed : bool
         Smooth the correction further where the written program would run slower than the original
         (:func:`simulate.compensation.update.keep_speed`); off (default): only the time contract lowers the
@@ -62,7 +66,7 @@ class CompensationSettings:
         ``docs/compensation.md``).
     """
 
-    iterations: int = 4
+    iterations: int = 6
     gain: float = 1.0
     secant: bool = True
     smoothing: float = 2e-3
@@ -70,9 +74,10 @@ class CompensationSettings:
     fit_tolerance: float = 0.5e-6
     max_piece: float = 20e-3
     min_piece: float = 0.25e-3
-    max_correction: float = 0.5e-3
+    max_correction: float = 0.9e-3
     ramp: float = 1e-3
     blend: bool = True
+    floor_envelope: bool = True
     keep_speed: bool = False
 
     def validate(self) -> None:

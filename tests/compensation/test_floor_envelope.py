@@ -1,0 +1,79 @@
+"""The floor's deviation is the lower envelope of the tip's height over the tool radius.
+
+A flat end mill's face leaves a floor at the lowest height it passes over a point. A tip that
+oscillates vertically by ``a`` about a mean ``c`` therefore cuts the floor at ``c - a``; the
+compensation must correct that, not the mean (``simulate.compensation.measure``, *Floors*).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from simulate.compensation.iterate import compensate
+from simulate.compensation.measure import SimulationRun, deviation_field, lower_envelope, path_deviation
+from simulate.compensation.path import NominalPath
+from simulate.compensation.settings import CompensationSettings
+from simulate.pipeline import load_program
+
+R = 5e-3          # m, tool radius
+A = 12e-6         # m, amplitude of the vertical oscillation
+C = -30e-6        # m, its mean (the tip below the path)
+FREQ = 20.0       # Hz: 1 mm wavelength at the small program's F1200
+
+
+def test_lower_envelope_of_a_wave_is_its_trough_and_a_dip_spreads_over_the_window():
+    grid = np.arange(0.0, 50e-3 + 1e-9, 1e-4)
+    sigma = np.arange(0.0, 50e-3, 33e-6)               # a sample every 33 µm (F2000, 1 ms)
+    wave = C + A * np.sin(2 * np.pi * sigma / 1e-3)
+    env = lower_envelope(grid, sigma, wave, R)
+    assert np.allclose(env, C - A, atol=0.01 * A)       # 33 µm samples in a 1 mm period: within 0.5 % of A
+    dip = np.where((sigma >= 20e-3) & (sigma <= 20.3e-3), -50e-6, 0.0)
+    env = lower_envelope(grid, sigma, dip, R)
+    inside = (grid >= 20e-3 - R + 1e-4) & (grid <= 20.3e-3 + R - 1e-4)
+    outside = (grid < 20e-3 - R - 1e-4) | (grid > 20.3e-3 + R + 1e-4)
+    assert np.all(env[inside] == -50e-6) and np.all(env[outside] == 0.0)
+
+
+def _oscillating(setup, scale=1.0):
+    """The tip's height oscillates in time (a drive's own oscillation, not a function of the path)."""
+    t = np.asarray(setup.interp.t, float)
+    z = C + A * np.sin(2 * np.pi * FREQ * t)
+    return SimulationRun(setup, setup.interp.xyz + z[:, None] * np.array([0.0, 0.0, 1.0]))
+
+
+def _interior(path, run, written=None, skip=8e-3):
+    runs, sigma, dev = path_deviation(path, written, run)
+    starts = np.array([a for a, _ in path.runs])
+    ends = np.array([b for _, b in path.runs])
+    keep = (runs >= 0) & (sigma - starts[np.maximum(runs, 0)] > skip) & (ends[np.maximum(runs, 0)] - sigma > skip)
+    return dev[keep]
+
+
+def test_the_floor_field_is_the_trough_and_the_mean_field_the_mean(small):
+    setup = load_program(small[0])
+    path = NominalPath.of(setup)
+    run = _oscillating(setup)
+    mean = deviation_field(path, None, run, 2e-3)
+    floor = deviation_field(path, None, run, 2e-3, floor_window=R)
+    for r, g in enumerate(mean.grids):
+        mid = (g > g[0] + 8e-3) & (g < g[-1] - 8e-3)
+        # the triangular kernel over 4 mm averages a 1 mm wave to within a few % of A
+        assert np.allclose(mean.values[r][mid][:, 2], C, atol=0.1 * A)
+        assert np.allclose(floor.values[r][mid][:, 2], C - A, atol=0.05 * A)
+        assert np.allclose(floor.values[r][mid][:, :2], mean.values[r][mid][:, :2], atol=1e-9)
+
+
+@pytest.mark.parametrize("envelope", [True, False])
+def test_compensation_lifts_the_lowest_tip_to_the_path_not_the_mean(small, envelope):
+    prog, _ = small
+    setup = load_program(prog)
+    s = CompensationSettings(iterations=1, keep_speed=False, floor_envelope=envelope)
+    res = compensate(setup, _oscillating, s, tool_radius=R)
+    assert res.best == 1
+    z = _interior(res.path, res.after, res.program)[:, 2]
+    if envelope:   # the floor the face cuts (the lowest tip) on the path, the mean lifted by A
+        assert z.min() == pytest.approx(0.0, abs=0.1 * A)
+        assert z.mean() == pytest.approx(A, abs=0.1 * A)
+    else:          # the mean on the path: the floor cut A low
+        assert z.mean() == pytest.approx(0.0, abs=0.1 * A)
+        assert z.min() == pytest.approx(-A, abs=0.1 * A)
