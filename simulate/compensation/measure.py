@@ -13,7 +13,8 @@
   the centre line; a point nearer the face's edge is under it for ``+-sqrt(R^2 - y^2)``, so the
   envelope may be up to the variation over that difference too low (the sound side: the floor is
   not cut low). On iso160, whose floors lie in the stock face (a height row reads half the deepest
-  dip), correcting the mean left the circle's height -24..-36 µm where it had been -11 / +11 µm.
+  dip), correcting the mean took the circle's height from -11 / +11 µm (two poses) to -24..-46 µm;
+  correcting the envelope, to -3 / -2 µm.
 """
 from __future__ import annotations
 
