@@ -425,6 +425,8 @@ def compensation_sections(ctx: Context) -> list[dict]:
                               "after_um": _um(r["after"])} for r in ev["rows_mm"]]})
     rattling = info.get("gears_rattling") or []
     if rattling:
+        from simulate.compensation.report import RATTLE_NOTE
+
         out.append({"type": "table", "title": "Gears left rattling in their play", "id": "gears",
                     "columns": ["program section", "line", "joint", "flank changes before", "after",
                                 "in the play before [%]", "after [%]"],
@@ -432,11 +434,7 @@ def compensation_sections(ctx: Context) -> list[dict]:
                               g.get("flank_changes_before"), g.get("flank_changes_after"),
                               _pct(g.get("in_play_before")), _pct(g.get("in_play_after"))] for g in rattling],
                     "digits": [None, None, None, None, None, 0, 0],
-                    "note": "lines of the original program where a joint's gear changes flank many times a second "
-                            "after the correction: mostly where the corrected cut's process torque nearly cancels "
-                            "the joint's friction, so that the gear carries almost nothing and the tool rattles by up "
-                            "to the play times the lever; no path correction holds it on a flank, another placement "
-                            "can"})
+                    "note": RATTLE_NOTE})
     digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
     if "out/deviation.png" in digests:
         out.append({"type": "image", "title": "Tool deviation from the nominal path, before and after",

@@ -75,6 +75,19 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
             "max_offset_mm": best.max_offset / 1e-3, "time_ratio": best.time_ratio, "speed_ratio": best.speed_ratio}
 
 
+#: What the list of gears left rattling means (the report and the job page).
+RATTLE_NOTE = (
+    "Lines of the original program (the corrected pieces counted on the line they were split from) "
+    f"where a joint's gear rattles after the correction (at least {RATTLE_RATE:g} flank changes a "
+    "second and 1.5 times as many as before). A gear rattles where the torque it carries stays near "
+    "zero: mostly where the corrected cut's process torque about the joint nearly cancels its "
+    "friction (the link then leaves the flank and comes back many times a second and the tool "
+    "rattles by up to the play times the lever), or where the NC functions move a nearly still "
+    "joint's setpoint back and forth. No correction of the path holds such a gear on a flank (the "
+    "corrected cut is the nominal one); another placement or the other milling direction loads it. "
+    "A row of such a feature that got worse after the correction most likely got worse by it.")
+
+
 def gears_rattling(result: CompensationResult) -> list[dict]:
     """Lines of the original program and joints whose gear rattles in the compensated program and did
     not in the original (:func:`simulate.evaluation.gear_play.rattling_gears`), at the model's stiffness:
@@ -206,16 +219,7 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
         lines.append("")
     rattling = info.get("gears_rattling") or []
     if rattling:
-        lines += ["## Gears left rattling in their play", "",
-                  "Lines of the original program (the corrected pieces counted on the line they were split from) "
-                  f"where a joint's gear rattles after the correction (at least {RATTLE_RATE:g} flank changes a "
-                  "second and 1.5 times as many as before). A gear rattles where the torque it carries stays near "
-                  "zero: mostly where the corrected cut's process torque about the joint nearly cancels its "
-                  "friction (the link then leaves the flank and comes back many times a second and the tool "
-                  "rattles by up to the play times the lever), or where the NC functions move a nearly still "
-                  "joint's setpoint back and forth. No correction of the path holds such a gear on a flank (the "
-                  "corrected cut is the nominal one); another placement or the other milling direction loads it. "
-                  "A row of such a feature that got worse after the correction most likely got worse by it.", ""]
+        lines += ["## Gears left rattling in their play", "", RATTLE_NOTE, ""]
         lines += markdown_table(
             ("program section", "line", "joint", "flank changes before", "after", "in the play before [%]",
              "after [%]"),
