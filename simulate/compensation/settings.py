@@ -42,7 +42,9 @@ class CompensationSettings:
     min_piece : float
         Shortest piece [m] (a line is not split below twice this).
     max_correction : float
-        Cap on the correction's magnitude [m] (below the 1 mm contract).
+        Cap on the correction's magnitude [m]: the contract's 1 mm less a margin for the written pieces.
+        On iso160 the square's and the circle's walls need up to 0.87-0.89 mm (the deflection grows with
+        the deeper cut); at 0.5 mm the side length stayed 117-131 µm over size (``docs/compensation.md``).
     ramp : float
         Shortest piece [m] within this distance of where the original program changes speed
         (:func:`simulate.compensation.program.plan_pieces`).
