@@ -160,9 +160,11 @@ def deviation_field(path: NominalPath, written: WrittenProgram | None, run: Simu
         # the path round a corner is not shortened by averaging directions; two box passes: a
         # triangular kernel, which also suppresses the force ripple of the dexel grid
         _, h, v = path.frame(r, g)
-        up = np.sum(vals * v, axis=1)
-        if floor_window > 0:
-            up = lower_envelope(g, sg, np.sum(dv * path.frame(r, np.clip(sg, g[0], g[-1]))[2], axis=1), floor_window)
+        if floor_window > 0:   # the floor the face leaves: the lowest tip, per cycle, within the window
+            v_cycles = path.frame(r, np.clip(sg, g[0], g[-1]))[2]
+            up = lower_envelope(g, sg, np.sum(dv * v_cycles, axis=1), floor_window)
+        else:
+            up = np.sum(vals * v, axis=1)
         side = box(box(np.sum(vals * h, axis=1), smoothing), smoothing)
         up = box(box(up, smoothing), smoothing)
         grid.values[r] = side[:, None] * h + up[:, None] * v
