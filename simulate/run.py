@@ -357,8 +357,8 @@ def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *
 # ---- compensation, explain --------------------------------------------------------------------
 def compensation_steps(program: Path, iterations: int = CompensationSettings.iterations, stiffness_scale: float = 1.0,
                        check_scales: Sequence[float] = ()) -> int:
-    """The progress total of :func:`simulate.compensation.report.run_compensation`
-    (:func:`simulate.compensation.report.progress_total`: the original program's 2 ms steps per
+    """The progress total of :func:`simulate.compensation.job.run_compensation`
+    (:func:`simulate.compensation.job.progress_total`: the original program's 2 ms steps per
     simulation, for the original, the iterations, two runs per stiffness multiplier [-] other than 1)."""
     from simulate.compensation import progress_total
     from simulate.pipeline import load_program
@@ -754,7 +754,7 @@ RATTLE_LINES = 8
 
 
 def compensation_summary(info: dict) -> tuple[list[Table], list[str]]:
-    """``greybench compensate``'s summary of a run (:func:`simulate.compensation.report.run_compensation`'s
+    """``greybench compensate``'s summary of a run (:func:`simulate.compensation.job.run_compensation`'s
     dict): the Table-2 rows [µm] before and after with their sums, and lines: the ratio and the rows
     worse than max(10 %, 2 µm), each stiffness check's sums [µm] and ratio, the gears the corrected
     program leaves rattling in their play, the chosen iteration, the largest offset [µm], time and peak

@@ -1,5 +1,6 @@
 """``greybench compensate``: pre-compensate a program from the
-machining simulation (:mod:`simulate.compensation`, outputs :mod:`simulate.compensation.report`)."""
+machining simulation (:mod:`simulate.compensation`, the job :mod:`simulate.compensation.job`, outputs
+:mod:`simulate.compensation.report`)."""
 from __future__ import annotations
 
 from pathlib import Path

@@ -20,7 +20,9 @@ One concept per module; where the method is vague, each module's docstring state
 - :mod:`~simulate.compensation.update`: the update rules (secant step, curvature limit, corners,
   ramp-in, keeping the feed);
 - :mod:`~simulate.compensation.iterate`: the iteration and the choice of the best program;
-- :mod:`~simulate.compensation.report`: the output files and ``greybench compensate``'s work.
+- :mod:`~simulate.compensation.report`: the output files (program, stock, tables, report, figure);
+- :mod:`~simulate.compensation.job`: a compensation as one job (``greybench compensate``'s work,
+  the service's jobs), its progress.
 
 The names below are imported from their modules when first asked for, so importing the package
 alone loads no simulation.
@@ -32,13 +34,13 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from simulate.compensation.iterate import compensate
+    from simulate.compensation.job import compensation_job, progress_total, run_compensation
     from simulate.compensation.measure import pipeline_simulator
-    from simulate.compensation.report import compensation_job, progress_total, run_compensation
     from simulate.compensation.settings import CompensationSettings
 
 #: Public name -> module of this package that holds it.
 _EXPORTS = {"CompensationSettings": "settings", "compensate": "iterate", "pipeline_simulator": "measure",
-            "compensation_job": "report", "progress_total": "report", "run_compensation": "report"}
+            "compensation_job": "job", "progress_total": "job", "run_compensation": "job"}
 
 __all__ = ["CompensationSettings", "compensate", "compensation_job", "pipeline_simulator", "progress_total",
            "run_compensation"]

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from simulate.compensation.iterate import compensate
+from simulate.compensation.job import SimulationMeter, progress_total, run_compensation
 from simulate.compensation.measure import SimulationRun
-from simulate.compensation.report import SimulationMeter, progress_total, run_compensation
 from simulate.compensation.settings import CompensationSettings
 from simulate.pipeline import load_program
 from simulate.run import compensation_steps

@@ -74,7 +74,7 @@ def test_job_body_passes_robot_file_and_models(tmp_path, monkeypatch):
     """The job body hands run_compensation the shipped robot file and the fetched model folders per axis."""
     from service import compensation
     from service.paths import DATA_DIR
-    from simulate.compensation import report as compensation_report
+    from simulate.compensation import job as compensation_job
 
     seen = {}
 
@@ -83,7 +83,7 @@ def test_job_body_passes_robot_file_and_models(tmp_path, monkeypatch):
                     nc=(kw["ff_friction"], kw["backlash_comp"]))
         return {"evaluation": {}}
 
-    monkeypatch.setattr(compensation_report, "run_compensation", fake)
+    monkeypatch.setattr(compensation_job, "run_compensation", fake)
     gcode = (DATA_DIR / "programs" / "iso160.nc").read_text()
     (tmp_path / "program.nc").write_text(gcode)
     (tmp_path / "stock.json").write_text((DATA_DIR / "programs" / "iso160.stock.json").read_text())
@@ -105,14 +105,14 @@ def test_job_progress_ends_where_run_compensation_counts_to(tmp_path, monkeypatc
     it all brings the job to 95 % (the rest is writing the files), never past."""
     from service import compensation
     from service.paths import DATA_DIR
-    from simulate.compensation import report as compensation_report
+    from simulate.compensation import job as compensation_job
     from simulate.pipeline import load_program
 
     gcode = (DATA_DIR / "programs" / "iso160.nc").read_text()
     (tmp_path / "program.nc").write_text(gcode)
     (tmp_path / "stock.json").write_text((DATA_DIR / "programs" / "iso160.stock.json").read_text())
     shipped = DATA_DIR / "programs" / "iso160.nc"
-    total = compensation_report.progress_total(len(load_program(shipped, require_spindle=True).interp), 2, 1.0, [0.8])
+    total = compensation_job.progress_total(len(load_program(shipped, require_spindle=True).interp), 2, 1.0, [0.8])
 
     def fake(program, robot, poses, name, out, advance, **kw):
         for _ in range(total // 1000):
@@ -120,7 +120,7 @@ def test_job_progress_ends_where_run_compensation_counts_to(tmp_path, monkeypatc
         advance(total % 1000)
         return {}
 
-    monkeypatch.setattr(compensation_report, "run_compensation", fake)
+    monkeypatch.setattr(compensation_job, "run_compensation", fake)
     seen = []
     req = {"program_source": "gcode", "stock_source": "stock", "robot": "max100",
            "pose": json.loads((DATA_DIR / "poses" / "iso160.json").read_text())["poses"][0],
