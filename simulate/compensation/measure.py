@@ -145,7 +145,10 @@ def deviation_field(path: NominalPath, written: WrittenProgram | None, run: Simu
     smoothed [m].
 
     ``floor_window`` [m] > 0: the upward component is the lower envelope of the tip's over
-    ``+-floor_window`` along the path (the module docstring, *Floors*) before it is smoothed.
+    ``+-(floor_window + smoothing)`` along the path (the module docstring, *Floors*) before it is
+    smoothed: the triangular kernel reaches ``+-smoothing``, so the smoothed value at ``s`` averages
+    envelopes whose windows all contain ``[s - floor_window, s + floor_window]`` and is at most the
+    lowest tip there.
     """
     runs, sigma, dev = path_deviation(path, written, run, points)
     grid = Correction.zero(path)
@@ -162,7 +165,9 @@ def deviation_field(path: NominalPath, written: WrittenProgram | None, run: Simu
         _, h, v = path.frame(r, g)
         if floor_window > 0:   # the floor the face leaves: the lowest tip, per cycle, within the window
             v_cycles = path.frame(r, np.clip(sg, g[0], g[-1]))[2]
-            up = lower_envelope(g, sg, np.sum(dv * v_cycles, axis=1), floor_window)
+            # widened by the kernel's half-width: the smoothed envelope stays at or below the lowest tip
+            # within +-floor_window everywhere (a floor is left high rather than cut low)
+            up = lower_envelope(g, sg, np.sum(dv * v_cycles, axis=1), floor_window + smoothing)
         else:
             up = np.sum(vals * v, axis=1)
         side = box(box(np.sum(vals * h, axis=1), smoothing), smoothing)

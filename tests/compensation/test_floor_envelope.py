@@ -63,6 +63,28 @@ def test_the_floor_field_is_the_trough_and_the_mean_field_the_mean(small):
         assert np.allclose(floor.values[r][mid][:, :2], mean.values[r][mid][:, :2], atol=1e-9)
 
 
+def test_a_short_dip_is_lifted_in_full_over_the_tool_radius_after_smoothing(small):
+    """A dip narrower than the smoothing kernel: the smoothed floor field still reaches its full depth
+    wherever the dip lies under the face (within +-R), so the correction lifts the floor out of it."""
+    setup = load_program(small[0])
+    path = NominalPath.of(setup)
+    runs, sigma, _ = path_deviation(path, None, SimulationRun(setup, setup.interp.xyz))
+    s0 = path.runs[0][0] + 15e-3                        # on the first line, 15 mm after the run starts
+    d = 40e-6
+    z = np.where((runs == 0) & (np.abs(sigma - s0) <= 0.15e-3), -d, 0.0)
+    run = SimulationRun(setup, setup.interp.xyz + z[:, None] * np.array([0.0, 0.0, 1.0]))
+    smoothing = 2e-3
+    floor = deviation_field(path, None, run, smoothing, floor_window=R)
+    g, up = floor.grids[0], floor.values[0][:, 2]
+    under = np.abs(g - s0) <= R - 0.2e-3                # the dip within reach of the face
+    assert np.allclose(up[under], -d, atol=1e-9)
+    far = np.abs(g - s0) >= R + 2 * smoothing + 0.3e-3  # beyond the window and the kernel
+    assert np.allclose(up[far], 0.0, atol=1e-12)
+    # the mean field spreads the dip thin: a 0.3 mm dip under a 4 mm triangle
+    mean = deviation_field(path, None, run, smoothing)
+    assert mean.values[0][:, 2].min() > -0.2 * d
+
+
 @pytest.mark.parametrize("envelope", [True, False])
 def test_compensation_lifts_the_lowest_tip_to_the_path_not_the_mean(small, envelope):
     prog, _ = small
