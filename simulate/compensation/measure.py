@@ -9,12 +9,13 @@
   length ``s`` is therefore the lowest tip height over ``[s - R, s + R]``, not the mean: a tip that
   oscillates vertically (a gear in its play, the force's ripple) leaves the floor at its dips, and a
   correction of the mean puts the floor low by the dip depth. The update corrects this lower
-  envelope (:func:`deviation_field` with ``floor_window = R``). ``R`` is the bound for a point on
-  the centre line; a point nearer the face's edge is under it for ``+-sqrt(R^2 - y^2)``, so the
-  envelope may be up to the variation over that difference too low (the sound side: the floor is
-  not cut low). On iso160, whose floors lie in the stock face (a height row reads half the deepest
-  dip), correcting the mean took the circle's height from -11 / +11 µm (two poses) to -24..-46 µm;
-  correcting the envelope, to -3 / -2 µm.
+  envelope (:func:`deviation_field` with ``floor_window = R``), widened by the smoothing kernel's
+  half-width so that the smoothed value stays at or below the lowest tip within ``+-R``. ``R`` is
+  the bound for a point on the centre line; a point nearer the face's edge is under it for
+  ``+-sqrt(R^2 - y^2)``. Both margins err on the sound side: a floor left a little high, not cut
+  low. On iso160, whose floors lie in the stock face (a height row reads half the deepest dip),
+  correcting the mean took the circle's height from -11 / +11 µm (two poses) to -24..-46 µm;
+  correcting the envelope, to +0.3 / +0.6 µm.
 """
 from __future__ import annotations
 
