@@ -13,8 +13,6 @@ from greybench.support import out, print_table, progress, resolve_robot, show
 from simulate.compensation.settings import CompensationSettings
 from simulate.run import compensation_steps, compensation_summary
 
-DEFAULT = CompensationSettings()
-
 
 def print_info(info: dict[str, Any]) -> None:
     tables, lines = compensation_summary(info)
@@ -33,7 +31,7 @@ def compensate_cmd(
     robot: o.Robot = "max100",
     name: o.PoseName = None,
     iterations: Annotated[int, typer.Option("--iterations", help="Largest number of corrected programs simulated "
-                                                                 "[-].")] = DEFAULT.iterations,
+                                                                 "[-].")] = CompensationSettings.iterations,
     stiffness_scale: Annotated[float, typer.Option("--stiffness-scale", help="Joint stiffness multiplier [-] of the "
                                                    "robot the before/after evaluation simulates (both programs); the "
                                                    "compensation itself iterates with the robot file's model (1).")]

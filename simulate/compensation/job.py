@@ -38,8 +38,6 @@ def compensation_job(program: Path, robot: str | Path, pose: Path, name: str | N
                       ff_friction=bool(ff_friction), backlash_comp=bool(backlash_comp))
     settings = rs.machining()
     if sz is None:
-        from dataclasses import replace
-
         settings = replace(settings, size=0, features=False)
     settings.validate()
     if friction:

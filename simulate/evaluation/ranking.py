@@ -57,7 +57,7 @@ class RankSettings:
     ----------
     spacing : float
         Dexel spacing, m (default :data:`simulate.defaults.RANKING_DEXEL_SPACING`, 0.25 mm: why there).
-        On iso320 with max100 the 4-pose ranking takes about 20 s at 0.5 mm (0.25 mm: 55 s) on 2 cores.
+        On iso320 with max100 the 4-pose ranking takes about 36 s at 0.25 mm (0.5 mm: 15 s) on 2 cores.
     probe_spacing : float
         Virtual CMM point distance along a feature, m.
     material : str
