@@ -202,6 +202,10 @@ def _scripted(rows_um):
     ([[20, 20, 20], [30, 20, 35], [30, 0, 0], [21, 50, 30], [21, 50, 30]], 2, 4),
     # nothing beats the original's sum: no correction
     ([[10, 10], [15, 15], [12, 12]], 0, 2),
+    # the original's sum again is no improvement
+    ([[10, 10], [10, 10], [12, 12], [12, 12]], 0, 2),
+    # a later iteration with the same sum does not replace the chosen one
+    ([[50, 50], [20, 20], [20, 20], [60, 60], [60, 60]], 1, 3),
 ])
 def test_the_chosen_iteration_has_no_row_worse_then_the_lowest_sum(small, rows_um, chosen, ran):
     prog, _ = small
@@ -211,5 +215,9 @@ def test_the_chosen_iteration_has_no_row_worse_then_the_lowest_sum(small, rows_u
     assert len(res.iterations) == ran + 1          # stopped after two in a row with no lower sum, or at the last
     worse = [it.rows_worse for it in res.iterations]
     assert worse[0] == 0
+    assert [it.index for it in res.iterations] == list(range(ran + 1))
+    sums = [sum(abs(d) for d in rows) * 1e-6 for rows in rows_um[:ran + 1]]
+    assert [it.table_sum for it in res.iterations] == pytest.approx(sums)
+    assert [it.score for it in res.iterations] == pytest.approx(sums)
     if chosen:
         assert res.after.table.rows[0].deviation == pytest.approx(rows_um[chosen][0] * 1e-6)
