@@ -179,37 +179,50 @@ def test_lower_envelope_interpolates_cells_without_a_sample():
     assert np.allclose(env, -np.arange(11) / 10, atol=1e-15)
 
 
-def test_iterations_record_the_contract_figures_and_the_path_rms(small):
-    """The original is iteration 0 (time and speed ratio 1, no pieces, no offset); every corrected
-    program keeps the original's time and peak feed within the contract, and its path RMS is the
-    RMS of the tip's normal deviation over the feed runs."""
-    from simulate.compensation.iterate import compensate
+START_FEED = """%
+(no opening rapid: the first move is a feed from the origin)
+G21 G90 G17 G94
+T1 M6
+S12000 M3
+G1 X-8 Y24.5 Z-2 F1200
+G1 X20 Y24.5 Z-2
+G0 X20 Y24.5 Z5
+M5
+M30
+%
+"""
+
+
+def test_a_program_that_starts_with_a_feed_move_is_measured_from_its_first_cycle(tmp_path, small):
+    """No opening rapid: the first segment is interpolated and belongs to the feed run, its arc length
+    counts from 0 at the origin; the same through a written (zero-corrected) program, whose rapid
+    maps to no run."""
+    from simulate.compensation.path import Correction
+    from simulate.compensation.program import write_program
     from simulate.compensation.settings import CompensationSettings
 
-    d = np.array([0.0, 30e-6, -10e-6])
-    setup = load_program(small[0])
-    res = compensate(setup, lambda st, scale=1.0: SimulationRun(st, st.interp.xyz + d / scale),
-                     CompensationSettings(iterations=2, keep_speed=False))
-    first = res.iterations[0]
-    assert (first.time_ratio, first.speed_ratio, first.pieces, first.max_offset) == (1.0, 1.0, 0, 0.0)
-    assert first.rows_worse is None and first.table_sum is None
+    prog = tmp_path / "start_feed.nc"
+    prog.write_text(START_FEED)
+    (tmp_path / "start_feed.stock.json").write_text((small[0].parent / "small.stock.json").read_text())
+    setup = load_program(prog)
     path = NominalPath.of(setup)
-    _, _, dev = path_deviation(path, None, SimulationRun(setup, setup.interp.xyz + d))
-    feed = np.linalg.norm(dev, axis=1) > 0
-    assert first.path_rms == pytest.approx(float(np.sqrt(np.mean(np.sum(dev[feed] ** 2, axis=1)))), rel=0.02)
-    assert first.path_max == pytest.approx(float(np.linalg.norm(d)), rel=1e-6)
-    for it in res.iterations[1:]:
-        assert 0.98 < it.speed_ratio <= 1.0 + 1e-6 and 1.0 <= it.time_ratio < 1.2
-        assert it.pieces > 0 and 0.0 < it.max_offset < 2 * np.linalg.norm(d)
-    assert res.program.n_pieces == res.iterations[res.best].pieces
+    xyz = np.asarray(setup.interp.xyz, float)
+    seg = np.asarray(setup.interp.segment)
+    runs, sigma, dev = path_deviation(path, None, SimulationRun(setup, xyz + [0.0, 0.0, 5e-6]))
+    assert np.all(runs[seg <= 1] == 0) and np.all(runs[seg == 2] == -1)
+    first = seg == 0    # from the origin to (-8, 24.5, -2) mm
+    assert np.allclose(sigma[first], np.linalg.norm(xyz[first], axis=1), atol=1e-9)
+    assert np.allclose(sigma[seg == 1], path.sigma0[1] + xyz[seg == 1, 0] + 8e-3, atol=1e-9)
+    assert np.allclose(dev[seg == 1], [0.0, 0.0, 5e-6], atol=1e-12)
 
-
-@pytest.mark.parametrize("scale", [0.0, -1.0, float("nan"), float("inf")])
-def test_a_stiffness_check_scale_that_is_not_positive_and_finite_is_refused(small, scale):
-    from identify.errors import InputError
-    from simulate.compensation.iterate import compensate
-
-    setup = load_program(small[0])
-    with pytest.raises(InputError) as err:
-        compensate(setup, lambda st, sc=1.0: SimulationRun(st, st.interp.xyz), checks=(scale,))
-    assert err.value.field == "check-scale" and "stiffness scale must be > 0" in err.value.message
+    wp = write_program(path, Correction.zero(path), CompensationSettings())
+    out = tmp_path / "written.nc"
+    out.write_text(wp.text)
+    (tmp_path / "written.stock.json").write_text((small[0].parent / "small.stock.json").read_text())
+    written = load_program(out)
+    wxyz = np.asarray(written.interp.xyz, float)
+    wruns, wsigma, wdev = path_deviation(path, wp, SimulationRun(written, wxyz))
+    rapid = np.array([written.parsed.segments[j].line not in wp.pieces for j in written.interp.segment])
+    assert rapid.any() and np.all(wruns[rapid] == -1) and np.all(wdev[rapid] == 0.0)
+    assert np.all(wruns[~rapid] == 0)
+    assert np.all(np.diff(wsigma[~rapid]) >= -1e-12) and wsigma[~rapid][-1] == pytest.approx(path.runs[0][1], abs=1e-6)
