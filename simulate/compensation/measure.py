@@ -45,7 +45,8 @@ class SimulationRun:
     setup : ProgramSetup
         The program simulated (its interpolation).
     tip : ndarray (N, 3)
-        Predicted tool tip per 2 ms cycle [m, workpiece frame]: command + deflection + tracking error.
+        Predicted tool tip per 2 ms cycle [m, workpiece frame]: command + deflection + tracking error,
+        where the cutter was at that cycle (the deflection the previous cycle's force caused).
     table : simulate.evaluation.features.FeatureTable or None
         Table-2 deviations (test-piece stock).
     trajectory : simulate.toolpath.placement.JointTrajectory or None
@@ -83,7 +84,11 @@ def pipeline_simulator(job: MachiningJob, advance=None) -> Simulator:
         settings = replace(job.settings, stiffness_scale=job.settings.stiffness_scale * scale)
         mo = run_job(replace(job, program=setup, robot=robot, settings=settings), advance=advance)
         st = mo.steps
-        tip = np.asarray(mo.trajectory.xyz) + st.deflection + st.tracking_error
+        # the loop's deflection row k is its response to step k's force, which moves the cutter from
+        # step k + 1 on (simulate.machining.simulation): the cutter at step k carries row k - 1
+        defl = np.asarray(st.deflection)
+        at_step = np.vstack((np.zeros((1, 3)), defl[:-1])) if len(defl) else defl
+        tip = np.asarray(mo.trajectory.xyz) + at_step + st.tracking_error
         return SimulationRun(setup, tip, mo.table, mo.trajectory, time.perf_counter() - c0, list(mo.friction),
                              mo.result.joint_contact)
 

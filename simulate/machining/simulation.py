@@ -81,7 +81,8 @@ class StepTable:
     Attributes
     ----------
     t : (N,) s; line : (N,) program line; force : (N, 3) N, revolution-mean force on the cutter;
-    peak_force : (N,) N; deflection : (N, 3) m; tracking_error : (N, 3) m; switch : (N,) int bits.
+    peak_force : (N,) N; deflection : (N, 3) m, the response to step k's force (the cutter carries it
+    from step k + 1 on); tracking_error : (N, 3) m; switch : (N,) int bits.
     """
 
     t: np.ndarray

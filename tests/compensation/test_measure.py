@@ -226,3 +226,19 @@ def test_a_program_that_starts_with_a_feed_move_is_measured_from_its_first_cycle
     assert rapid.any() and np.all(wruns[rapid] == -1) and np.all(wdev[rapid] == 0.0)
     assert np.all(wruns[~rapid] == 0)
     assert np.all(np.diff(wsigma[~rapid]) >= -1e-12) and wsigma[~rapid][-1] == pytest.approx(path.runs[0][1], abs=1e-6)
+
+
+def test_the_first_cutting_cycle_is_at_the_command_and_the_deflection_follows_from_the_next(small, robot):
+    """Ideal drives: the loop moves the cutter by the deflection of the force of the step before, so the
+    first cycle with a cutting force has the tip at the command exactly, and from the next cycle on the
+    tip is off the command by the deflection that force caused (a first-order lag of 2 ms steps)."""
+    from simulate.pipeline import run_job
+
+    setup, job = _job(small, robot, servo=False)
+    run = pipeline_simulator(job)(setup, 1.0)
+    steps = run_job(job).result.steps
+    k0 = int(np.flatnonzero(np.linalg.norm(steps.force, axis=1) > 0)[0])
+    off = run.tip - setup.interp.xyz
+    assert np.all(off[:k0 + 1] == 0.0)
+    assert np.linalg.norm(off[k0 + 1]) > 0.0
+    assert np.allclose(off[k0 + 1:], steps.deflection[k0:-1], atol=1e-15)
