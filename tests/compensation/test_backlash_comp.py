@@ -95,6 +95,7 @@ def test_drive_loses_no_play_with_the_compensation(robot):
     assert abs(lost(q + backlash_offset(tau, p.b, p.c, t))) < 0.02 * p.b[0]
 
 
+@pytest.mark.loop
 def test_pipeline_reports_the_tool_error_against_the_program_not_the_moved_setpoint(small, robot):
     """Through the coupled loop on a small contour: the loop steps the drives on the moved setpoint,
     and the tracking error it reports is the tool's against the program, ``J (q_link - q)``: the

@@ -33,6 +33,7 @@ def _words(text, letters):
     return [w for line in text.splitlines() if not line.startswith("(") for w in line.split() if w[0] in letters]
 
 
+@pytest.mark.loop
 def test_outputs_keep_the_contract(small, tmp_path):
     prog, pose = small
     out = tmp_path / "out"
@@ -103,6 +104,7 @@ def test_outputs_keep_the_contract(small, tmp_path):
     assert "Iterations" in (out / "report.md").read_text()
 
 
+@pytest.mark.loop
 @pytest.mark.parametrize("case", ["name", "reach", "gcode", "scale", "friction"])
 def test_bad_input_exits_2_with_one_line_and_writes_nothing(small, tmp_path, case):
     prog, pose = small

@@ -50,6 +50,7 @@ def _on_first_line(setup, skip=3e-3):
     return (seg == 2) & (x > -8e-3 + skip) & (x < 20e-3 - skip)
 
 
+@pytest.mark.loop
 def test_simulated_tip_is_deflected_away_from_the_wall_and_half_as_far_when_twice_as_stiff(small, robot):
     """Ideal drives: the tip is the command plus the deflection. On the first line the tool cuts the
     block's edge below it (y <= 20 mm), so the force pushes the tool away from it, +y; with the robot
@@ -66,6 +67,7 @@ def test_simulated_tip_is_deflected_away_from_the_wall_and_half_as_far_when_twic
     assert 0.0 < soft.wall_time < 60.0
 
 
+@pytest.mark.loop
 def test_simulated_tip_is_where_the_link_joints_put_the_tool(small, robot):
     """No deflection: the tip is the command plus the servo's tracking error, i.e. the forward
     kinematics at the link joints ``q_cmd - e`` (``e`` the loop's joint error) against the one at the
@@ -228,6 +230,7 @@ def test_a_program_that_starts_with_a_feed_move_is_measured_from_its_first_cycle
     assert np.all(np.diff(wsigma[~rapid]) >= -1e-12) and wsigma[~rapid][-1] == pytest.approx(path.runs[0][1], abs=1e-6)
 
 
+@pytest.mark.loop
 def test_the_first_cutting_cycle_is_at_the_command_and_the_deflection_follows_from_the_next(small, robot):
     """Ideal drives: the loop moves the cutter by the deflection of the force of the step before, so the
     first cycle with a cutting force has the tip at the command exactly, and from the next cycle on the

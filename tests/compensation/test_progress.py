@@ -104,6 +104,7 @@ def test_meter_stays_within_the_total_when_a_simulation_reports_more_steps():
     assert rec.running[-1] == 20
 
 
+@pytest.mark.loop
 def test_run_compensation_progress_reaches_the_cli_total_exactly(small, tmp_path):
     """The real pipeline (1 mm dexels): four iterations and a check at 0.8 count up to the total the
     command's progress bar is given, never past it (counting each program's own steps passed it: the
