@@ -87,12 +87,13 @@ def test_a_step_longer_than_max_correction_is_scaled_to_it_and_keeps_its_directi
 
 # per segment of 30 mm: |dc| [m], de / dc, the expected g (1: the mirror step)
 SEGMENTS = [
+    # first: its window sums exact zeros (after a segment of non-zero <de, dc> the moving sum's round-off is not 0)
+    (50e-6, 0.0, 1.0),     # the tip did not move: g = 0 is not positive, mirror
     (50e-6, 0.1, 0.25),    # g below 0.25 is clipped to it
     (50e-6, 0.5, 0.5),     # the measured g
     (50e-6, 2.0, 1.5),     # above 1.5 clipped
     (50e-6, 3.0, 1.5),
     (50e-6, -0.5, 1.0),    # the tip moved against the command: not a local response, mirror
-    (50e-6, 0.0, 1.0),     # the tip did not move: g = 0 is not positive, mirror
     (0.0, 0.5, 1.0),       # the command did not move: mirror
     (0.4e-6, 0.5, 1.0),    # <dc, dc> = (0.4 um)^2, at most (0.5 um)^2: too small to measure, mirror
     (0.6e-6, 0.5, 0.5),    # (0.6 um)^2: measured
@@ -180,18 +181,20 @@ def test_corner_arc_is_linear_in_the_path_frame_between_its_ends_values(small, i
     assert np.abs(np.sum(corr.at(r, np.array([a, b])) * t, axis=1)).min() > 10e-6   # the ends did change
 
 
-@pytest.mark.parametrize(("factor", "blended"), [(1.2, True), (1.0, True), (1 / (1 + 0.5e-3), True),
-                                                 (1 / (1 + 2e-3), False), (0.8, False)])
-def test_an_arc_is_a_corner_up_to_the_tool_radius_plus_a_thousandth(small, factor, blended):
-    """The arc (r 4.5 mm) is blended for a tool radius of at least ``r / (1 + 1e-3)`` and is a surface of its
-    own (untouched) below that."""
+@pytest.mark.parametrize(("divisor", "blended"), [(1 / 1.2, True), (1.0, True), (1 + 0.5e-3, True), (1 + 1e-3, True),
+                                                  (1 + 2e-3, False), (1 / 0.8, False)])
+def test_an_arc_is_a_corner_up_to_the_tool_radius_plus_a_thousandth(small, divisor, blended):
+    """The arc (r 4.5 mm) is a corner, blended, while ``r <= tool_radius (1 + 1e-3)``, the bound included
+    (tool radius ``r / (1 + 1e-3)``), and a surface of its own, untouched, for a smaller tool."""
     prog, _ = small
     path = NominalPath.of(load_program(prog))
     i = next(k for k, s in enumerate(path.segments) if isinstance(s, Arc))
     r = int(path.run[i])
     corr = Correction.zero(path)
     *_, corr.values[r] = _components(path, r, corr.grids[r])
-    out = blend_corners(path, corr, tool_radius=path.segments[i].radius * factor)
+    tool = path.segments[i].radius / divisor
+    assert (path.segments[i].radius <= tool * (1 + 1e-3)) is blended   # exact at the bound for this r
+    out = blend_corners(path, corr, tool_radius=tool)
     if blended:
         a = float(path.sigma0[i])
         _check_blend(path, r, corr.grids[r], corr, out, a, a + path.segments[i].length)
