@@ -34,3 +34,19 @@ def small(tmp_path):
     pose.write_text(json.dumps({"poses": [{"name": "near", "xyz": [1.45, 0.0, -0.1], "rpy": [0.0, 0.0, 0.0]},
                                           {"name": "away", "xyz": [6.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}]}))
     return prog, pose
+
+
+@pytest.fixture
+def program(small):
+    """``program(text, name) -> ProgramSetup``: a G-code text written beside the small contour and read
+    with the small contour's stock."""
+    from simulate.pipeline import load_program
+
+    prog, _ = small
+
+    def load(text: str, name: str):
+        f = prog.with_name(f"{name}.nc")
+        f.write_text(text)
+        return load_program(f, stock=prog.with_name("small.stock.json"))
+
+    return load

@@ -104,11 +104,8 @@ def test_the_corner_arc_gets_the_walls_blended_correction_in_the_iteration(small
     assert side == pytest.approx(-7.5e-6, abs=0.5e-6)
 
 
-def test_feed_peak_speed_is_the_programmed_feed_and_zero_without_feed_moves(tmp_path, small):
+def test_feed_peak_speed_is_the_programmed_feed_and_zero_without_feed_moves(small, program):
     from simulate.compensation.iterate import feed_peak_speed
 
     assert feed_peak_speed(load_program(small[0])) == pytest.approx(1200 / 60e3, rel=1e-6)
-    prog = tmp_path / "rapids.nc"
-    prog.write_text("%\nG21 G90\nG0 X10 Y0 Z5\nG0 X20 Y0 Z5\nM30\n%\n")
-    (tmp_path / "rapids.stock.json").write_text((small[0].parent / "small.stock.json").read_text())
-    assert feed_peak_speed(load_program(prog)) == 0.0
+    assert feed_peak_speed(program("%\nG21 G90\nG0 X10 Y0 Z5\nG0 X20 Y0 Z5\nM30\n%\n", "rapids")) == 0.0

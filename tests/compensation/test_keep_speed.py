@@ -39,11 +39,8 @@ F6000 = 0.1    # m/s
 
 
 @pytest.fixture
-def two(small, tmp_path):
-    prog, _ = small
-    f = tmp_path / "two.nc"
-    f.write_text(TWO)
-    return load_program(f, stock=prog.with_name("small.stock.json"))
+def two(program):
+    return program(TWO, "two")
 
 
 def _k(feed, blend, share=0.9):

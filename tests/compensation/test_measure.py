@@ -136,16 +136,13 @@ def test_path_deviation_is_the_normal_offset_at_the_nominal_arc_length(small):
     assert np.allclose(dev_points, dev, atol=0.0)
 
 
-def test_a_feed_run_of_one_cycle_gets_no_field_and_the_next_run_its_own(tmp_path, small):
+def test_a_feed_run_of_one_cycle_gets_no_field_and_the_next_run_its_own(small, program):
     """A program with a feed run of a single cycle (10 nm) before the contour: that run gets no
     field, the contour's run the offset (constant along the run, so smoothing keeps it)."""
     text = small[0].read_text().replace(
         "G0 X-8 Y24.5 Z5\n",
         "G0 X-30 Y24.5 Z5\nG1 X-30.00001 Y24.5 Z5 F1200\nG0 X-8 Y24.5 Z5\n")
-    prog = tmp_path / "two_runs.nc"
-    prog.write_text(text)
-    (tmp_path / "two_runs.stock.json").write_text((small[0].parent / "small.stock.json").read_text())
-    setup = load_program(prog)
+    setup = program(text, "two_runs")
     path = NominalPath.of(setup)
     assert len(path.runs) == 2
     xyz = np.array(setup.interp.xyz, float)
@@ -195,7 +192,7 @@ M30
 """
 
 
-def test_a_program_that_starts_with_a_feed_move_is_measured_from_its_first_cycle(tmp_path, small):
+def test_a_program_that_starts_with_a_feed_move_is_measured_from_its_first_cycle(program):
     """No opening rapid: the first segment is interpolated and belongs to the feed run, its arc length
     counts from 0 at the origin; the same through a written (zero-corrected) program, whose rapid
     maps to no run."""
@@ -203,10 +200,7 @@ def test_a_program_that_starts_with_a_feed_move_is_measured_from_its_first_cycle
     from simulate.compensation.program import write_program
     from simulate.compensation.settings import CompensationSettings
 
-    prog = tmp_path / "start_feed.nc"
-    prog.write_text(START_FEED)
-    (tmp_path / "start_feed.stock.json").write_text((small[0].parent / "small.stock.json").read_text())
-    setup = load_program(prog)
+    setup = program(START_FEED, "start_feed")
     path = NominalPath.of(setup)
     xyz = np.asarray(setup.interp.xyz, float)
     seg = np.asarray(setup.interp.segment)
@@ -218,10 +212,7 @@ def test_a_program_that_starts_with_a_feed_move_is_measured_from_its_first_cycle
     assert np.allclose(dev[seg == 1], [0.0, 0.0, 5e-6], atol=1e-12)
 
     wp = write_program(path, Correction.zero(path), CompensationSettings())
-    out = tmp_path / "written.nc"
-    out.write_text(wp.text)
-    (tmp_path / "written.stock.json").write_text((small[0].parent / "small.stock.json").read_text())
-    written = load_program(out)
+    written = program(wp.text, "written")
     wxyz = np.asarray(written.interp.xyz, float)
     wruns, wsigma, wdev = path_deviation(path, wp, SimulationRun(written, wxyz))
     rapid = np.array([written.parsed.segments[j].line not in wp.pieces for j in written.interp.segment])

@@ -43,17 +43,9 @@ M30
 """
 
 
-def _load(small, tmp_path, name, text):
-    """A program next to a copy of the small contour's stock."""
-    prog = tmp_path / f"{name}.nc"
-    prog.write_text(text)
-    (tmp_path / f"{name}.stock.json").write_text((small[0].parent / "small.stock.json").read_text())
-    return load_program(prog)
-
-
 @pytest.fixture
-def corners(small, tmp_path):
-    return NominalPath.of(_load(small, tmp_path, "corners", CORNERS))
+def corners(program):
+    return NominalPath.of(program(CORNERS, "corners"))
 
 
 @pytest.mark.parametrize(("text", "first"), [
@@ -94,9 +86,9 @@ def test_rapids_split_the_feed_moves_into_runs(corners):
         assert got == pytest.approx(want, abs=1e-12)
 
 
-def test_a_program_opening_with_feed_moves_has_one_run_from_zero(small, tmp_path):
+def test_a_program_opening_with_feed_moves_has_one_run_from_zero(program):
     """No opening rapid: nothing is skipped, the two feed moves (10 mm each) make one run (0, 20) mm."""
-    path = NominalPath.of(_load(small, tmp_path, "feed_first", "G21 G90 G17\nG1 X10 F600\nG1 Y10\nG0 Z5\nM30\n"))
+    path = NominalPath.of(program("G21 G90 G17\nG1 X10 F600\nG1 Y10\nG0 Z5\nM30\n", "feed_first"))
     assert np.allclose(path.sigma0, [0.0, 10 * MM, 20 * MM], rtol=0.0, atol=1e-12)
     assert path.run.tolist() == [0, 0, -1]
     assert path.runs[0] == pytest.approx((0.0, 20 * MM), abs=1e-12)
@@ -228,8 +220,8 @@ def test_each_run_reads_its_own_correction_and_max_norm_is_the_largest_offset(co
     assert corr.max_norm() == pytest.approx(12e-6, rel=1e-12)
 
 
-def test_a_program_without_feed_moves_has_no_run_and_no_offset(small, tmp_path):
-    path = NominalPath.of(_load(small, tmp_path, "rapids", "G21 G90\nG0 X10\nG0 Z5\nM30\n"))
+def test_a_program_without_feed_moves_has_no_run_and_no_offset(program):
+    path = NominalPath.of(program("G21 G90\nG0 X10\nG0 Z5\nM30\n", "rapids"))
     assert path.runs == [] and np.all(path.run == -1)
     corr = Correction.zero(path)
     assert corr.max_norm() == 0.0 and isinstance(corr.max_norm(), float)

@@ -47,12 +47,8 @@ M30
 
 
 @pytest.fixture
-def two_runs(small):
-    prog, _ = small
-    two = prog.with_name("two.nc")
-    two.write_text(TWO_RUNS)
-    two.with_name("two.stock.json").write_text(prog.with_name("small.stock.json").read_text())
-    return NominalPath.of(load_program(two))
+def two_runs(program):
+    return NominalPath.of(program(TWO_RUNS, "two"))
 
 
 # ---------------------------------------------------------------------------------------------------- update
