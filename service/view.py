@@ -240,7 +240,7 @@ def vertex_values(vw, step: np.ndarray, variable: str) -> np.ndarray:
 
     if variable != TOOL_DEVIATION:
         return step_values(vw, step, variable)
-    dev = np.linalg.norm(np.asarray(vw.steps.deflection) + np.asarray(vw.steps.tracking_error), axis=1)
+    dev = np.linalg.norm(vw.steps.tool_offset(), axis=1)
     out = np.full(len(step), np.nan)
     ok = step >= 0
     out[ok] = dev[step[ok]]

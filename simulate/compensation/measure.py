@@ -83,12 +83,7 @@ def pipeline_simulator(job: MachiningJob, advance=None) -> Simulator:
         c0 = time.perf_counter()
         settings = replace(job.settings, stiffness_scale=job.settings.stiffness_scale * scale)
         mo = run_job(replace(job, program=setup, robot=robot, settings=settings), advance=advance)
-        st = mo.steps
-        # the loop's deflection row k is its response to step k's force, which moves the cutter from
-        # step k + 1 on (simulate.machining.simulation): the cutter at step k carries row k - 1
-        defl = np.asarray(st.deflection)
-        at_step = np.vstack((np.zeros((1, 3)), defl[:-1])) if len(defl) else defl
-        tip = np.asarray(mo.trajectory.xyz) + at_step + st.tracking_error
+        tip = np.asarray(mo.trajectory.xyz) + mo.steps.tool_offset()
         return SimulationRun(setup, tip, mo.table, mo.trajectory, time.perf_counter() - c0, list(mo.friction),
                              mo.result.joint_contact)
 

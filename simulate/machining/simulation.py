@@ -101,6 +101,14 @@ class StepTable:
     def as_arrays(self) -> dict:
         return {f"step_{k}": v for k, v in self.__dict__.items()}
 
+    def tool_offset(self) -> np.ndarray:
+        """Offset of the cutter from the command at each step (N, 3) [m]: the deflection it carried,
+        the response to the previous step's force (zero at the first), plus the tracking error."""
+        d = np.asarray(self.deflection, float)
+        carried = np.zeros_like(d)
+        carried[1:] = d[:-1]
+        return carried + np.asarray(self.tracking_error, float)
+
 
 @dataclass
 class MachiningResult:

@@ -225,13 +225,15 @@ def test_mesh_and_values_match_the_workpiece(job):
     assert val.shape == (n,) and np.array_equal(np.isnan(val), np.isnan(expected))
     assert np.allclose(val[~np.isnan(val)], expected[~np.isnan(expected)], rtol=1e-6)
     assert vhead["unit"] == "N" and vhead["range"][0] == pytest.approx(np.nanmin(expected), rel=1e-6)
-    # the tool deviation: |deflection + tracking error| of the creating step, in µm
+    # the tool deviation: |deflection + tracking error| of the creating step, in µm, the deflection the
+    # cutter carried there (the loop's row of the step before: the response to that step's force)
     with srv.client() as c:
         thead, tbody = _unframe(c.get(f"/simulations/{job_id}/view/workpiece/near/values",
                                       params={"variable": "tool_deviation"}).content)
     dev = np.frombuffer(tbody, "<f4")
     ok = sm.vertex_step >= 0
-    d = vw.steps.deflection[sm.vertex_step[ok]] + vw.steps.tracking_error[sm.vertex_step[ok]]
+    k = sm.vertex_step[ok]
+    d = np.where((k > 0)[:, None], vw.steps.deflection[np.maximum(k - 1, 0)], 0.0) + vw.steps.tracking_error[k]
     assert thead["unit"] == "µm" and np.all(np.isnan(dev[~ok]))
     assert np.allclose(dev[ok], np.sqrt(np.sum(d ** 2, axis=1)) * 1e6, rtol=1e-6)
 
