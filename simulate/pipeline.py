@@ -46,7 +46,10 @@ class Components:
     Attributes
     ----------
     deflection : bool
-        Robot deflection under the cutting force (compliance ``J K^-1 J^T``) in the loop.
+        The robot yields to the cutting force: the gears wind up under the process torque ``-J^T F``
+        in the drives (or quasi-statically, ``J K_gear^-1 J^T F``, without them), and the links and
+        bearings deflect by their static compliance ``J K_link^-1 J^T F``; each compliance once
+        (:mod:`simulate.robot.stiffness`).
     friction : bool
         Joint friction in the drives (each joint's friction model).
     switching : bool
@@ -84,7 +87,7 @@ class MachiningSettings:
     require_spindle : bool
         Refuse a program that never sets the spindle speed (the ranking: forces would rest on a guess).
     stiffness_scale : float
-        Multiplies every joint stiffness [-].
+        Multiplies every joint stiffness, gears and links [-].
     substeps : int or None
         Drive substeps per 2 ms cycle [-]; None: per joint what its fastest mode needs
         (:func:`simulate.robot.drive.substeps_for`).
@@ -393,6 +396,7 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
     from simulate.evaluation.cutter import robot_cutter
     from simulate.machining.cutting import Spindle, load_material
     from simulate.machining.simulation import simulate_machining, workpiece_compliance
+    from simulate.robot.stiffness import Compliance
 
     s, comp = job.settings, job.components
     s.validate()
@@ -404,7 +408,10 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
     rpm = s.spindle_rpm or prog.spindle_rpm
     c0 = time.perf_counter()
     R = job.placement.T[:3, :3]
-    C = workpiece_compliance(robot, jt.q, R, s.stiffness_scale) if comp.deflection else None
+    # each compliance once: the drives wind the gears up under the process torque, so the static
+    # term holds only the links'; without the drives it holds the gears' too (quasi-static)
+    part = Compliance.LINK if comp.servo else Compliance.TOTAL
+    C = workpiece_compliance(robot, jt.q, R, s.stiffness_scale, part) if comp.deflection else None
     drive = None
     if comp.servo:
         from simulate.machining.simulation import loop_drive
@@ -420,7 +427,8 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
 
             q_bl = nc_backlash_offset(robot, jt.t, jt.q, fp)
             q_ref = jt.q + q_bl
-        drive = loop_drive(robot, q_ref, jt.t, R, fp, substeps=s.substeps, flags=flags)
+        drive = loop_drive(robot, q_ref, jt.t, R, fp, substeps=s.substeps, flags=flags, process=comp.deflection,
+                           stiffness_scale=s.stiffness_scale)
     else:
         fr = [{"joint": j, "kind": "none", "source": "no drives"} for j in range(1, 7)]
     n = len(jt.t)

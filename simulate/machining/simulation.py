@@ -192,12 +192,14 @@ class LoopFlags(IntFlag):
     """What the coupled loop computes besides the removal (:class:`LoopOptions`)."""
 
     FORCES = 1       # engagement and cutting forces
-    COMPLIANCE = 2   # the deflection from the forces through the robot's compliance (needs FORCES)
+    COMPLIANCE = 2   # the deflection from the forces through the static compliance
+    EXTERNAL = 4     # a given force on the tool added to the cutting force (LoopPath.force_ext)
 
 
 # the members as plain ints for the compiled kernel (numba does not type IntFlag arithmetic)
 LOOP_FORCES = int(LoopFlags.FORCES)
 LOOP_COMPLIANCE = int(LoopFlags.COMPLIANCE)
+LOOP_EXTERNAL = int(LoopFlags.EXTERNAL)
 
 
 class LoopPath(NamedTuple):
@@ -207,6 +209,7 @@ class LoopPath(NamedTuple):
     xyz: np.ndarray          # (N, 3) commanded tool tip [m]
     err: np.ndarray          # (N, 3) tool offset [m]: the given one in, plus the drives' tracking error out
     compliance: np.ndarray   # (N, 3, 3) translational compliance [m/N] ((1, 3, 3) unused without COMPLIANCE)
+    force_ext: np.ndarray    # (N, 3) force on the tool added to the cutting force [N] ((1, 3) unused without EXTERNAL)
 
 
 class LoopOptions(NamedTuple):
@@ -243,6 +246,7 @@ DriveLoop = namedtuple("DriveLoop", [
     "model",     # (N, 6) load the NC's feed-forward knows along the command [Nm] (gravity, inertia)
     "ff",        # (N, 6) the NC's friction feed-forward along the command [Nm] (zeros without FF_FRICTION)
     "jac",       # (N, 3, 6) translational Jacobian at the commanded joints, workpiece frame [m/rad]
+    "process",   # bool: the process force loads the links (-J^T F; off with the deflection switched off)
     "scratch",   # (4, 6): the cycle's process torque, load at its start and end [Nm], link inertia [kg m^2]
     "dq",        # (N, 6) out: joint error q_cmd - q_link [rad]
     "tf",        # (N, 6) out: friction torque at the end of the step [Nm]
@@ -265,7 +269,7 @@ def drive_cycle(dr, k, dt, force):
     tp, l0, l1, jl = dr.scratch[0], dr.scratch[1], dr.scratch[2], dr.scratch[3]
     for jj in range(6):
         tp[jj] = -(dr.jac[k - 1, 0, jj] * force[k - 1, 0] + dr.jac[k - 1, 1, jj] * force[k - 1, 1]
-                   + dr.jac[k - 1, 2, jj] * force[k - 1, 2])
+                   + dr.jac[k - 1, 2, jj] * force[k - 1, 2]) if dr.process else 0.0
     load_torque_step(dr.dyn, dr.st.q, dr.st.qd, dr.a[k - 1], tp, l0, jl)
     for jj in range(6):
         l1[jj] = l0[jj] + dr.model[k, jj] - dr.model[k - 1, jj]
@@ -312,13 +316,14 @@ def coupled_steps(k_from, k_to, dex, grid, path, model, opts, buf, out, drive):
     tool = model.tool
     R, rc, L = tool
     lower, s, nx, ny = grid.lower, grid.spacing, grid.nx, grid.ny
-    t, xyz, err, C = path
+    t, xyz, err, C, fext = path
     force, peak, deflection, state, ticks = out
     xr, yr, zr = dex
     samples, layer_removed, cols, circle = buf
     mcap = samples.ang.shape[1]
     forces = (opts.flags & LOOP_FORCES) != 0
     use_compliance = (opts.flags & LOOP_COMPLIANCE) != 0
+    use_ext = (opts.flags & LOOP_EXTERNAL) != 0
     time_constant, parallel_work = opts.time_constant, opts.parallel_work
     p0 = state[0:3].copy()
     defl = state[3:6].copy()
@@ -410,16 +415,20 @@ def coupled_steps(k_from, k_to, dex, grid, path, model, opts, buf, out, drive):
             for a in range(3):
                 force[k, a] = fout[a]
             peak[k] = fout[3]
-            c5 = _clock()
-            ticks[2] += c5 - c4
-            # ---- robot: deflection for the next step, first-order lag towards C F
-            if use_compliance:
-                alpha = 1.0 - math.exp(-dt / time_constant) if time_constant > 0.0 else 1.0
-                for a in range(3):
-                    target = C[k, a, 0] * fout[0] + C[k, a, 1] * fout[1] + C[k, a, 2] * fout[2]
-                    defl[a] += alpha * (target - defl[a])
-                    deflection[k, a] = defl[a]
-            ticks[3] += _clock() - c5
+            ticks[2] += _clock() - c4
+        c5 = _clock()
+        if use_ext:
+            for a in range(3):
+                force[k, a] += fext[k, a]
+        # ---- robot: deflection for the next step, first-order lag towards C F
+        if use_compliance:
+            dt = t[k] - t[k - 1]
+            alpha = 1.0 - math.exp(-dt / time_constant) if time_constant > 0.0 else 1.0
+            for a in range(3):
+                target = C[k, a, 0] * force[k, 0] + C[k, a, 1] * force[k, 1] + C[k, a, 2] * force[k, 2]
+                defl[a] += alpha * (target - defl[a])
+                deflection[k, a] = defl[a]
+        ticks[3] += _clock() - c5
         for a in range(3):
             p0[a] = p1[a]
         if full != 0:
@@ -459,7 +468,8 @@ def profiling_kernel():
 def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Material, spindle: Spindle, *,
                        compliance=None, tracking_error=None, switch=None, forces: bool = True,
                        advance=None, time_constant: float = DEFLECTION_TIME_CONSTANT,
-                       parallel_work: int = PARALLEL_WORK, profile: bool = False, drive=None) -> MachiningResult:
+                       parallel_work: int = PARALLEL_WORK, profile: bool = False, drive=None,
+                       external_force=None) -> MachiningResult:
     """Run the coupled loop over a commanded cutter path (modifies ``workpiece``).
 
     Parameters
@@ -472,7 +482,8 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     material : Material
     spindle : Spindle
     compliance : (N, 3, 3) m/N, optional
-        Translational compliance in the workpiece frame per step; None: no deflection.
+        Static translational compliance in the workpiece frame per step (what the drives do not
+        model: :func:`workpiece_compliance`); None: no static deflection.
     tracking_error : (N, 3) m, optional
         Tool offset in the workpiece frame per step (a precomputed tracking error, a thermal drift);
         the in-loop drives' error is added to it. None: none.
@@ -492,6 +503,9 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         (default): the cached loop, ``timings`` empty.
     drive : DriveLoop, optional
         The six drives stepped inside the loop (:func:`loop_drive`); None: none.
+    external_force : (N, 3) N, optional
+        A given force on the tool per step (workpiece frame), added to the cutting force: it loads
+        the drives and the static compliance as a cutting force would (a held-pose load test).
 
     Raises
     ------
@@ -516,12 +530,16 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     buf = RemovalBuffers.sized(workpiece, cutter.radius, max_move)
     nsub = substeps(float(np.median(np.diff(t))), spindle.omega, cutter.flutes, per_tooth=4)
     model = force_model(cutter, material, spindle, nsub)
-    use_c = compliance is not None and forces
+    use_ext = external_force is not None
+    use_c = compliance is not None and (forces or use_ext)
     # a writable copy: a read-only broadcast view is another array type, which would compile the loop twice
     C = np.array(np.broadcast_to(np.asarray(compliance, float), (n, 3, 3)), order="C") if use_c \
         else np.zeros((1, 3, 3))
-    path = LoopPath(t, xyz, err, C)
-    flags = (LoopFlags.FORCES if forces else LoopFlags(0)) | (LoopFlags.COMPLIANCE if use_c else LoopFlags(0))
+    fext = np.array(np.broadcast_to(np.asarray(external_force, float), (n, 3)), order="C") if use_ext \
+        else np.zeros((1, 3))
+    path = LoopPath(t, xyz, err, C, fext)
+    flags = ((LoopFlags.FORCES if forces else LoopFlags(0)) | (LoopFlags.COMPLIANCE if use_c else LoopFlags(0))
+             | (LoopFlags.EXTERNAL if use_ext else LoopFlags(0)))
     state = np.zeros(7)
     state[:3] = xyz[0] + err[0]
     ticks = np.zeros(6, np.int64)
@@ -570,6 +588,8 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         timings = {k: float(v) for k, v in timings.items()}
     st.tracking_error[:] = err
     on = sv.on
+    if on and sv.process:
+        attribute_gear_windup(st, sv, time_constant)
     return MachiningResult(st, float(state[6]), wall, timings, cpu, sv.dq if on else None, sv.tf if on else None,
                            sv.contact if on else None)
 
@@ -579,16 +599,53 @@ def _tick_now():
     return _cycles()
 
 
-def workpiece_compliance(robot, q, placement_rotation, stiffness_scale: float = 1.0) -> np.ndarray:
+def attribute_gear_windup(steps: StepTable, drive, time_constant: float) -> None:
+    """Move the gears' quasi-static windup under the process force from the tracking error to the
+    deflection column of ``steps`` (in place); their sum, the tool offset, is unchanged.
+
+    The drives wind their gears up under the process torque ``tau_p = -J^T F`` (the NC's windup
+    compensation knows only gravity and inertia), so the drives' error holds the gears' share of
+    the force-induced offset. For the report it is split off as the quasi-static windup
+    ``-J [twist(tau_m + tau_p) - twist(tau_m)]`` (``twist`` the inverse of the gear's spring law,
+    :func:`simulate.robot.drive.elastic_twist`; ``tau_m`` the load the NC's model knows along the
+    command; linear gears: ``J K_gear^-1 J^T F``), with the same first-order lag as the static
+    deflection (``time_constant`` [s]), and added to the deflection, whose row k is the response
+    to step k's force (the cutter carries it from step k + 1 on, as the drives feel step k's force
+    in cycle k + 1). The tracking error keeps the rest: servo lag, friction, play, the gears'
+    dynamic response beyond the quasi-static windup. ``drive`` is the loop's :data:`DriveLoop`.
+    """
+    from simulate.robot.drive import elastic_twist_array
+
+    F = np.asarray(steps.force, float)
+    n = F.shape[0]
+    if n < 2:
+        return
+    p = drive.params
+    tp = -np.einsum("nij,ni->nj", drive.jac, F)
+    dq = elastic_twist_array(p, drive.model + tp) - elastic_twist_array(p, drive.model)
+    target = -np.einsum("nij,nj->ni", drive.jac, dq)
+    dt = np.diff(steps.t)
+    alpha = 1.0 - np.exp(-dt / time_constant) if time_constant > 0.0 else np.ones_like(dt)
+    gear = np.zeros_like(target)
+    for k in range(1, n):   # the loop's lag, step by step (as the static deflection)
+        gear[k] = gear[k - 1] + alpha[k - 1] * (target[k] - gear[k - 1])
+    steps.deflection[:] += gear
+    steps.tracking_error[1:] -= gear[:-1]
+
+
+def workpiece_compliance(robot, q, placement_rotation, stiffness_scale: float = 1.0, part=None) -> np.ndarray:
     """Translational compliance (N, 3, 3) [m/N] in the workpiece frame at joints q (N, 6).
 
     ``C_wcs = R^T C_base R`` with R the workpiece-to-base rotation: a force in the workpiece frame
     maps to the base as ``R F``, the base deflection back as ``R^T d``. ``stiffness_scale``
-    multiplies the joint stiffness (0.5 halves it).
+    multiplies the joint stiffness (0.5 halves it). ``part``
+    (:class:`simulate.robot.stiffness.Compliance`, default the total): which joint compliance, the
+    links' only when the drives model the gears.
     """
-    from simulate.robot.stiffness import cartesian_compliance
+    from simulate.robot.stiffness import Compliance, cartesian_compliance
 
-    Cb = cartesian_compliance(robot, np.atleast_2d(q))[:, :3, :3] / stiffness_scale
+    part = Compliance.TOTAL if part is None else part
+    Cb = cartesian_compliance(robot, np.atleast_2d(q), part=part)[:, :3, :3] / stiffness_scale
     Rm = np.asarray(placement_rotation, float)
     return np.einsum("ji,njk,kl->nil", Rm, Cb, Rm)
 
@@ -602,14 +659,14 @@ def _no_drive():
     z6 = np.zeros(6)
     fp = assemble([None] * 6)
     p = DriveParams(jm=np.ones(6), c=np.ones(6), d=z6, b=z6, kv=z6, kp=z6, ki=z6, ffv=z6, fft=z6,
-                    side=np.zeros(6, np.int64))
+                    side=np.zeros(6, np.int64), t1=z6, p1=z6)
     z = np.zeros((1, 6))
     return DriveLoop(False, p, fp, drive_state(), new_state(fp), 0, np.ones(6, np.int64), dyn_params_empty(), z, z,
-                     z, z, z, np.zeros((1, 3, 6)), np.zeros((4, 6)), z, z, np.zeros((1, 6), np.int8))
+                     z, z, z, np.zeros((1, 3, 6)), False, np.zeros((4, 6)), z, z, np.zeros((1, 6), np.int8))
 
 
 def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substeps: int | None = None,
-               payload=None) -> DriveLoop:
+               payload=None, process: bool = True, stiffness_scale: float = 1.0) -> DriveLoop:
     """The six drives for the coupled loop along the commanded joints ``q`` (N, 6) [rad] at ``t`` (N,) [s].
 
     ``friction`` is the joints' :data:`~simulate.robot.loop_friction.LoopFriction`
@@ -619,7 +676,10 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
     :func:`~simulate.robot.drive.substeps_for`). The NC's feed-forward knows gravity and inertia along
     the command (not the process force: an unmeasured disturbance its velocity integrator rejects).
     The Jacobian (tracking error and ``-J^T F``) is taken at the commanded joints, for all steps at once.
-    The state starts at equilibrium on the first command.
+    The state starts at equilibrium on the first command. ``process``: the process force loads the
+    links (False: the deflection switched off, the gears carry no process torque);
+    ``stiffness_scale`` multiplies the gears' stiffness and soft-zone torque (the robot the
+    simulation runs is that much stiffer; the NC's windup compensation is calibrated on it).
     """
     from simulate.robot.drive import (
         DriveFlags,
@@ -647,6 +707,8 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
     model, jl = load_torques(robot, q, v, a, payload=payload)
     model = np.ascontiguousarray(model)
     p = drive_params(robot)
+    if stiffness_scale != 1.0:
+        p = p._replace(c=p.c * stiffness_scale, t1=p.t1 * stiffness_scale)
     T = float(np.max(np.diff(t))) if n > 1 else 0.002
     n_sub = as_substeps(substeps) if substeps is not None else substeps_for(p, jl, T, flags, friction)
     st, fst = drive_state(), new_state(friction)
@@ -657,4 +719,4 @@ def loop_drive(robot, q, t, placement_rotation, friction, *, flags=None, substep
     contact[0] = st.contact
     ff = nc_friction(friction, t, q, v, model + jl * a, flags)
     return DriveLoop(True, p, friction, st, fst, flags, n_sub, dyn_params(robot, payload), q, v, a, model, ff, jac,
-                     np.zeros((4, 6)), dq, np.zeros((n, 6)), contact)
+                     bool(process), np.zeros((4, 6)), dq, np.zeros((n, 6)), contact)

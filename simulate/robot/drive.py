@@ -116,9 +116,10 @@ class FrictionSide(IntEnum):
 #: Per-joint parameters, arrays of shape (6,) [SI, joint side]:
 #: jm reflected motor inertia N^2 J_m [kg m^2]; c gear stiffness [Nm/rad]; d gear damping [Nm s/rad];
 #: b total play [rad]; kv [1/s], kp [Nm s/rad], ki [Nm/rad] loop gains; ffv, fft feed-forward factors [-];
-#: side FrictionSide (int64). The friction itself is a separate LoopFriction
-#: (:mod:`simulate.robot.loop_friction`) with its state array.
-DriveParams = namedtuple("DriveParams", "jm c d b kv kp ki ffv fft side")
+#: side FrictionSide (int64); t1 [Nm], p1 [rad] the gear's soft zone (:func:`elastic_torque`: the
+#: torque at which the catalogue quotes the lost motion and half that lost motion; 0, 0: none).
+#: The friction itself is a separate LoopFriction (:mod:`simulate.robot.loop_friction`) with its state array.
+DriveParams = namedtuple("DriveParams", "jm c d b kv kp ki ffv fft side t1 p1")
 
 #: Per-joint state, arrays of shape (6,), updated in place by :func:`drive_step`:
 #: theta motor position [rad], omega motor velocity [rad/s] (both joint side), q, qd link position [rad]
@@ -139,17 +140,60 @@ CycleInput = namedtuple("CycleInput", "r0 r1 v0 v1 a0 a1 load0 load1 model0 mode
 # --------------------------------------------------------------------------- per-step kernels
 
 @njit(cache=True)
-def gear_torque(c, d, b2, delta, delta_d):
-    """Elasto-backlash gear torque [Nm] for deflection ``delta`` [rad], rate ``delta_d`` [rad/s], half play b2 [rad]."""
+def elastic_torque(c, t1, p1, phi):
+    """Torque [Nm] of the gear's spring at twist ``phi`` [rad] beyond the play (the catalogue curve's midline).
+
+    A soft zone of stiffness ``t1 / p1`` up to ``|phi| = p1`` (the torque ``t1``), then the torsional
+    rigidity ``c``: ``sign(phi) (t1 + c (|phi| - p1))``. ``p1 = t1 = 0``: the linear spring ``c phi``.
+    """
+    a = abs(phi)
+    e = t1 / p1 * a if (p1 > 0.0 and a <= p1) else t1 + c * (a - p1)
+    return e if phi >= 0.0 else -e
+
+
+@njit(cache=True)
+def elastic_twist(c, t1, p1, tau):
+    """Twist [rad] of the gear's spring (no play) under the static torque ``tau`` [Nm]: the inverse of
+    :func:`elastic_torque`."""
+    a = abs(tau)
+    x = a * p1 / t1 if (t1 > 0.0 and a <= t1) else p1 + (a - t1) / c
+    return x if tau >= 0.0 else -x
+
+
+@njit(cache=True)
+def local_stiffness(c, t1, p1, tau):
+    """Slope [Nm/rad] of the gear's spring at the static torque ``tau`` [Nm]: ``t1 / p1`` in the soft zone,
+    else ``c``."""
+    return t1 / p1 if abs(tau) < t1 else c
+
+
+@njit(cache=True)
+def gear_torque_soft(c, d, b2, t1, p1, delta, delta_d):
+    """Gear torque [Nm] at deflection ``delta`` [rad], rate ``delta_d`` [rad/s]: play ``+-b2`` [rad], then the
+    spring of :func:`elastic_torque` (soft zone ``t1`` [Nm] over ``p1`` [rad], rigidity ``c``), damping ``d``.
+
+    The play and the spring in series trace the catalogue's hysteresis loop: loading and unloading
+    branches ``b = 2 b2`` apart at every torque (the hysteresis loss, the twist width at zero
+    torque), the midline through ``+-p1`` at ``+-t1`` (the lost motion ``2 p1`` at the torque at
+    which it is quoted) and of slope ``c`` beyond (the torsional rigidity). The damper may not pull
+    the flanks together (the torque keeps the sign of the contact flank).
+    """
     if b2 <= 0.0:
-        return c * delta + d * delta_d
+        return elastic_torque(c, t1, p1, delta) + d * delta_d
     if delta > b2:
-        t = c * (delta - b2) + d * delta_d
+        t = elastic_torque(c, t1, p1, delta - b2) + d * delta_d
         return t if t > 0.0 else 0.0
     if delta < -b2:
-        t = c * (delta + b2) + d * delta_d
+        t = elastic_torque(c, t1, p1, delta + b2) + d * delta_d
         return t if t < 0.0 else 0.0
     return 0.0
+
+
+@njit(cache=True)
+def gear_torque(c, d, b2, delta, delta_d):
+    """Elasto-backlash gear torque [Nm] for deflection ``delta`` [rad], rate ``delta_d`` [rad/s], half play b2 [rad]
+    (a linear spring beyond the play: :func:`gear_torque_soft` without a soft zone)."""
+    return gear_torque_soft(c, d, b2, 0.0, 0.0, delta, delta_d)
 
 
 @njit(cache=True)
@@ -175,9 +219,9 @@ def drive_init(p, st, fst, r, v, load, model, jl, flags):
         b2 = 0.5 * p.b[j] if flags & F_BACKLASH else 0.0
         fft = p.fft[j] if flags & F_FF_TAU else 0.0
         tg = fft * model[j]
-        sh = r[j] + (tg / p.c[j] if flags & F_WINDUP else 0.0)
+        sh = r[j] + (elastic_twist(p.c[j], p.t1[j], p.p1[j], tg) if flags & F_WINDUP else 0.0)
         sg = 1.0 if load[j] > 0 else (-1.0 if load[j] < 0 else 0.0)
-        dl = load[j] / p.c[j] + sg * b2
+        dl = elastic_twist(p.c[j], p.t1[j], p.p1[j], load[j]) + sg * b2
         st.theta[j] = sh
         st.q[j] = sh - dl
         st.omega[j] = v[j]
@@ -226,6 +270,8 @@ def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
         jl = cy.jl[j]
         c = p.c[j]
         d = p.d[j]
+        t1 = p.t1[j]
+        p1 = p.p1[j]
         side = p.side[j]
         theta, omega, q, qd = st.theta[j], st.omega[j], st.q[j], st.qd[j]
         integ = st.integ[j]
@@ -253,14 +299,17 @@ def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
             th_r = r
             th_rd = rd
             if flags & F_WINDUP:
-                # c delta + d delta_d = tau_g to first order in d/c: delta = (tau_g - (d/c) tau_g_d) / c
+                # spring(delta) + d delta_d = tau_g to first order in d/k (k the local slope):
+                # delta = twist(tau_g) - (d/k) tau_g_d / k
                 tg_d = fft * (jl * jerk + dmod)
-                th_r += (fft * (jl * rdd + mod_a) - d / c * tg_d) / c
-                th_rd += tg_d / c
+                tg = fft * (jl * rdd + mod_a)
                 if flags & F_FF_FRICTION and side == 0:
                     # joint-side friction the NC expects also passes the gear: its windup too
                     # (position only: its derivative is steep at each reversal)
-                    th_r += (cy.ff0[j] + (cy.ff1[j] - cy.ff0[j]) * sa) / c
+                    tg += cy.ff0[j] + (cy.ff1[j] - cy.ff0[j]) * sa
+                kl = local_stiffness(c, t1, p1, tg)
+                th_r += elastic_twist(c, t1, p1, tg) - d / kl * tg_d / kl
+                th_rd += tg_d / kl
             vcmd = p.kv[j] * (th_r - theta) + ffv * th_rd
             ev = vcmd - omega
             integ += p.ki[j] * ev * h
@@ -281,12 +330,12 @@ def drive_step(p, fp, st, fst, cy, T, n_sub, flags):
                     tfl = tf
             load = cy.load0[j] + (cy.load1[j] - cy.load0[j]) * sm
             # velocity Verlet: kick, drift, kick (gear torque at both ends of the substep)
-            ts = gear_torque(c, d, b2, theta - q, omega - qd)
+            ts = gear_torque_soft(c, d, b2, t1, p1, theta - q, omega - qd)
             omega += 0.5 * h * (u - tfm - ts) / jm
             qd += 0.5 * h * (ts - load - tfl) / jl
             theta += h * omega
             q += h * qd
-            ts = gear_torque(c, d, b2, theta - q, omega - qd)
+            ts = gear_torque_soft(c, d, b2, t1, p1, theta - q, omega - qd)
             omega += 0.5 * h * (u - tfm - ts) / jm
             qd += 0.5 * h * (ts - load - tfl) / jl
         st.theta[j] = theta
@@ -399,6 +448,17 @@ def linear_modes(p: DriveParams, jl: float, j: int) -> list[tuple[float, float]]
                   for e in ev if e.imag >= 0.0)
 
 
+def elastic_twist_array(p: DriveParams, tau) -> np.ndarray:
+    """:func:`elastic_twist` of each joint's gear for static torques ``tau`` [Nm] (..., 6): twist [rad]."""
+    tau = np.asarray(tau, float)
+    a = np.abs(tau)
+    t1, p1, c = p.t1, p.p1, p.c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        soft = np.where(t1 > 0, a * p1 / np.where(t1 > 0, t1, 1.0), 0.0)
+    x = np.where((t1 > 0) & (a <= t1), soft, p1 + (a - t1) / c)
+    return np.sign(tau) * x
+
+
 def as_substeps(substeps) -> np.ndarray:
     """Substeps per joint (6,) int64 from an int or six ints; ``ValueError`` below 1."""
     n = np.broadcast_to(np.asarray(substeps), (N_AXES,))
@@ -433,11 +493,16 @@ def drive_params(robot, *, gains=None) -> DriveParams:
                              field=f"joint[{j + 1}].stiffness")
     gs = gains if gains is not None else robot.servo
     dr = robot.drive
+    # the soft zone beyond the play: up to the torque the lost motion is quoted at, over half of the
+    # lost motion that the play does not take (the catalogue's lost motion includes the play)
+    lm = np.array(dr.lost_motion, float)
+    p1 = np.where(lm > 0, 0.5 * (lm - np.array(robot.backlash, float)), 0.0)
+    t1 = np.where(p1 > 0, np.array(dr.lost_motion_torque, float), 0.0)
     return DriveParams(
         jm=np.array(robot.rotor_inertia, float), c=np.array(robot.stiffness, float), d=np.array(dr.damping, float),
         b=np.array(robot.backlash, float), kv=np.array(gs.kv, float), kp=np.array(gs.kp_vel, float),
         ki=np.array(gs.ki_vel, float), ffv=np.array(gs.ff_vel, float), fft=np.array(gs.ff_tau, float),
-        side=np.array(dr.friction_side, dtype=np.int64))
+        side=np.array(dr.friction_side, dtype=np.int64), t1=t1, p1=p1)
 
 
 def drive_flags(*, friction: bool = True, backlash: bool = True, ff_friction: bool = False) -> DriveFlags:

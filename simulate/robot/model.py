@@ -17,14 +17,24 @@ com                m            link centre of mass in the DH link frame i
 inertia            kg m^2       3x3 inertia about the COM, axes of link frame i
 gear_ratio         -            motor turns per joint turn
 motor_inertia      kg m^2       rotor (+ gear input) inertia, motor side
-stiffness          Nm/rad       joint (gear) stiffness; ``inf`` for a rigid joint
-backlash           rad          total gear play, joint side
+stiffness          Nm/rad       gear torsional rigidity (the slope of the torque-twist curve above the
+                                soft zone); ``inf`` for a rigid joint. The drives model it
+                                (:mod:`simulate.robot.drive`)
+link_stiffness     Nm/rad       optional, default ``inf``: the compliance of links and bearings that
+                                the drives do not model, lumped at the joint (virtual joint
+                                method); the static compliance ``J K_link^-1 J^T`` of the loop
+backlash           rad          gear play (the catalogue's hysteresis loss: the twist width of the
+                                torque-twist curve at zero torque), joint side
 [joint.servo]                   ``kv`` [1/s], ``kp_vel`` [Nm s/rad], ``ki_vel`` [Nm/rad],
                                 ``ff_vel`` [-], ``ff_tau`` [-] (the cascaded control of :mod:`simulate.robot.drive`)
 [joint.drive]                   optional (all joints or none), the two-mass drive model
                                 (:mod:`simulate.robot.drive`): ``damping`` [Nm s/rad] gear
                                 damping, ``rated_torque`` [Nm] of the reducer,
-                                ``friction_side`` ``"joint"`` or ``"motor"``
+                                ``friction_side`` ``"joint"`` or ``"motor"``; optional
+                                ``lost_motion`` [rad] and ``lost_motion_torque`` [Nm]: the
+                                catalogue's lost motion (the twist between -T and +T on the
+                                torque-twist curve, T = ``lost_motion_torque``, the play
+                                included) gives the soft zone beyond the play; default 0
 [joint.friction]                inline LuGre ``fc, fs`` [Nm], ``vs`` [rad/s], ``delta`` [-],
                                 ``s0`` [Nm/rad], ``s1`` [Nm s/rad], ``nu`` [Nm s/rad]; or
                                 ``model = "<saved friction model dir or MLflow URI>"``
@@ -64,6 +74,8 @@ JOINT_SCALARS = {
 }
 SERVO_KEYS = {"kv": "1/s", "kp_vel": "Nm s/rad", "ki_vel": "Nm/rad", "ff_vel": "-", "ff_tau": "-"}
 DRIVE_KEYS = {"damping": "Nm s/rad", "rated_torque": "Nm"}
+#: Optional ``[joint.drive]`` keys (default 0: no soft zone), with their unit.
+DRIVE_OPTIONAL = {"lost_motion": "rad", "lost_motion_torque": "Nm"}
 FRICTION_SIDES = ("joint", "motor")
 LUGRE_KEYS = {"fc": "Nm", "fs": "Nm", "vs": "rad/s", "delta": "-", "s0": "Nm/rad", "s1": "Nm s/rad", "nu": "Nm s/rad"}
 
@@ -209,15 +221,26 @@ class DriveSpec:
         Rated output torque of the reducer [Nm] (friction levels are quoted as its share).
     friction_side : ndarray of int
         Where friction acts: 0 joint (gear output), 1 motor (see ``simulate.robot.drive.FrictionSide``).
+    lost_motion : ndarray
+        The catalogue's lost motion [rad]: the twist of the torque-twist curve between
+        ``-lost_motion_torque`` and ``+lost_motion_torque`` (RV catalogues: at +-3 % of the rated
+        torque), the play included; the soft zone beyond the play spans ``lost_motion - backlash``.
+        0: none (the gear is linear beyond its play).
+    lost_motion_torque : ndarray
+        The torque [Nm] at which the lost motion is quoted (the end of the soft zone).
     """
 
     damping: np.ndarray
     rated_torque: np.ndarray
     friction_side: np.ndarray
+    lost_motion: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+    lost_motion_torque: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
 
     def __post_init__(self):
         object.__setattr__(self, "damping", _frozen(self.damping, (N_JOINTS,)))
         object.__setattr__(self, "rated_torque", _frozen(self.rated_torque, (N_JOINTS,)))
+        for key in DRIVE_OPTIONAL:
+            object.__setattr__(self, key, _frozen(getattr(self, key), (N_JOINTS,)))
         side = np.array(self.friction_side, dtype=np.int64)
         if side.shape != (N_JOINTS,):
             raise ValueError(f"expected shape {(N_JOINTS,)}, got {side.shape}")
@@ -250,9 +273,12 @@ class Robot:
     gear_ratio, motor_inertia : ndarray
         Gear ratio [-], rotor inertia [kg m^2] (motor side; reflected: ``gear_ratio**2 * motor_inertia``).
     stiffness : ndarray
-        Joint stiffness [Nm/rad] (``inf`` = rigid).
+        Gear torsional rigidity [Nm/rad] (``inf`` = rigid), modelled by the drives.
+    link_stiffness : ndarray
+        Compliance of links and bearings that the drives do not model, lumped at each joint
+        [Nm/rad] (``inf`` = rigid links; the default).
     backlash : ndarray
-        Total gear play, joint side [rad].
+        Gear play, joint side [rad].
     servo : ServoGains
     friction : tuple of FrictionSpec
     tool : Tool
@@ -286,10 +312,12 @@ class Robot:
     description: str = ""
     source: str = ""
     drive: DriveSpec | None = None
+    link_stiffness: np.ndarray = field(default_factory=lambda: np.full(N_JOINTS, np.inf))
 
     def __post_init__(self):
         for key in (*JOINT_SCALARS, ):
             object.__setattr__(self, key, _frozen(getattr(self, key), (N_JOINTS,)))
+        object.__setattr__(self, "link_stiffness", _frozen(self.link_stiffness, (N_JOINTS,)))
         object.__setattr__(self, "com", _frozen(self.com, (N_JOINTS, 3)))
         object.__setattr__(self, "inertia", _frozen(self.inertia, (N_JOINTS, 3, 3)))
         object.__setattr__(self, "friction", tuple(self.friction))
@@ -398,7 +426,9 @@ def robot_from_dict(data: dict, source: str = "<robot>") -> Robot:
     vals: dict[str, list] = {k: [] for k in JOINT_SCALARS}
     com, inertia, names, frictions = [], [], [], []
     servo: dict[str, list] = {k: [] for k in SERVO_KEYS}
-    drive: dict[str, list] = {"damping": [], "rated_torque": [], "friction_side": []}
+    drive: dict[str, list] = {"damping": [], "rated_torque": [], "friction_side": [],
+                              **{k: [] for k in DRIVE_OPTIONAL}}
+    link_stiffness = []
     for i, jt in enumerate(joints):
         where = f"joint[{i + 1}]"
         if not isinstance(jt, dict):
@@ -406,6 +436,7 @@ def robot_from_dict(data: dict, source: str = "<robot>") -> Robot:
         names.append(str(jt.get("name", f"A{i + 1}")))
         for key in JOINT_SCALARS:
             vals[key].append(_number(jt, key, where, source))
+        link_stiffness.append(_number(jt, "link_stiffness", where, source, required=False, default=math.inf))
         com.append(_vector(jt, "com", 3, where, source))
         inertia.append(_vector(jt, "inertia", 9, where, source))
         sv = jt.get("servo")
@@ -419,6 +450,8 @@ def robot_from_dict(data: dict, source: str = "<robot>") -> Robot:
                 raise InputError("must be a table", source=source, field=f"{where}.drive")
             for key in DRIVE_KEYS:
                 drive[key].append(_number(dv, key, f"{where}.drive", source))
+            for key in DRIVE_OPTIONAL:
+                drive[key].append(_number(dv, key, f"{where}.drive", source, required=False, default=0.0))
             side = dv.get("friction_side", "joint")
             if side not in FRICTION_SIDES:
                 raise InputError(f"must be one of {', '.join(FRICTION_SIDES)}, got {side!r}", source=source,
@@ -469,7 +502,8 @@ def robot_from_dict(data: dict, source: str = "<robot>") -> Robot:
         name=str(data.get("name", Path(source).stem)), drive=drive_spec, description=str(data.get("description", "")),
         joint_names=tuple(names), com=np.array(com), inertia=np.array(inertia),
         servo=ServoGains(**{k: np.array(v) for k, v in servo.items()}), friction=tuple(frictions),
-        tool=tool, source=source if source != "<robot>" else "", **{k: np.array(v) for k, v in vals.items()})
+        tool=tool, source=source if source != "<robot>" else "", link_stiffness=np.array(link_stiffness),
+        **{k: np.array(v) for k, v in vals.items()})
     _validate(robot, source)
     return robot
 
@@ -486,7 +520,7 @@ def _validate(r: Robot, source: str) -> None:
                 bad("must be finite", i, key)
         if not r.lower[i] < r.upper[i]:
             bad(f"must be above lower ({r.lower[i]})", i, "upper")
-        for key in ("vmax", "amax", "jmax", "gear_ratio", "stiffness"):
+        for key in ("vmax", "amax", "jmax", "gear_ratio", "stiffness", "link_stiffness"):
             if not getattr(r, key)[i] > 0:
                 bad("must be > 0", i, key)
         for key in ("mass", "motor_inertia", "backlash"):
@@ -507,6 +541,21 @@ def _validate(r: Robot, source: str) -> None:
                     bad("must be finite and >= 0", i, f"drive.{key}")
             if not r.drive.rated_torque[i] > 0:
                 bad("must be > 0", i, "drive.rated_torque")
+            for key in DRIVE_OPTIONAL:
+                v = getattr(r.drive, key)[i]
+                if not (math.isfinite(v) and v >= 0):
+                    bad("must be finite and >= 0", i, f"drive.{key}")
+            lm, tlm = r.drive.lost_motion[i], r.drive.lost_motion_torque[i]
+            if (lm > 0) != (tlm > 0):
+                bad("give lost_motion and lost_motion_torque together (both > 0) or neither", i,
+                    "drive.lost_motion_torque")
+            if lm > 0 and not lm > r.backlash[i]:
+                bad(f"the lost motion includes the play: must be above backlash {r.backlash[i]:.4g} rad", i,
+                    "drive.lost_motion")
+            if lm > 0 and not 2 * tlm / (lm - r.backlash[i]) < r.stiffness[i]:
+                # the soft zone must be softer than the rigidity beyond it
+                bad(f"the soft zone 2 T / (lost_motion - backlash) = {2 * tlm / (lm - r.backlash[i]):.4g} Nm/rad "
+                    f"must be below the stiffness {r.stiffness[i]:.4g} Nm/rad", i, "drive.lost_motion")
             if r.drive.friction_side[i] not in (0, 1):
                 bad("must be joint or motor", i, "drive.friction_side")
         lg = r.friction[i].lugre
@@ -541,12 +590,17 @@ def _as_dict(r: Robot) -> dict:
         jt: dict[str, Any] = {"name": r.joint_names[i]}
         for key in JOINT_SCALARS:
             jt[key] = float(getattr(r, key)[i])
+        if math.isfinite(r.link_stiffness[i]):
+            jt["link_stiffness"] = float(r.link_stiffness[i])
         jt["com"] = [float(v) for v in r.com[i]]
         jt["inertia"] = [[float(v) for v in row] for row in r.inertia[i]]
         jt["servo"] = {k: float(getattr(r.servo, k)[i]) for k in SERVO_KEYS}
         if r.drive is not None:
             jt["drive"] = {k: float(getattr(r.drive, k)[i]) for k in DRIVE_KEYS}
             jt["drive"]["friction_side"] = FRICTION_SIDES[int(r.drive.friction_side[i])]
+            for key in DRIVE_OPTIONAL:
+                if getattr(r.drive, key)[i] > 0:
+                    jt["drive"][key] = float(getattr(r.drive, key)[i])
         fr = r.friction[i]
         jt["friction"] = ({"model": fr.model} if fr.model is not None
                           else {k: float(getattr(fr.lugre, k)) for k in LUGRE_KEYS})

@@ -6,6 +6,12 @@ Cartesian compliance is ``C(q) = J(q) K^-1 J(q)^T`` (modelling notes 4), and a w
 ``w = [F; M]`` (base frame, at the TCP, applied to the tool) moves the TCP by
 ``[dx, dy, dz, rx, ry, rz] = C w`` (small displacement and small rotation vector, base frame).
 
+Each compliance is counted once (:class:`Compliance`): a joint's compliance is its gear's
+``1 / stiffness`` (the two-mass drives of :mod:`simulate.robot.drive` model it, winding up under
+the process torque ``J^T F`` in the loop) plus the links' and bearings' ``1 / link_stiffness``,
+which no drive models. The coupled loop therefore takes the static ``C F`` of the links only when
+the drives run, and of both when they do not (an ideal drive: the gear's windup quasi-static).
+
 Backlash (gear play ``b_i`` [rad], joint side) is a dead zone in the joint: once the static joint
 torque ``tau = J^T w`` exceeds ``backlash_threshold`` in magnitude, the joint sits against one flank
 of the play, ``b_i / 2`` away from the mid position in the direction of ``tau``; below it the joint
@@ -18,6 +24,7 @@ Link compliance (paper 2.1, ref. [26]: beam models of the bodies) is an added te
 from __future__ import annotations
 
 from collections.abc import Callable
+from enum import Enum
 
 import numpy as np
 
@@ -30,12 +37,27 @@ BACKLASH_THRESHOLD = 1.0
 LinkCompliance = Callable[[Robot, np.ndarray], np.ndarray]
 
 
-def joint_compliance(robot: Robot) -> np.ndarray:
-    """``K^-1`` diagonal [rad/Nm]; an ``inf`` stiffness (rigid joint) gives 0."""
-    return 1.0 / np.asarray(robot.stiffness, dtype=float)
+class Compliance(Enum):
+    """Which joint compliance a Cartesian compliance holds (each counted once: module docstring)."""
+
+    TOTAL = "total"   #: gear and links in series, ``1/stiffness + 1/link_stiffness``
+    GEAR = "gear"     #: the gears only, ``1/stiffness`` (what the drives model)
+    LINK = "link"     #: links and bearings only, ``1/link_stiffness`` (what the drives do not model)
 
 
-def cartesian_compliance(robot: Robot, q, *, link_compliance: LinkCompliance | None = None) -> np.ndarray:
+def joint_compliance(robot: Robot, part: Compliance = Compliance.TOTAL) -> np.ndarray:
+    """``K^-1`` diagonal [rad/Nm] of ``part``; an ``inf`` stiffness (rigid) gives 0."""
+    gear = 1.0 / np.asarray(robot.stiffness, dtype=float)
+    link = 1.0 / np.asarray(robot.link_stiffness, dtype=float)
+    if part is Compliance.GEAR:
+        return gear
+    if part is Compliance.LINK:
+        return link
+    return gear + link
+
+
+def cartesian_compliance(robot: Robot, q, *, link_compliance: LinkCompliance | None = None,
+                         part: Compliance = Compliance.TOTAL) -> np.ndarray:
     """Cartesian compliance at the TCP, ``C = J K^-1 J^T (+ C_link)``, (N, 6, 6).
 
     Parameters
@@ -43,6 +65,8 @@ def cartesian_compliance(robot: Robot, q, *, link_compliance: LinkCompliance | N
     robot : Robot
     q : array_like (N, 6) or (6,)
         Joint angles [rad].
+    part : Compliance
+        Which joint compliance ``K^-1`` holds (default the total, gear and links).
     link_compliance : callable, optional
         ``f(robot, q (N, 6)) -> (N, 6, 6)`` added compliance of the links (base frame, at the TCP,
         same units as C).
@@ -54,7 +78,7 @@ def cartesian_compliance(robot: Robot, q, *, link_compliance: LinkCompliance | N
     """
     q2 = np.atleast_2d(np.asarray(q, dtype=float))
     J = jacobian(robot, q2)
-    C = np.einsum("nij,j,nkj->nik", J, joint_compliance(robot), J)
+    C = np.einsum("nij,j,nkj->nik", J, joint_compliance(robot, part), J)
     if link_compliance is not None:
         C = C + np.asarray(link_compliance(robot, q2), dtype=float)
     return C[0] if np.asarray(q).ndim == 1 else C

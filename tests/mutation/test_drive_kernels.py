@@ -49,7 +49,7 @@ def params(**kw) -> DriveParams:
     """Six explicit joints; the velocity PI at rate kp / (jm + jl) = 100 1/s with a slower integrator."""
     kp = 100.0 * (JM + JL)
     p = DriveParams(jm=JM.copy(), c=C.copy(), d=D.copy(), b=B.copy(), kv=KV.copy(), kp=kp, ki=10.0 * kp,
-                    ffv=Z6.copy(), fft=Z6.copy(), side=np.zeros(6, np.int64))
+                    ffv=Z6.copy(), fft=Z6.copy(), side=np.zeros(6, np.int64), t1=Z6.copy(), p1=Z6.copy())
     return p._replace(**kw)
 
 
@@ -517,7 +517,8 @@ def test_command_velocity_is_second_order():
 
 
 def test_drive_params_from_a_robot_and_its_errors():
-    drive = SimpleNamespace(damping=[1, 2, 3, 4, 5, 6], friction_side=[0, 1, 0, 1, 0, 1])
+    drive = SimpleNamespace(damping=[1, 2, 3, 4, 5, 6], friction_side=[0, 1, 0, 1, 0, 1],
+                            lost_motion=[0, 3e-3, 0, 4e-4, 0, 0], lost_motion_torque=[0, 10, 0, 3, 0, 0])
     servo = SimpleNamespace(kv=[7] * 6, kp_vel=[8] * 6, ki_vel=[9] * 6, ff_vel=[0.5] * 6, ff_tau=[0.25] * 6)
     robot = SimpleNamespace(drive=drive, servo=servo, rotor_inertia=list(JM), stiffness=list(C), backlash=list(B),
                             source="r.toml")
@@ -526,6 +527,9 @@ def test_drive_params_from_a_robot_and_its_errors():
     np.testing.assert_array_equal(p.c, C)
     np.testing.assert_array_equal(p.b, B)
     np.testing.assert_array_equal(p.d, [1, 2, 3, 4, 5, 6])
+    # the soft zone: its torque, half the lost motion beyond the play
+    np.testing.assert_array_equal(p.t1, [0, 10, 0, 3, 0, 0])
+    np.testing.assert_allclose(p.p1, [0, 0.5 * (3e-3 - B[1]), 0, 0.5 * (4e-4 - B[3]), 0, 0], rtol=1e-12)
     assert (p.kv[0], p.kp[0], p.ki[0], p.ffv[0], p.fft[0]) == (7, 8, 9, 0.5, 0.25)
     assert p.side.dtype == np.int64 and list(p.side) == [0, 1, 0, 1, 0, 1]
     for name in ("jm", "c", "d", "b", "kv", "kp", "ki", "ffv", "fft"):      # integers in the file become floats
