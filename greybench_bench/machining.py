@@ -64,7 +64,9 @@ def bench_machining(
     mat, spindle = load_material("Al7075"), Spindle.from_rpm(12000)
     t1, c1 = time.perf_counter(), time.process_time()
     Rm = placement.T[:3, :3]
-    C = workpiece_compliance(rob, jt.q[:n], Rm)
+    from simulate.robot.stiffness import Compliance
+
+    C = workpiece_compliance(rob, jt.q[:n], Rm, part=Compliance.LINK)   # the drives take the gears' compliance
     from simulate.machining.simulation import loop_drive
     from simulate.robot.friction import loop_friction
 
