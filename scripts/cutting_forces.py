@@ -86,9 +86,19 @@ def engagement_of(piece: str, stock: dict, block: str, seg_xyz: np.ndarray, ramp
         y = float(seg_xyz[0, 1])
         ae = R - (y - edge)
         top = b["top"]
-        # the wall's top is the lower of the stock's sloped top and the first slope pass
-        return math.pi - math.acos(1 - ae / R), (
-            lambda x: np.minimum(top["z0"] + top["dzdx"] * x, ramp(x)) - z)
+        mid = edge - 0.5 * ae   # the middle of the strip the wall cut takes
+
+        def depth(x):
+            # the strip's top: the stock's sloped top or, lower, what the slope passes left: a flat end
+            # mill ramping up along x cuts a point at distance dy from its path lowest when its axis
+            # was sqrt(R^2 - dy^2) before it
+            h = top["z0"] + top["dzdx"] * x
+            for y_p, zfun in ramp:
+                dy = abs(y_p - mid)
+                if dy < R:
+                    h = np.minimum(h, zfun(x - math.sqrt(R * R - dy * dy)))
+            return h - z
+        return math.pi - math.acos(1 - ae / R), depth
     return None
 
 
@@ -114,14 +124,15 @@ def segment_rows(piece: str, spacings: list[float]) -> list[dict]:
     prog, _, mat = runs[0]
     ip = prog.interp
     rpm = prog.spindle_rpm
-    # the first slope pass (a ramp along +x): the height it leaves at x
-    ramp_lines = [ln for ln in np.unique(ip.line) if lab.get(int(ln)) == "slope"]
-    sel0 = ip.line == ramp_lines[0]
-    xr, zr = ip.xyz[sel0, 0], ip.xyz[sel0, 2]
-    order = np.argsort(xr)
-
-    def ramp(x):
-        return np.interp(x, xr[order], zr[order])
+    # the slope passes (ramps along x): each one's path y [m] and tip height [m] as a function of x
+    ramp = []
+    for ln in np.unique(ip.line):
+        sel0 = ip.line == ln
+        if lab.get(int(ln)) == "slope" and np.ptp(ip.xyz[sel0, 2]) > 1e-4:
+            xr, zr = ip.xyz[sel0, 0], ip.xyz[sel0, 2]
+            order = np.argsort(xr)
+            ramp.append((float(np.median(ip.xyz[sel0, 1])),
+                         lambda x, xr=xr[order], zr=zr[order]: np.interp(x, xr, zr)))
 
     rows = []
     for ln in np.unique(ip.line):
