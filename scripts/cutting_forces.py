@@ -162,7 +162,8 @@ def segment_rows(piece: str, spacings: list[float]) -> list[dict]:
             left = np.array([-u[1], u[0], 0.0])
             fl = mean_force_local(phi_st, math.pi, a[q], c[q], mat.kc, mat.ke)
             ref[q] = fl[0] * u + fl[1] * left - np.array([0.0, 0.0, fl[2]])
-        row = {"line": ln, "block": block, "steps": len(idx), "analytic_N": float(np.linalg.norm(ref, axis=1).mean())}
+        row: dict[object, object] = {"line": ln, "block": block, "steps": len(idx),
+                                     "analytic_N": float(np.linalg.norm(ref, axis=1).mean())}
         for sp, (_, st, _) in zip(spacings, runs, strict=True):
             F = st.force[idx]
             err = np.linalg.norm(F - ref, axis=1) / np.linalg.norm(ref, axis=1)
