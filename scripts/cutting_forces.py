@@ -30,26 +30,6 @@ N = 3             # teeth of the robot file's tool
 END_MARGIN = 12e-3
 
 
-def mean_force_local(phi_st, phi_ex, a, c, kc, ke):
-    """Altintas' revolution-mean force (Fx along the feed, Fy to its left, |Fz|) [N]: depth a [m],
-    feed per tooth c [m], engagement [phi_st, phi_ex] [rad] (phi from the left normal, clockwise)."""
-    Ktc, Krc, Kac = kc
-    Kte, Kre, Kae = ke
-
-    def fx(p):
-        return N * a * c / (8 * math.pi) * (Ktc * math.cos(2 * p) - Krc * (2 * p - math.sin(2 * p))) \
-            + N * a / (2 * math.pi) * (-Kte * math.sin(p) + Kre * math.cos(p))
-
-    def fy(p):
-        return N * a * c / (8 * math.pi) * (Ktc * (2 * p - math.sin(2 * p)) + Krc * math.cos(2 * p)) \
-            - N * a / (2 * math.pi) * (Kte * math.cos(p) + Kre * math.sin(p))
-
-    def fz(p):
-        return N * a / (2 * math.pi) * (-Kac * c * math.cos(p) + Kae * p)
-
-    return np.array([fx(phi_ex) - fx(phi_st), fy(phi_ex) - fy(phi_st), fz(phi_ex) - fz(phi_st)])
-
-
 def blocks(program: Path) -> dict[int, str]:
     """Program line -> the comment block it belongs to ('square', 'circle', 'angle', 'slope', 'wall')."""
     out, label = {}, ""
@@ -118,6 +98,8 @@ def run(piece: str, spacing_mm: float):
 
 
 def segment_rows(piece: str, spacings: list[float]) -> list[dict]:
+    from simulate.machining.closed_form import mean_force_local
+
     stock = json.loads((ROOT / "data" / "programs" / f"{piece}.stock.json").read_text())
     lab = blocks(ROOT / "data" / "programs" / f"{piece}.nc")
     runs = [run(piece, sp) for sp in spacings]
@@ -160,7 +142,7 @@ def segment_rows(piece: str, spacings: list[float]) -> list[dict]:
         for q in range(len(idx)):
             u = np.array([vel[q, 0], vel[q, 1], 0.0]) / speed[q]
             left = np.array([-u[1], u[0], 0.0])
-            fl = mean_force_local(phi_st, math.pi, a[q], c[q], mat.kc, mat.ke)
+            fl = mean_force_local(phi_st, math.pi, a[q], c[q], N, mat.kc, mat.ke)
             ref[q] = fl[0] * u + fl[1] * left - np.array([0.0, 0.0, fl[2]])
         row: dict[object, object] = {"line": ln, "block": block, "steps": len(idx),
                                      "analytic_N": float(np.linalg.norm(ref, axis=1).mean())}

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from identify.errors import InputError
+from simulate.machining.closed_form import mean_force_local
 from simulate.machining.cutting import load_material
 from simulate.machining.dexel import TriDexel
 from simulate.machining.tools import make_cutter
@@ -20,23 +21,8 @@ def _mean(F, pts, x0, x1):
 
 
 def altintas(phi_st, phi_ex, mat):
-    """Mean forces per revolution (Altintas, Manufacturing Automation, 2nd ed., eq. 2.xx), N."""
-    Ktc, Krc, Kac = mat.kc
-    Kte, Kre, Kae = mat.ke
-    a, c = A, C
-
-    def fx(p):
-        return N * a * c / (8 * math.pi) * (Ktc * math.cos(2 * p) - Krc * (2 * p - math.sin(2 * p))) \
-            + N * a / (2 * math.pi) * (-Kte * math.sin(p) + Kre * math.cos(p))
-
-    def fy(p):
-        return N * a * c / (8 * math.pi) * (Ktc * (2 * p - math.sin(2 * p)) + Krc * math.cos(2 * p)) \
-            - N * a / (2 * math.pi) * (Kte * math.cos(p) + Kre * math.sin(p))
-
-    def fz(p):
-        return N * a / (2 * math.pi) * (-Kac * c * math.cos(p) + Kae * p)
-
-    return np.array([fx(phi_ex) - fx(phi_st), fy(phi_ex) - fy(phi_st), fz(phi_ex) - fz(phi_st)])
+    """Mean forces per revolution [N] of this file's cut (Altintas, Manufacturing Automation, 2.4)."""
+    return mean_force_local(phi_st, phi_ex, A, C, N, mat.kc, mat.ke)
 
 
 def _slot_run(helpers, stock_lo, stock_hi, y):

@@ -25,6 +25,7 @@ import math
 import numpy as np
 import pytest
 
+from simulate.machining import closed_form
 from simulate.machining.cutting import load_material
 from simulate.machining.dexel import ConvexSolid, TriDexel
 from simulate.machining.tools import make_cutter
@@ -39,25 +40,8 @@ STEADY = (R + 3e-3, LENGTH - 3e-3)     # path coordinate window of steady cuttin
 
 
 def mean_force_local(phi_st, phi_ex, a, mat):
-    """Altintas' revolution-mean force [N] (feed along local x, teeth entering at phi = 0 on local +y).
-
-    Returns (Fx, Fy, |Fz|): ``N a/(2 pi) * integral over [phi_st, phi_ex]`` of the elemental forces
-    ``dFx = -ft cos(phi) - fr sin(phi)``, ``dFy = ft sin(phi) - fr cos(phi)``, ``dFz = fa``."""
-    Ktc, Krc, Kac = mat.kc
-    Kte, Kre, Kae = mat.ke
-
-    def fx(p):
-        return N * a * C / (8 * math.pi) * (Ktc * math.cos(2 * p) - Krc * (2 * p - math.sin(2 * p))) \
-            + N * a / (2 * math.pi) * (-Kte * math.sin(p) + Kre * math.cos(p))
-
-    def fy(p):
-        return N * a * C / (8 * math.pi) * (Ktc * (2 * p - math.sin(2 * p)) + Krc * math.cos(2 * p)) \
-            - N * a / (2 * math.pi) * (Kte * math.cos(p) + Kre * math.sin(p))
-
-    def fz(p):
-        return N * a / (2 * math.pi) * (-Kac * C * math.cos(p) + Kae * p)
-
-    return np.array([fx(phi_ex) - fx(phi_st), fy(phi_ex) - fy(phi_st), fz(phi_ex) - fz(phi_st)])
+    """Altintas' revolution-mean force [N] of this file's cutter and feed (feed along local x)."""
+    return closed_form.mean_force_local(phi_st, phi_ex, a, C, N, mat.kc, mat.ke)
 
 
 def peak_force_local(phi_st, phi_ex, a, mat, n_phase=1440, dz=1e-6):
