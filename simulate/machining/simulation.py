@@ -599,6 +599,16 @@ def _tick_now():
     return _cycles()
 
 
+@njit(cache=True)
+def _first_order_lag(target, alpha):
+    """``y[0] = 0``, ``y[k] = y[k-1] + alpha[k-1] (target[k] - y[k-1])``: the loop's lag of the static
+    deflection, step by step (``alpha`` may vary with the cycle time)."""
+    y = np.zeros_like(target)
+    for k in range(1, target.shape[0]):
+        y[k] = y[k - 1] + alpha[k - 1] * (target[k] - y[k - 1])
+    return y
+
+
 def attribute_gear_windup(steps: StepTable, drive, time_constant: float) -> None:
     """Move the gears' quasi-static windup under the process force from the tracking error to the
     deflection column of ``steps`` (in place); their sum, the tool offset, is unchanged.
@@ -626,9 +636,7 @@ def attribute_gear_windup(steps: StepTable, drive, time_constant: float) -> None
     target = -np.einsum("nij,nj->ni", drive.jac, dq)
     dt = np.diff(steps.t)
     alpha = 1.0 - np.exp(-dt / time_constant) if time_constant > 0.0 else np.ones_like(dt)
-    gear = np.zeros_like(target)
-    for k in range(1, n):   # the loop's lag, step by step (as the static deflection)
-        gear[k] = gear[k - 1] + alpha[k - 1] * (target[k] - gear[k - 1])
+    gear = _first_order_lag(np.ascontiguousarray(target), np.ascontiguousarray(alpha, dtype=float))
     steps.deflection[:] += gear
     steps.tracking_error[1:] -= gear[:-1]
 

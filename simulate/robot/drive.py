@@ -448,15 +448,21 @@ def linear_modes(p: DriveParams, jl: float, j: int) -> list[tuple[float, float]]
                   for e in ev if e.imag >= 0.0)
 
 
+@njit(cache=True)
+def _twist_rows(c, t1, p1, tau):
+    out = np.empty_like(tau)
+    for i in range(tau.shape[0]):
+        for j in range(tau.shape[1]):
+            out[i, j] = elastic_twist(c[j], t1[j], p1[j], tau[i, j])
+    return out
+
+
 def elastic_twist_array(p: DriveParams, tau) -> np.ndarray:
     """:func:`elastic_twist` of each joint's gear for static torques ``tau`` [Nm] (..., 6): twist [rad]."""
     tau = np.asarray(tau, float)
-    a = np.abs(tau)
-    t1, p1, c = p.t1, p.p1, p.c
-    with np.errstate(divide="ignore", invalid="ignore"):
-        soft = np.where(t1 > 0, a * p1 / np.where(t1 > 0, t1, 1.0), 0.0)
-    x = np.where((t1 > 0) & (a <= t1), soft, p1 + (a - t1) / c)
-    return np.sign(tau) * x
+    rows = np.ascontiguousarray(tau.reshape(-1, N_AXES))
+    c, t1, p1 = (np.ascontiguousarray(np.broadcast_to(np.asarray(v, float), (N_AXES,))) for v in (p.c, p.t1, p.p1))
+    return _twist_rows(c, t1, p1, rows).reshape(tau.shape)
 
 
 def as_substeps(substeps) -> np.ndarray:

@@ -78,6 +78,10 @@ def _edit(src: Path, dst: Path, old: str, new: str, count: int = 1) -> Path:
 @pytest.mark.parametrize("old,new,field", [
     ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = -1.0       #", "joint[3].stiffness"),
     ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = \"stiff\"   #", "joint[3].stiffness"),
+    ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = 1.0e6 # Nm/rad\nlink_stiffness = 0.0 # Nm/rad",
+     "joint[3].link_stiffness"),
+    ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = 1.0e6 # Nm/rad\nlink_stiffness = \"nan\" # Nm/rad",
+     "joint[3].link_stiffness"),
     ("gear_ratio = 120.0      # assumed", "", "joint[3].gear_ratio"),
     ("com = [0.03, -0.02, -0.05]", "com = [0.03, -0.02]", "joint[3].com"),
     ("inertia = [[6.0, 0.0, 0.1], [0.0, 6.0, 0.0], [0.1, 0.0, 4.0]]",
