@@ -5,6 +5,7 @@ worker process has its own temporary folders (``tmp_path_factory``), MLflow stor
 (``free_port``) and environment, and its share of the cores for its thread pools.
 """
 import os
+from pathlib import Path
 
 import pytest
 
@@ -126,3 +127,13 @@ def few_epoch_models(tmp_path_factory):
         return shutil.copytree(saved[kind], folder)
 
     return copy
+
+
+#: The drive model's closed-form test robot: joint-side friction, a linear gear beyond its play
+#: (``tests/data/max100_joint_friction.toml``, its header says why).
+JOINT_FRICTION_ROBOT = Path(__file__).resolve().parent / "data" / "max100_joint_friction.toml"
+
+
+@pytest.fixture(scope="session")
+def joint_friction_robot_path():
+    return JOINT_FRICTION_ROBOT

@@ -126,11 +126,11 @@ def apply(robot: Robot, cause: Cause, theta) -> Robot:
         c = 1.0 / robot.stiffness[i] + th
         k = robot.stiffness.copy()
         k[i] = 1.0 / max(c, 0.02 / robot.stiffness[i])  # at most 50 x stiffer: keeps k finite
-        return robot.with_changes(stiffness=k)
+        return robot.with_gear(stiffness=k)
     if cause.kind == "backlash":
         b = robot.backlash.copy()
         b[i] = max(0.0, b[i] + th)
-        return robot.with_changes(backlash=b)
+        return robot.with_gear(backlash=b)
     if cause.kind == "friction":
         fr = list(robot.friction)
         fr[i] = scale_friction(fr[i], max(0.05, 1.0 + th))

@@ -336,6 +336,20 @@ class Robot:
         _validate(new, source=self.source or "<robot>")
         return new
 
+    def with_gear(self, *, stiffness=None, backlash=None) -> Robot:
+        """A copy with new gear rigidity [Nm/rad] and/or play [rad] (arrays (6,)), each gear's
+        catalogue curve kept whole: a softer gear's soft zone widens as its rigidity (the elastic
+        twist scales with the compliance, so the soft-zone slope keeps its ratio to the rigidity),
+        and a wider play adds to the lost motion, which includes it. A joint without a soft zone
+        only takes the new values. (``with_changes`` replaces fields as given and checks them.)"""
+        k = self.stiffness if stiffness is None else np.asarray(stiffness, float)
+        b = self.backlash if backlash is None else np.asarray(backlash, float)
+        lm = self.drive.lost_motion.copy()
+        soft = lm > 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lm[soft] = b[soft] + (lm[soft] - self.backlash[soft]) * self.stiffness[soft] / k[soft]
+        return self.with_changes(stiffness=k, backlash=b, drive=dataclasses.replace(self.drive, lost_motion=lm))
+
     def equals(self, other: Robot) -> bool:
         """True when every value (arrays exactly) equals ``other``'s, ignoring ``source``."""
         return _as_dict(self) == _as_dict(other)

@@ -21,7 +21,13 @@ JL = np.array([650.0, 480.0, 137.0, 1.25, 4.0, 0.065])   # kg m^2, link inertias
 
 
 @pytest.fixture(scope="module")
-def robot():
+def robot(joint_friction_robot_path):
+    """The test robot whose friction acts on the joint side (so it passes the gear)."""
+    return load_robot(joint_friction_robot_path)
+
+
+@pytest.fixture(scope="module")
+def shipped():
     from pathlib import Path
 
     return load_robot(Path(__file__).resolve().parents[2] / "data" / "robots" / "max100.toml")
@@ -66,6 +72,19 @@ def test_predicted_torque_is_inertia_gravity_and_friction(robot):
     v = 0.02 * math.pi / 2
     f = (60.0 + 20.0 * math.exp(-(v / 0.05) ** 2)) + 40.0 * v   # robot file's joint-1 LuGre curve
     assert tau[k, 0] == pytest.approx(f, rel=1e-3)
+
+
+def test_motor_side_friction_does_not_load_the_gear(shipped):
+    """The shipped robot's friction acts on the motor: the gear carries only J_l q_dd + the model load,
+    so at A1's full speed (zero acceleration, no gravity about a vertical axis) it carries nothing."""
+    t = np.arange(0.0, 4.0 + T / 2, T)
+    q = np.tile(HOME_Q, (len(t), 1))
+    q[:, 0] += -0.02 * np.cos(math.pi / 2 * t)
+    tau = predicted_gear_torque(shipped, t, q)
+    k = np.argmin(np.abs(t - 1.0))
+    assert abs(tau[k, 0]) < 1e-3 * shipped.friction[0].lugre.fc
+    # inertia only: J_l A w^2 = 650 kg m^2 x 0.02 rad x (pi/2 1/s)^2 = 32 Nm at the turning points
+    assert np.max(np.abs(tau[:, 0])) == pytest.approx(JL[0] * 0.02 * (math.pi / 2) ** 2, rel=0.05)
 
 
 def test_drive_loses_no_play_with_the_compensation(robot):

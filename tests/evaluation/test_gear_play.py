@@ -13,7 +13,8 @@ import pytest
 from simulate.compensation.report import gears_rattling, report_text
 from simulate.evaluation.gear_play import GearPlay, gear_play, program_sections, rattling_gears
 
-ROBOT = Path(__file__).resolve().parents[2] / "data" / "robots" / "max100.toml"
+#: joint-side friction, so the gear carries it (tests/data/max100_joint_friction.toml)
+ROBOT = Path(__file__).resolve().parents[2] / "tests" / "data" / "max100_joint_friction.toml"
 PROGRAM = """%
 (test piece)
 (tool T1)

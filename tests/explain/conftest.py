@@ -48,9 +48,9 @@ def hidden_robot(robot, kind: str, axis: int, value: float):
     tool radius + value [m]."""
     i = axis - 1
     if kind == "stiffness":
-        return robot.with_changes(stiffness=robot.stiffness * np.where(np.arange(6) == i, value, 1.0))
+        return robot.with_gear(stiffness=robot.stiffness * np.where(np.arange(6) == i, value, 1.0))
     if kind == "backlash":
-        return robot.with_changes(backlash=robot.backlash + np.where(np.arange(6) == i, value, 0.0))
+        return robot.with_gear(backlash=robot.backlash + np.where(np.arange(6) == i, value, 0.0))
     if kind == "friction":
         fr = list(robot.friction)
         fr[i] = scale_friction(fr[i], value)

@@ -122,7 +122,7 @@ def test_square_wall_error_scales_inversely_with_stiffness(tmp_path):
     jt = joint_trajectory(robot, interpolate(read_program(prog)), placement)
     err_y, err_x = {}, {}
     for scale in (1.0, 0.5):
-        rob = robot.with_changes(stiffness=np.asarray(robot.stiffness) * scale)
+        rob = robot.with_gear(stiffness=np.asarray(robot.stiffness) * scale)
         C = workpiece_compliance(rob, jt.q, placement.T[:3, :3])
         wp = TriDexel.from_stock_file(STOCK, 1e-3)
         res = simulate_machining(wp, make_cutter("flat", 0.010), jt.t, jt.line, jt.xyz, load_material("Al7075"),

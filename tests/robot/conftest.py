@@ -64,3 +64,12 @@ def make_pin_model():
     """The builder :func:`pinocchio_model` (skips when pinocchio is missing)."""
     pytest.importorskip("pinocchio")
     return pinocchio_model
+
+
+def linear_gear(robot):
+    """``robot`` without the catalogue soft zone: the gear is linear beyond its play (the linear
+    closed forms' gear; the soft zone's own law is tested in test_gear_law.py)."""
+    import dataclasses
+
+    z = np.zeros(6)
+    return robot.with_changes(drive=dataclasses.replace(robot.drive, lost_motion=z, lost_motion_torque=z))

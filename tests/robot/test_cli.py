@@ -86,10 +86,10 @@ def test_bad_joint_file_and_bad_robot_exit_2(robot_path, joints, tmp_path):
     r = _run("robot", "fk", "--in", p, "--out", tmp_path / "o.csv")
     assert r.exit_code == 2 and "'q6'" in r.stderr
     bad_robot = tmp_path / "bad_robot.toml"
-    bad_robot.write_text(robot_path.read_text().replace("backlash = 2.0e-4       # rad, assumed",
+    bad_robot.write_text(robot_path.read_text().replace("backlash = 1.0e-4       # rad,",
                                                         "backlash = -1.0 #", 1))
     r = _run("robot", "fk", "--robot", bad_robot, "--in", joints[0], "--out", tmp_path / "o.csv")
-    assert r.exit_code == 2 and str(bad_robot) in r.stderr and "joint[4].backlash" in r.stderr
+    assert r.exit_code == 2 and str(bad_robot) in r.stderr and "joint[1].backlash" in r.stderr
     r = _run("robot", "fk", "--robot", "nosuchrobot", "--in", joints[0], "--out", tmp_path / "o.csv")
     assert r.exit_code == 2 and "unknown robot" in r.stderr
     r = _run("robot", "ik", "--in", joints[0], "--out", tmp_path / "o.csv", "--q-start", "1,2,3")

@@ -19,8 +19,17 @@ from simulate.robot.friction import loop_friction
 from simulate.robot.kinematics import fk
 from simulate.robot.stiffness import Compliance
 
+from .conftest import linear_gear
+
 Q_HELD = np.array([0.3, 0.55, -0.25, 0.4, 0.9, -0.2])   # rad, a reachable pose away from singularities
 FORCE = np.array([150.0, -90.0, 120.0])                # N on the tool, base (= workpiece) frame
+
+
+@pytest.fixture(scope="module")
+def robot(robot):
+    """The shipped robot with a linear gear beyond the play (no catalogue soft zone): the closed form
+    ``J K^-1 J^T F`` is the linear one."""
+    return linear_gear(robot)
 
 
 def _pin_jacobian(make_pin_model, robot, q):

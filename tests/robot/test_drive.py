@@ -29,6 +29,20 @@ JL = np.array([650.0, 480.0, 137.0, 1.25, 4.0, 0.065])   # kg m^2, link inertias
 FF = DriveFlags.FF_VEL | DriveFlags.FF_TAU | DriveFlags.WINDUP
 
 
+# The closed forms below are written for joint-side friction and a linear gear beyond the play:
+# the test robot with that physics (tests/data/max100_joint_friction.toml).
+@pytest.fixture(scope="module")
+def robot_path(joint_friction_robot_path):
+    return joint_friction_robot_path
+
+
+@pytest.fixture(scope="module")
+def robot(robot_path):
+    from simulate.robot.model import load_robot
+
+    return load_robot(robot_path)
+
+
 def coulomb(p: DriveParams, fc, side=FrictionSide.JOINT, s0=1e7, jl=JL, vs=1e-4):
     """Drive parameters with friction on ``side`` and pure Coulomb LuGre friction fc [Nm] (fs = fc, no
     viscous part, stiff bristles: pre-sliding fc/s0 negligible, bristle mode damped at ratio 0.5)."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from simulate.machining.simulation import loop_drive, simulate_machining
 from simulate.robot.drive import DriveFlags, simulate_drive
@@ -18,6 +19,19 @@ from simulate.robot.kinematics import fk
 from simulate.toolpath.placement import HOME_Q
 
 T = 0.002
+
+
+# The loop against the drive model alone: the test robot with joint-side friction and a linear gear.
+@pytest.fixture(scope="module")
+def robot_path(joint_friction_robot_path):
+    return joint_friction_robot_path
+
+
+@pytest.fixture(scope="module")
+def robot(robot_path):
+    from simulate.robot.model import load_robot
+
+    return load_robot(robot_path)
 
 
 def _run_loop(robot, t, q, flags):

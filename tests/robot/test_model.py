@@ -19,7 +19,11 @@ def test_max100_loads_with_units_and_values(robot, robot_path):
         assert getattr(robot, key).shape == (6,)
     assert robot.com.shape == (6, 3) and robot.inertia.shape == (6, 3, 3)
     assert 700 < robot.mass.sum() < 1200          # about 1 t arm
-    assert np.all(robot.stiffness[:3] >= 1e6) and np.all(robot.stiffness[3:] < 1e6)
+    # the KR 500's joint stiffness by modal analysis (docs/robot-parameters.md)
+    np.testing.assert_array_equal(robot.stiffness, [2.3e6, 8.6e6, 2.8e6, 3.0e6, 0.2e6, 0.9e6])
+    np.testing.assert_allclose(robot.gear_ratio * [7, 7, 3, 55, 483, 49400],
+                               [1798, 1872, 754, 10387, 91834, 6485103], rtol=1e-6)   # KR 120 R3900 $RAT_MOT_AX
+    assert np.all(robot.drive.friction_side == 1)   # identified from motor current
     t = robot.tool
     assert t.type == "flat" and t.diameter == 0.010 and t.flutes == 3 and t.corner_radius == 0.0
     assert t.helix == pytest.approx(np.radians(30))
@@ -50,9 +54,16 @@ def test_save_load_round_trip_is_identical(robot, tmp_path):
     assert np.array_equal(again.tool.T_flange_tcp, robot.tool.T_flange_tcp)
 
 
-def test_with_changes_halves_stiffness_and_adds_backlash(robot, tmp_path):
-    soft = robot.with_changes(stiffness=robot.stiffness * 0.5, backlash=robot.backlash + 1e-3)
+def test_with_gear_halves_stiffness_and_adds_backlash(robot, tmp_path):
+    soft = robot.with_gear(stiffness=robot.stiffness * 0.5, backlash=robot.backlash + 1e-3)
     assert np.array_equal(soft.stiffness, robot.stiffness * 0.5)
+    # the catalogue curve stays whole: the play adds to the lost motion, the soft zone's twist doubles
+    lm, b = robot.drive.lost_motion, robot.backlash
+    assert np.all(lm > b)
+    np.testing.assert_allclose(soft.drive.lost_motion, b + 1e-3 + 2.0 * (lm - b), rtol=1e-12)
+    with pytest.raises(InputError) as ei:   # the play alone, beyond the lost motion that includes it
+        robot.with_changes(backlash=robot.backlash + 1e-3)
+    assert ei.value.field == "joint[1].drive.lost_motion"
     assert np.array_equal(robot.stiffness, load_robot(robot.source).stiffness)   # original unchanged
     assert load_robot(save_robot(soft, tmp_path / "soft.toml")).equals(soft)
     with pytest.raises(InputError) as ei:
@@ -76,19 +87,17 @@ def _edit(src: Path, dst: Path, old: str, new: str, count: int = 1) -> Path:
 
 
 @pytest.mark.parametrize("old,new,field", [
-    ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = -1.0       #", "joint[3].stiffness"),
-    ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = \"stiff\"   #", "joint[3].stiffness"),
-    ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = 1.0e6 # Nm/rad\nlink_stiffness = 0.0 # Nm/rad",
-     "joint[3].link_stiffness"),
-    ("stiffness = 1.0e6       # Nm/rad, assumed", "stiffness = 1.0e6 # Nm/rad\nlink_stiffness = \"nan\" # Nm/rad",
-     "joint[3].link_stiffness"),
-    ("gear_ratio = 120.0      # assumed", "", "joint[3].gear_ratio"),
+    ("stiffness = 2.80e+06", "stiffness = -1.0 #", "joint[3].stiffness"),
+    ("stiffness = 2.80e+06", "stiffness = \"stiff\" #", "joint[3].stiffness"),
+    ("stiffness = 2.80e+06", "link_stiffness = 0.0 # Nm/rad\nstiffness = 2.80e+06", "joint[3].link_stiffness"),
+    ("stiffness = 2.80e+06", "link_stiffness = \"nan\" # Nm/rad\nstiffness = 2.80e+06", "joint[3].link_stiffness"),
+    ("gear_ratio = 251.333333", "#", "joint[3].gear_ratio"),
     ("com = [0.03, -0.02, -0.05]", "com = [0.03, -0.02]", "joint[3].com"),
     ("inertia = [[6.0, 0.0, 0.1], [0.0, 6.0, 0.0], [0.1, 0.0, 4.0]]",
      "inertia = [[6.0, 0.0, 0.5], [0.0, 6.0, 0.0], [0.1, 0.0, 4.0]]", "joint[3].inertia"),
     ("upper = 2.7052603", "upper = -3.0", "joint[3].upper"),
-    ("kv = 40.0               # 1/s\nkp_vel = 3.0e4", "kv = 0.0 # 1/s\nkp_vel = 3.0e4", "joint[3].servo.kv"),
-    ("fs = 55.0               # Nm", "fs = 5.0 # Nm", "joint[3].friction.fs"),
+    ("kv = 40.0               # 1/s\nkp_vel = 1.316e+05", "kv = 0.0 # 1/s\nkp_vel = 1.316e+05", "joint[3].servo.kv"),
+    ("fs = 719.2               # Nm, static level: A1's x 1", "fs = 5.0 # Nm", "joint[3].friction.fs"),
     ("diameter = 0.010", "diameter = 0.0", "tool.diameter"),
     ("flutes = 3 ", "flutes = 2.5 ", "tool.flutes"),
 ])

@@ -7,12 +7,14 @@ import pytest
 from simulate.robot.kinematics import fk, jacobian
 from simulate.robot.stiffness import cartesian_compliance, deflection
 
+from .conftest import linear_gear
+
 
 @pytest.fixture(scope="module")
 def two_joint(robot):
     """Only joints 2 and 3 compliant (the others rigid: stiffness inf), at q = 0 (arm upright)."""
     k = np.array([np.inf, 2.0e6, 5.0e5, np.inf, np.inf, np.inf])
-    return robot.with_changes(stiffness=k)
+    return linear_gear(robot).with_changes(stiffness=k)
 
 
 def test_two_joint_hand_calculation(two_joint):
