@@ -22,6 +22,9 @@ Supported words
   program end. Nothing but blank lines and comments may follow the end.
 - Comments ``( ... )`` and ``; ...``, line numbers ``N...``, ``%`` tape marks on their own line.
 
+Files are UTF-8 (with or without byte order mark) or, when not valid UTF-8, Latin-1
+(:func:`decode_program`); an error message shows an invisible character by its code point.
+
 Everything else (``G41``, ``M8``, ``A``, ``P``, ...) is refused by name with an
 :class:`~identify.errors.InputError` that carries file, 1-based line and 1-based column.
 """
@@ -46,6 +49,7 @@ _SUPPORTED_G = {0, 1, 2, 3, 17, 18, 19, 20, 21, 61, 64, 90, 91, 94}
 _SUPPORTED_M = {2, 3, 5, 6, 30}
 _VALUE_WORDS = set("XYZIJKRFSTN")
 
+_LETTERS = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZ")
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)")
 
 
@@ -177,15 +181,65 @@ class Program:
 
 
 def read_program(path: str | Path, *, arc_tolerance: float = 2e-6) -> Program:
-    """Read a G-code file. See :func:`parse_program`."""
+    """Read a G-code file. See :func:`parse_program`.
+
+    Encodings: UTF-8 with or without a byte order mark; a file that is not valid UTF-8 is read as
+    Latin-1 (ISO 8859-1, what older posts and editors write into comments: every byte is a
+    character there). A file with a NUL byte or a UTF-16/32 byte order mark is not a text program.
+    """
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8", errors="strict")
+        data = p.read_bytes()
     except FileNotFoundError:
         raise InputError("program file not found", source=str(p)) from None
-    except UnicodeDecodeError as exc:
-        raise InputError(f"not a text file ({exc.reason})", source=str(p)) from None
-    return parse_program(text, source=str(p), arc_tolerance=arc_tolerance)
+    except IsADirectoryError:
+        raise InputError("program path is a directory, not a file", source=str(p)) from None
+    return parse_program(decode_program(data, source=str(p)), source=str(p), arc_tolerance=arc_tolerance)
+
+
+_UTF8_BOM = b"\xef\xbb\xbf"
+_WIDE_BOMS = {b"\xff\xfe\x00\x00": "UTF-32", b"\x00\x00\xfe\xff": "UTF-32", b"\xff\xfe": "UTF-16",
+              b"\xfe\xff": "UTF-16"}
+
+
+def decode_program(data: bytes, *, source: str = "<program>") -> str:
+    """Program text from file bytes: UTF-8 (a leading byte order mark dropped), else Latin-1.
+
+    Raises
+    ------
+    InputError
+        For a UTF-16/32 file or one with a NUL byte ("not a text file", with line and column of the
+        first NUL byte).
+    """
+    for bom, name in _WIDE_BOMS.items():
+        if data.startswith(bom):
+            raise InputError(f"not a text file ({name} byte order mark: save the program as UTF-8)",
+                             source=source)
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        before = data[:nul]
+        line = before.count(b"\n") + 1
+        column = nul - (before.rfind(b"\n") + 1) + 1
+        raise InputError("not a text file (NUL byte)", source=source, line=line, column=column)
+    if data.startswith(_UTF8_BOM):
+        data = data[len(_UTF8_BOM):]
+    try:
+        return data.decode("utf-8", errors="strict")
+    except UnicodeDecodeError:
+        # Latin-1 maps every byte to one character: comments written by older posts stay readable
+        return data.decode("latin-1")
+
+
+def _visible(ch: str) -> str:
+    """A character as an error message can show it: invisible ones (BOM, zero-width space, control
+    characters) as their code point."""
+    return ch if ch.isprintable() else f"U+{ord(ch):04X}"
+
+
+def _lines(text: str) -> list[str]:
+    """Program lines split at LF, CR LF or CR only (``str.splitlines`` would also split at NEL,
+    U+0085, which is a Latin-1 comment byte, and so shift the line numbers)."""
+    return re.split(r"\r\n|\r|\n", text)
 
 
 def _strip_comments(raw: str, source: str, lineno: int) -> list[tuple[int, str]]:
@@ -223,8 +277,9 @@ def _words(raw: str, source: str, lineno: int) -> list[tuple[str, float, str, in
     while i < len(text):
         letter = text[i].upper()
         col = cols[i]
-        if not letter.isalpha():
-            raise InputError(f"expected a word letter, found '{text[i]}'", source=source, line=lineno, column=col)
+        if letter not in _LETTERS:
+            raise InputError(f"expected a word letter, found '{_visible(text[i])}'", source=source, line=lineno,
+                             column=col)
         m = _NUMBER.match(text, i + 1)
         if m is None:
             raise InputError(f"word '{letter}' has no number", source=source, line=lineno, column=col)
@@ -270,7 +325,9 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
     segments: list[Segment] = []
     ended_at: int | None = None
 
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    if text.startswith("\ufeff"):
+        text = text[1:]  # a byte order mark left in by a decoder (the service receives text)
+    for lineno, raw in enumerate(_lines(text), start=1):
         stripped = raw.strip()
         if stripped == "%":
             continue
