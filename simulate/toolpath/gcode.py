@@ -8,25 +8,37 @@ Supported words
 ---------------
 - ``G0`` rapid, ``G1`` linear feed, ``G2``/``G3`` arcs (clockwise / counter-clockwise seen from the
   positive end of the plane normal, i.e. ``G3`` is a positive rotation about the normal by the
-  right-hand rule) with centre offsets ``I J K`` (incremental from the start point, the usual
-  ``G91.1`` convention) or radius ``R`` (``R < 0`` selects the arc longer than 180 deg).
-  A linear move along the plane normal during ``G2``/``G3`` gives a helix.
+  right-hand rule) with centre ``I J K`` or radius ``R`` (``R < 0`` selects the arc longer than
+  180 deg). ``I J K`` are incremental from the start point under ``G91.1`` (the default) and
+  absolute coordinates under ``G90.1``. A linear move along the plane normal during ``G2``/``G3``
+  gives a helix.
 - ``G17``/``G18``/``G19`` plane XY (normal +z) / ZX (normal +y) / YZ (normal +x).
 - ``G90``/``G91`` absolute / incremental coordinates; ``G20``/``G21`` inch / mm; ``G94`` feed per
   minute (the only feed mode, accepted as a no-op).
 - ``G61`` exact path (the default) / ``G64`` continuous-path blending, modal: under ``G64`` the
   interpolator carries speed and acceleration across junctions that need no slow-down
   (:mod:`simulate.toolpath.interpolation`); the path itself stays exactly as programmed.
+  ``G64 P`` (blending tolerance, length unit) is recorded on the segments (``blend_tolerance``):
+  the interpolator has no tolerance setting because it never leaves the path.
+- ``G40`` (cutter compensation off), ``G49`` (tool length offset off) and ``G80`` (canned cycle
+  off: no motion mode until the next ``G0``-``G3``) as the safety line of a post writes them.
 - ``F`` feed in length unit per minute, ``S`` spindle speed in rev/min, ``T`` tool number.
-- ``M3`` spindle on (clockwise), ``M5`` spindle off, ``M6`` tool change (no motion), ``M2``/``M30``
-  program end. Nothing but blank lines and comments may follow the end.
-- Comments ``( ... )`` and ``; ...``, line numbers ``N...``, ``%`` tape marks on their own line.
+- ``M3``/``M4`` spindle on clockwise / counter-clockwise (``spindle_ccw``), ``M5`` spindle off,
+  ``M6`` tool change, ``M7``/``M8``/``M9`` coolant, ``M0``/``M1`` stops: none moves the tool.
+  ``M2``/``M30`` program end; nothing but blank lines and comments may follow the end.
+- Rotary words ``A B C`` only at 0 (posts write ``A0.`` on 3-axis programs); any other value is
+  refused.
+- Comments ``( ... )`` and ``; ...``, line numbers ``N...`` (named in error messages as the block),
+  an ``O`` program number alone on its line, ``%`` tape marks on their own line.
 
 Files are UTF-8 (with or without byte order mark) or, when not valid UTF-8, Latin-1
 (:func:`decode_program`); an error message shows an invisible character by its code point.
 
-Everything else (``G41``, ``M8``, ``A``, ``P``, ...) is refused by name with an
-:class:`~identify.errors.InputError` that carries file, 1-based line and 1-based column.
+Everything else (``G41``/``G42`` cutter compensation, ``G15``/``G16`` polar coordinates, ``G65``
+and ``M98`` macro and subprogram calls, ``#`` parameters, ``[...]`` expressions, o-word control flow
+such as ``o100 if``, other G codes and canned cycles) is refused in one line that names the word and
+says it is not supported, as an :class:`~identify.errors.InputError` that carries file, 1-based line
+and 1-based column.
 """
 from __future__ import annotations
 
@@ -34,6 +46,7 @@ import math
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,9 +58,6 @@ _UNIT_M = {20: 0.0254, 21: 1e-3}
 _PLANES = {17: ((0, 1), 2), 18: ((2, 0), 1), 19: ((1, 2), 0)}
 _CENTRE_WORD = {0: "I", 1: "J", 2: "K"}
 
-_SUPPORTED_G = {0, 1, 2, 3, 17, 18, 19, 20, 21, 61, 64, 90, 91, 94}
-_SUPPORTED_M = {2, 3, 5, 6, 30}
-_VALUE_WORDS = set("XYZIJKRFSTN")
 
 _LETTERS = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZ")
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)")
@@ -73,6 +83,14 @@ class Linear:
         Active tool number (``T``), 0 if none was selected.
     blend : bool
         ``G64`` (continuous-path blending) was active for this move; ``False`` under ``G61``.
+
+    blend_tolerance : float
+        m, the ``G64 P`` tolerance in force (0 when none was given or under ``G61``). The
+        interpolator never rounds a corner (it blends only junctions it can pass on the exact path),
+        so the path deviation is 0 and always within this tolerance; it is kept for the record.
+    spindle_ccw : bool
+        The spindle turns counter-clockwise (``M4``); ``False`` for ``M3`` or a stopped spindle.
+        ``spindle`` stays a positive speed either way.
     """
 
     start: np.ndarray
@@ -83,6 +101,8 @@ class Linear:
     spindle: float = 0.0
     tool: int = 0
     blend: bool = False
+    blend_tolerance: float = 0.0
+    spindle_ccw: bool = False
 
     @property
     def length(self) -> float:
@@ -117,6 +137,14 @@ class Arc:
         Active tool number.
     blend : bool
         ``G64`` was active for this move.
+
+    blend_tolerance : float
+        m, the ``G64 P`` tolerance in force (0 when none was given or under ``G61``). The
+        interpolator never rounds a corner (it blends only junctions it can pass on the exact path),
+        so the path deviation is 0 and always within this tolerance; it is kept for the record.
+    spindle_ccw : bool
+        The spindle turns counter-clockwise (``M4``); ``False`` for ``M3`` or a stopped spindle.
+        ``spindle`` stays a positive speed either way.
     """
 
     start: np.ndarray
@@ -130,6 +158,8 @@ class Arc:
     spindle: float = 0.0
     tool: int = 0
     blend: bool = False
+    blend_tolerance: float = 0.0
+    spindle_ccw: bool = False
 
     @property
     def rise(self) -> float:
@@ -267,11 +297,37 @@ def _strip_comments(raw: str, source: str, lineno: int) -> list[tuple[int, str]]
     return kept
 
 
+_O_KEYWORDS = ("endsub", "sub", "call", "endif", "elseif", "else", "if", "endwhile", "while", "do", "endrepeat",
+               "repeat", "return", "break", "continue")
+_O_WORD_FLOW = re.compile(r"[oO](<[^>]*>|\d+)(" + "|".join(_O_KEYWORDS) + r")(?![a-zA-Z])", re.IGNORECASE)
+_PARAMETER = re.compile(r"#(<[^>]*>|\d+)?")
+
+
 def _words(raw: str, source: str, lineno: int) -> list[tuple[str, float, str, int]]:
-    """Split one line into (letter, value, text, column) words."""
+    """Split one line into (letter, value, text, column) words.
+
+    LinuxCNC o-word control flow (``o100 if``, ``o<name> call``), ``#`` parameters and ``[...]``
+    expressions are refused here by name: this reader executes no program logic.
+    """
     chars = [(c, ch) for c, ch in _strip_comments(raw, source, lineno) if not ch.isspace()]
     text = "".join(ch for _, ch in chars)
     cols = [c for c, _ in chars]
+
+    def refuse(msg: str, i: int) -> InputError:
+        return InputError(msg, source=source, line=lineno, column=cols[i])
+
+    flow = _O_WORD_FLOW.match(text)
+    if flow is not None:
+        raise refuse(f"o-word control flow 'o{flow.group(1)} {flow.group(2).lower()}' is not supported "
+                     "(no subroutines, loops or conditions)", 0)
+    hash_at = text.find("#")
+    if hash_at >= 0:
+        m = _PARAMETER.match(text, hash_at)
+        name = m.group(0) if m else "#"
+        raise refuse(f"parameter '{name}' is not supported (no '#' variables)", hash_at)
+    bracket = text.find("[")
+    if bracket >= 0:
+        raise refuse("expression '[...]' is not supported (numbers only)", bracket)
     words = []
     i = 0
     while i < len(text):
@@ -286,6 +342,67 @@ def _words(raw: str, source: str, lineno: int) -> list[tuple[str, float, str, in
         words.append((letter, float(m.group(0)), letter + m.group(0), col))
         i = m.end()
     return words
+
+
+def _code10(value: float) -> int | None:
+    """G/M number in tenths (``G91.1`` -> 911), ``None`` if it has more than one decimal."""
+    c = round(value * 10)
+    return c if abs(value * 10 - c) < 1e-6 and c >= 0 else None
+
+
+def _name(letter: str, code10: int) -> str:
+    return f"{letter}{code10 // 10}" + (f".{code10 % 10}" if code10 % 10 else "")
+
+
+#: G codes (tenths) -> modal group, as in LinuxCNC's groups
+_G_GROUP = {
+    **{c: "motion" for c in (0, 10, 20, 30, 800)},
+    **{c: "plane" for c in (170, 180, 190)},
+    **{c: "units" for c in (200, 210)},
+    **{c: "distance" for c in (900, 910)},
+    **{c: "arc centre" for c in (901, 911)},
+    940: "feed mode",
+    400: "cutter compensation",
+    490: "tool length",
+    **{c: "path mode" for c in (610, 640)},
+}
+#: refused G codes with what they are (the rest: "not supported")
+_G_REFUSED = {
+    410: "cutter radius compensation", 420: "cutter radius compensation",
+    411: "cutter radius compensation", 421: "cutter radius compensation",
+    150: "polar coordinates", 160: "polar coordinates",
+    650: "macro call", 660: "macro call", 670: "macro call",
+    100: "setting offsets from the program", 920: "coordinate system offset",
+    680: "coordinate rotation", 690: "coordinate rotation", 500: "scaling", 510: "scaling",
+    930: "inverse time feed", 950: "feed per revolution", 300: "second reference point return",
+    330: "threading", 50: "splines", 51: "splines", 520: "local coordinate system",
+    **{c: "this canned cycle" for c in (740, 760, 840, 850, 860, 870, 880, 890)},
+}
+#: M codes that do not move the tool: stops, spindle, tool change, coolant, program end
+_M_ACCEPTED = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 30}
+_M_REFUSED = {98: "subprogram call", 99: "subprogram return", 97: "local subprogram call"}
+_ROTARY = "ABC"
+#: letters with a value on a supported line (G, M and the rotary axes are handled apart)
+_VALUE_WORDS = set("XYZIJKRFSTNOPQH")
+
+
+@dataclass
+class _State:
+    """Modal state of the reader between lines (SI units)."""
+
+    unit: float = _UNIT_M[21]
+    absolute: bool = True
+    arc_absolute: bool = False  # G90.1 absolute arc centres; G91.1 (default) incremental
+    plane: int = 17
+    motion: int | None = None   # tenths: 0, 10, 20, 30, or a canned cycle
+    feed: float | None = None   # m/s
+    spindle_rpm: float = 0.0
+    spindle_on: bool = False
+    spindle_ccw: bool = False   # M4
+    tool: int = 0
+    blend: bool = False         # G61 exact path until G64
+    blend_tolerance: float = 0.0  # m, G64 P (0: none given)
+    pos: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float = 2e-6) -> Program:
@@ -312,16 +429,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
     InputError
         With ``source``, ``line`` and ``column`` of the offending word.
     """
-    unit = _UNIT_M[21]
-    absolute = True
-    plane = 17
-    motion: int | None = None
-    feed: float | None = None  # m/s
-    spindle_rpm = 0.0
-    spindle_on = False
-    tool = 0
-    blend = False  # G61 exact path until G64
-    pos = np.zeros(3)
+    st = _State()
     segments: list[Segment] = []
     ended_at: int | None = None
 
@@ -337,24 +445,34 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         if ended_at is not None:
             raise InputError(f"program continues after its end (M2/M30 on line {ended_at})",
                              source=source, line=lineno, column=words[0][3])
+        block = [w for w in words if w[0] == "N"]
 
-        def err(msg: str, col: int, line: int = lineno) -> InputError:
-            return InputError(msg, source=source, line=line, column=col)
+        def err(msg: str, col: int, line: int = lineno, block=block) -> InputError:
+            # the block number as the post printed it helps to find the line in a CAM listing
+            where = f" (block {block[0][2]})" if block else ""
+            return InputError(msg + where, source=source, line=line, column=col)
 
         seen: dict[str, int] = {}
         values: dict[str, float] = {}
         gcodes: list[tuple[int, int]] = []
         mcodes: list[tuple[int, int]] = []
         for letter, value, wtext, col in words:
-            if letter == "G" or letter == "M":
-                if value != int(value) or value < 0:
-                    raise err(f"unsupported word '{wtext}'", col)
-                code = int(value)
-                if letter == "G" and code not in _SUPPORTED_G:
-                    raise err(f"unsupported word 'G{code}'", col)
-                if letter == "M" and code not in _SUPPORTED_M:
-                    raise err(f"unsupported word 'M{code}'", col)
-                (gcodes if letter == "G" else mcodes).append((code, col))
+            if letter in ("G", "M"):
+                code = _code10(value)
+                if code is None:
+                    raise err(f"unsupported word '{wtext}': not supported", col)
+                name = _name(letter, code)
+                if letter == "G" and code not in _G_GROUP:
+                    what = _G_REFUSED.get(code)
+                    raise err(f"unsupported word '{name}': {what or 'this G code'} is not supported", col)
+                if letter == "M" and (code % 10 or code // 10 not in _M_ACCEPTED):
+                    what = _M_REFUSED.get(code // 10) if code % 10 == 0 else None
+                    raise err(f"unsupported word '{name}': {what or 'this M code'} is not supported", col)
+                (gcodes if letter == "G" else mcodes).append((code if letter == "G" else code // 10, col))
+            elif letter in _ROTARY:
+                if value != 0.0:
+                    raise err(f"unsupported word '{wtext}': a rotary axis on this 3-axis reader is only "
+                              f"accepted at 0", col)
             elif letter in _VALUE_WORDS:
                 if letter in seen:
                     raise err(f"word '{letter}' given twice on one line", col)
@@ -362,49 +480,74 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
                     raise err("line number 'N' must be the first word", col)
                 seen[letter] = col
                 values[letter] = value
+            elif letter == "D":
+                raise err(f"unsupported word '{wtext}': cutter compensation offsets are not supported", col)
             else:
-                raise err(f"unsupported word '{wtext}'", col)
+                raise err(f"unsupported word '{wtext}': not supported", col)
+        if "O" in seen:
+            others = [w for w in words if w[0] not in "NO"]
+            if others:
+                raise err("program number 'O' must stand alone on its line", others[0][3])
+            if values["O"] != int(values["O"]) or values["O"] < 0:
+                raise err("program number 'O' must be a non-negative integer", seen["O"])
+            continue
 
         # Modal state first (units, distance mode, plane), as a controller does.
         new_motion = None
         groups: dict[str, int] = {}
         for code, col in gcodes:
-            group = ("motion" if code in (0, 1, 2, 3) else "plane" if code in (17, 18, 19)
-                     else "units" if code in (20, 21) else "distance" if code in (90, 91)
-                     else "path mode" if code in (61, 64) else "feedmode")
+            group = _G_GROUP[code]
             if group in groups:
                 raise err(f"two G words of one modal group ({group}) on one line", col)
             groups[group] = col
-            if code in (20, 21):
-                unit = _UNIT_M[code]
-            elif code in (90, 91):
-                absolute = code == 90
-            elif code in (17, 18, 19):
-                plane = code
-            elif code in (61, 64):
-                blend = code == 64
-            elif code in (0, 1, 2, 3):
+            if code in (200, 210):
+                st.unit = _UNIT_M[code // 10]
+            elif code in (900, 910):
+                st.absolute = code == 900
+            elif code in (901, 911):
+                st.arc_absolute = code == 901
+            elif code in (170, 180, 190):
+                st.plane = code // 10
+            elif code in (610, 640):
+                st.blend = code == 640
+                st.blend_tolerance = 0.0
+            elif group == "motion":
                 new_motion = code
         if new_motion is not None:
-            motion = new_motion
+            st.motion = None if new_motion == 800 else new_motion
 
+        if "P" in values:
+            if "path mode" in groups and st.blend:
+                if values["P"] < 0:
+                    raise err("blending tolerance P must be >= 0", seen["P"])
+                st.blend_tolerance = values["P"] * st.unit
+            else:
+                raise err("word 'P' is only allowed with G64 here", seen["P"])
+        if "Q" in values and not ("path mode" in groups and st.blend):
+            # (G64 Q, LinuxCNC's naive CAM detector, only merges colinear points: the path stays the same)
+            raise err("word 'Q' is only allowed with G64 here", seen["Q"])
+        if "H" in values:
+            raise err("word 'H' is only allowed with G43", seen["H"])
         if "F" in values:
             if values["F"] <= 0:
                 raise err("feed F must be > 0", seen["F"])
-            feed = values["F"] * unit / 60.0
+            st.feed = values["F"] * st.unit / 60.0
         if "S" in values:
             if values["S"] < 0:
                 raise err("spindle speed S must be >= 0", seen["S"])
-            spindle_rpm = values["S"]
+            st.spindle_rpm = values["S"]
         if "T" in values:
             if values["T"] != int(values["T"]) or values["T"] < 0:
                 raise err("tool number T must be a non-negative integer", seen["T"])
-            tool = int(values["T"])
+            st.tool = int(values["T"])
+        spindle_words = [col for code, col in mcodes if code in (3, 4, 5)]
+        if len(spindle_words) > 1:
+            raise err("two spindle words (M3/M4/M5) on one line", spindle_words[1])
         for code, _col in mcodes:
-            if code == 3:
-                spindle_on = True
+            if code in (3, 4):
+                st.spindle_on, st.spindle_ccw = True, code == 4
             elif code == 5:
-                spindle_on = False
+                st.spindle_on = False
             elif code in (2, 30):
                 ended_at = lineno
 
@@ -412,34 +555,42 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         arcw = [k for k in "IJKR" if k in values]
         if not axis and not arcw:
             continue
+        motion = st.motion
         if motion is None:
             first = min(seen[k] for k in axis + arcw)
             raise err("coordinates without a motion mode (G0/G1/G2/G3)", first)
-        if arcw and motion not in (2, 3):
+        if arcw and motion not in (20, 30):
             k = arcw[0]
             raise err(f"word '{k}' is only allowed with G2/G3", seen[k])
+        pos = st.pos
         target = pos.copy()
         for i, k in enumerate("XYZ"):
             if k in values:
-                target[i] = values[k] * unit if absolute else pos[i] + values[k] * unit
-        spindle = spindle_rpm / 60.0 if spindle_on else 0.0
+                target[i] = values[k] * st.unit if st.absolute else pos[i] + values[k] * st.unit
+        spindle = st.spindle_rpm / 60.0 if st.spindle_on else 0.0
         first_col = min(seen[k] for k in axis + arcw)
-        if motion in (1, 2, 3) and feed is None:
+        if motion in (10, 20, 30) and st.feed is None:
             raise err("feed move before any feed rate F was programmed", first_col)
-        if motion in (0, 1):
+        common: dict[str, Any] = dict(line=lineno, spindle=spindle, tool=st.tool, blend=st.blend,
+                      blend_tolerance=st.blend_tolerance if st.blend else 0.0,
+                      spindle_ccw=st.spindle_on and st.spindle_ccw)
+        if motion in (0, 10):
             if np.linalg.norm(target - pos) > 0.0:
-                segments.append(Linear(start=pos.copy(), end=target.copy(), feed=feed if feed else 0.0,
-                                       rapid=motion == 0, line=lineno, spindle=spindle, tool=tool,
-                                       blend=blend))
+                segments.append(Linear(start=pos.copy(), end=target.copy(), feed=st.feed if st.feed else 0.0,
+                                       rapid=motion == 0, **common))
         else:
-            seg = _arc(pos, target, values, seen, motion, plane, unit, feed, lineno, spindle, tool,
-                       arc_tolerance, err)
-            segments.append(replace(seg, blend=blend) if blend else seg)
-        pos = target
+            centre_origin = np.zeros(3) if st.arc_absolute else pos
+            seg = _arc(pos, target, values, seen, motion // 10, st.plane, st.unit, st.feed, lineno, spindle,
+                       st.tool, arc_tolerance, err, centre_origin)
+            segments.append(replace(seg, **common))
+        st.pos = target
     return Program(segments=segments, source=source)
 
 
-def _arc(pos, target, values, seen, motion, plane, unit, feed, lineno, spindle, tool, tol, err) -> Arc:
+def _arc(pos, target, values, seen, motion, plane, unit, feed, lineno, spindle, tool, tol, err,
+         centre_origin) -> Arc:
+    """The arc from ``pos`` to ``target``; ``I J K`` are measured from ``centre_origin`` (the start
+    point under G91.1, the coordinate origin under G90.1)."""
     (a, b), n = _PLANES[plane]
     normal = np.zeros(3)
     normal[n] = 1.0
@@ -480,7 +631,7 @@ def _arc(pos, target, values, seen, motion, plane, unit, feed, lineno, spindle, 
         r = float(np.linalg.norm(p0 - c))
     else:
         off = np.array([values.get(_CENTRE_WORD[a], 0.0), values.get(_CENTRE_WORD[b], 0.0)]) * unit
-        c = p0 + off
+        c = np.array([centre_origin[a], centre_origin[b]]) + off
         r0 = float(np.linalg.norm(p0 - c))
         r1 = float(np.linalg.norm(p1 - c))
         col = min(seen[k] for k in "IJK" if k in seen)
