@@ -10,7 +10,8 @@ Supported words
   positive end of the plane normal, i.e. ``G3`` is a positive rotation about the normal by the
   right-hand rule) with centre ``I J K`` or radius ``R`` (``R < 0`` selects the arc longer than
   180 deg). ``I J K`` are incremental from the start point under ``G91.1`` (the default) and
-  absolute coordinates under ``G90.1``. A linear move along the plane normal during ``G2``/``G3``
+  absolute coordinates under ``G90.1``; start and end may differ in radius within LinuxCNC's
+  tolerance (0.028 mm and 0.1 %, docs/gcode.md). A linear move along the plane normal during ``G2``/``G3``
   gives a helix.
 - ``G17``/``G18``/``G19`` plane XY (normal +z) / ZX (normal +y) / YZ (normal +x).
 - ``G90``/``G91`` absolute / incremental coordinates; ``G20``/``G21`` inch / mm; ``G94`` feed per
@@ -54,6 +55,15 @@ from identify.errors import InputError
 
 #: metres per programmed length unit, keyed by G20 (inch) / G21 (mm)
 _UNIT_M = {20: 0.0254, 21: 1e-3}
+#: LinuxCNC's default centre-format arc tolerances (src/emc/rs274ngc/interp_internal.hh: the radius
+#: mismatch that rounding start, end and centre to 0.01 mm / 0.001 inch can cause, 2 * 0.01 * sqrt 2),
+#: in m; and the relative one (SPIRAL_RELATIVE_TOLERANCE). See docs/gcode.md.
+ARC_TOLERANCE_MM = 2 * 0.01 * math.sqrt(2) * 1e-3
+ARC_TOLERANCE_INCH = 2 * 0.001 * math.sqrt(2) * 0.0254
+ARC_RELATIVE_TOLERANCE = 0.001
+#: m, LinuxCNC RADIUS_TOLERANCE_INCH (0.00005 inch): smallest radius, and how far an R-format radius
+#: may fall short of half the chord
+RADIUS_TOLERANCE = 0.00005 * 0.0254
 #: plane normal (workpiece frame) and the two in-plane axes (indices into xyz) per plane code
 _PLANES = {17: ((0, 1), 2), 18: ((2, 0), 1), 19: ((1, 2), 0)}
 _CENTRE_WORD = {0: "I", 1: "J", 2: "K"}
@@ -210,7 +220,7 @@ class Program:
         return float(sum(s.length for s in self.segments))
 
 
-def read_program(path: str | Path, *, arc_tolerance: float = 2e-6) -> Program:
+def read_program(path: str | Path, *, arc_tolerance: float | None = None) -> Program:
     """Read a G-code file. See :func:`parse_program`.
 
     Encodings: UTF-8 with or without a byte order mark; a file that is not valid UTF-8 is read as
@@ -405,7 +415,7 @@ class _State:
     pos: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
-def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float = 2e-6) -> Program:
+def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float | None = None) -> Program:
     """Parse G-code text into a :class:`Program` (paper 3.1).
 
     Parameters
@@ -414,11 +424,13 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         The program.
     source : str
         Name used in error messages (the file path).
-    arc_tolerance : float
-        m. Start and end of an ``I J K`` arc may differ in distance from the programmed centre by
-        this much plus 1e-5 of the radius (CAM rounding); the centre is then moved onto the
-        perpendicular bisector so both points lie exactly on the circle. Larger mismatches are
-        refused.
+    arc_tolerance : float, optional
+        m. How much the distances of the start and the end of an ``I J K`` arc from the programmed
+        centre may differ (CAM rounding); the difference must also stay within
+        :data:`ARC_RELATIVE_TOLERANCE` of the larger of the two. Default: LinuxCNC's,
+        :data:`ARC_TOLERANCE_MM` in a ``G21`` program, :data:`ARC_TOLERANCE_INCH` under ``G20``
+        (docs/gcode.md). An accepted arc has its centre moved onto the perpendicular bisector
+        of start and end, so both lie exactly on one circle; larger mismatches are refused.
 
     Returns
     -------
@@ -581,10 +593,17 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         else:
             centre_origin = np.zeros(3) if st.arc_absolute else pos
             seg = _arc(pos, target, values, seen, motion // 10, st.plane, st.unit, st.feed, lineno, spindle,
-                       st.tool, arc_tolerance, err, centre_origin)
+                       st.tool, _arc_tolerance(arc_tolerance, st.unit), err, centre_origin)
             segments.append(replace(seg, **common))
         st.pos = target
     return Program(segments=segments, source=source)
+
+
+def _arc_tolerance(given: float | None, unit: float) -> float:
+    """m, the absolute centre-format tolerance in force (LinuxCNC's per length unit by default)."""
+    if given is not None:
+        return given
+    return ARC_TOLERANCE_INCH if unit == _UNIT_M[20] else ARC_TOLERANCE_MM
 
 
 def _arc(pos, target, values, seen, motion, plane, unit, feed, lineno, spindle, tool, tol, err,
@@ -617,7 +636,7 @@ def _arc(pos, target, values, seen, motion, plane, unit, feed, lineno, spindle, 
             raise err("arc with R cannot be a full circle (start = end in the plane)", seen["R"])
         if r == 0.0:
             raise err("arc radius R must not be 0", seen["R"])
-        if d > 2 * r * (1 + 1e-9) + tol:
+        if d / 2 - r > RADIUS_TOLERANCE:
             raise err(f"arc radius R {r * 1e3:.4f} mm is smaller than half the chord {d * 5e2:.4f} mm",
                       seen["R"])
         h = math.sqrt(max(r * r - d * d / 4.0, 0.0))
@@ -635,11 +654,16 @@ def _arc(pos, target, values, seen, motion, plane, unit, feed, lineno, spindle, 
         r0 = float(np.linalg.norm(p0 - c))
         r1 = float(np.linalg.norm(p1 - c))
         col = min(seen[k] for k in "IJK" if k in seen)
-        if r0 == 0.0:
+        if r0 < RADIUS_TOLERANCE:
             raise err("arc centre coincides with the start point (radius 0)", col)
-        if abs(r1 - r0) > tol + 1e-5 * r0:
+        if r1 < RADIUS_TOLERANCE:
+            raise err("arc centre coincides with the end point (radius 0)", col)
+        # LinuxCNC's rule (interp_arc.cc, arc_data_ijk): refused above the absolute OR the relative bound
+        mismatch = abs(r1 - r0)
+        if mismatch > tol or mismatch > ARC_RELATIVE_TOLERANCE * max(r0, r1):
             raise err(f"arc end is not on the circle: start radius {r0 * 1e3:.4f} mm, end radius "
-                      f"{r1 * 1e3:.4f} mm (tolerance {(tol + 1e-5 * r0) * 1e3:.4f} mm)", col)
+                      f"{r1 * 1e3:.4f} mm, difference {mismatch * 1e3:.4f} mm (allowed {tol * 1e3:.4f} mm "
+                      f"and {ARC_RELATIVE_TOLERANCE:.1%} of the radius)", col)
         if d > 0.0:
             # Move the centre onto the chord's bisector so both ends lie exactly on one circle.
             mid = (p0 + p1) / 2.0
