@@ -27,6 +27,12 @@ Supported words
 - ``M3``/``M4`` spindle on clockwise / counter-clockwise (``spindle_ccw``), ``M5`` spindle off,
   ``M6`` tool change, ``M7``/``M8``/``M9`` coolant, ``M0``/``M1`` stops: none moves the tool.
   ``M2``/``M30`` program end; nothing but blank lines and comments may follow the end.
+- Work offsets ``G54``-``G59`` and ``G54.1 P<n>`` from the ``work_offsets`` table (m, placement
+  frame; ``G54`` is active from the start, zero when the table has no entry). ``G53`` (non-modal,
+  with ``G0``/``G1``): this line's coordinates are machine coordinates, i.e. the placement frame with
+  no offset. ``G28``: rapid to the intermediate point the axis words give (program coordinates),
+  then those axes (all three without axis words) to the table's ``G28`` home. Both are marked
+  ``retract``: for a robot they are retracts and returns in the placement frame (docs/gcode.md).
 - Rotary words ``A B C`` only at 0 (posts write ``A0.`` on 3-axis programs); any other value is
   refused.
 - Comments ``( ... )`` and ``; ...``, line numbers ``N...`` (named in error messages as the block),
@@ -45,6 +51,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -101,6 +108,9 @@ class Linear:
     spindle_ccw : bool
         The spindle turns counter-clockwise (``M4``); ``False`` for ``M3`` or a stopped spindle.
         ``spindle`` stays a positive speed either way.
+    retract : bool
+        A ``G53`` or ``G28`` move: given in machine coordinates (the placement frame, no work
+        offset). For a robot these are retracts and returns, not cuts.
     """
 
     start: np.ndarray
@@ -113,6 +123,7 @@ class Linear:
     blend: bool = False
     blend_tolerance: float = 0.0
     spindle_ccw: bool = False
+    retract: bool = False
 
     @property
     def length(self) -> float:
@@ -220,8 +231,9 @@ class Program:
         return float(sum(s.length for s in self.segments))
 
 
-def read_program(path: str | Path, *, arc_tolerance: float | None = None) -> Program:
-    """Read a G-code file. See :func:`parse_program`.
+def read_program(path: str | Path, *, arc_tolerance: float | None = None,
+                 work_offsets: Mapping[str, Sequence[float]] | None = None) -> Program:
+    """Read a G-code file. See :func:`parse_program` (same keyword arguments).
 
     Encodings: UTF-8 with or without a byte order mark; a file that is not valid UTF-8 is read as
     Latin-1 (ISO 8859-1, what older posts and editors write into comments: every byte is a
@@ -234,7 +246,8 @@ def read_program(path: str | Path, *, arc_tolerance: float | None = None) -> Pro
         raise InputError("program file not found", source=str(p)) from None
     except IsADirectoryError:
         raise InputError("program path is a directory, not a file", source=str(p)) from None
-    return parse_program(decode_program(data, source=str(p)), source=str(p), arc_tolerance=arc_tolerance)
+    return parse_program(decode_program(data, source=str(p)), source=str(p), arc_tolerance=arc_tolerance,
+                         work_offsets=work_offsets)
 
 
 _UTF8_BOM = b"\xef\xbb\xbf"
@@ -375,6 +388,8 @@ _G_GROUP = {
     400: "cutter compensation",
     490: "tool length",
     **{c: "path mode" for c in (610, 640)},
+    **{c: "coordinate system" for c in (540, 550, 560, 570, 580, 590, 541)},
+    **{c: "non-modal" for c in (280, 530)},
 }
 #: refused G codes with what they are (the rest: "not supported")
 _G_REFUSED = {
@@ -412,10 +427,18 @@ class _State:
     tool: int = 0
     blend: bool = False         # G61 exact path until G64
     blend_tolerance: float = 0.0  # m, G64 P (0: none given)
-    pos: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    pos: np.ndarray = field(default_factory=lambda: np.zeros(3))  # placement frame, m
+    offset_name: str = "G54"
+    work_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m
+
+    @property
+    def shift(self) -> np.ndarray:
+        """m, placement-frame position of the program origin (work offset)."""
+        return self.work_offset
 
 
-def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float | None = None) -> Program:
+def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float | None = None,
+                  work_offsets: Mapping[str, Sequence[float]] | None = None) -> Program:
     """Parse G-code text into a :class:`Program` (paper 3.1).
 
     Parameters
@@ -431,6 +454,12 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         :data:`ARC_TOLERANCE_MM` in a ``G21`` program, :data:`ARC_TOLERANCE_INCH` under ``G20``
         (docs/gcode.md). An accepted arc has its centre moved onto the perpendicular bisector
         of start and end, so both lie exactly on one circle; larger mismatches are refused.
+    work_offsets : mapping of str to (x, y, z), optional
+        m, in the placement frame (the frame every segment is given in: "machine coordinates" for
+        this reader). ``G54``..``G59`` and ``G54.1 P<n>`` select an entry; program coordinates are
+        then shifted by it. Default: an empty table, where ``G54`` (active from the start) has zero
+        offset, so program coordinates are the placement frame, and any other offset is refused
+        naming it. The entry ``G28`` is the home position ``G28`` returns to.
 
     Returns
     -------
@@ -442,6 +471,8 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         With ``source``, ``line`` and ``column`` of the offending word.
     """
     st = _State()
+    work_table = work_offset_table(work_offsets)
+    st.work_offset = _work_offset("G54", work_table, 1, None)
     segments: list[Segment] = []
     ended_at: int | None = None
 
@@ -507,6 +538,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         # Modal state first (units, distance mode, plane), as a controller does.
         new_motion = None
         groups: dict[str, int] = {}
+        non_modal: tuple[int, int] | None = None  # G28 / G53 with its column
         for code, col in gcodes:
             group = _G_GROUP[code]
             if group in groups:
@@ -525,16 +557,26 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
                 st.blend_tolerance = 0.0
             elif group == "motion":
                 new_motion = code
+            elif group == "non-modal":
+                non_modal = (code, col)
         if new_motion is not None:
             st.motion = None if new_motion == 800 else new_motion
 
+        p_owner = [g for g in ("coordinate system", "path mode") if g in groups]
         if "P" in values:
-            if "path mode" in groups and st.blend:
+            if "coordinate system" in groups:
+                if len(p_owner) > 1:
+                    raise err("word 'P' with both G54.1 and G64 on one line", seen["P"])
+            elif "path mode" in groups and st.blend:
                 if values["P"] < 0:
                     raise err("blending tolerance P must be >= 0", seen["P"])
                 st.blend_tolerance = values["P"] * st.unit
             else:
-                raise err("word 'P' is only allowed with G64 here", seen["P"])
+                raise err("word 'P' is only allowed with G64 or G54.1 here", seen["P"])
+        for code, col in gcodes:
+            if _G_GROUP[code] == "coordinate system":
+                st.offset_name = _offset_name(code, values, seen, col, err)
+                st.work_offset = _work_offset(st.offset_name, work_table, col, err)
         if "Q" in values and not ("path mode" in groups and st.blend):
             # (G64 Q, LinuxCNC's naive CAM detector, only merges colinear points: the path stays the same)
             raise err("word 'Q' is only allowed with G64 here", seen["Q"])
@@ -565,6 +607,58 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
 
         axis = [k for k in "XYZ" if k in values]
         arcw = [k for k in "IJKR" if k in values]
+        spindle = st.spindle_rpm / 60.0 if st.spindle_on else 0.0
+        common: dict[str, Any] = dict(line=lineno, spindle=spindle, tool=st.tool, blend=st.blend,
+                                      blend_tolerance=st.blend_tolerance if st.blend else 0.0,
+                                      spindle_ccw=st.spindle_on and st.spindle_ccw)
+        pos = st.pos
+
+        def rapid_to(target: np.ndarray, retract: bool = False, common: dict[str, Any] = common) -> None:
+            if np.linalg.norm(target - st.pos) > 0.0:
+                segments.append(Linear(start=st.pos.copy(), end=target.copy(), feed=st.feed or 0.0, rapid=True,
+                                       retract=retract, **common))
+            st.pos = target
+
+        if non_modal is not None:
+            code, col = non_modal
+            if "motion" in groups and new_motion not in (0, 10):
+                raise err(f"G{code // 10} and {_name('G', new_motion or 0)} on one line both use the axis "
+                          f"words", groups["motion"])
+            if arcw:
+                raise err(f"word '{arcw[0]}' is not allowed with G{code // 10}", seen[arcw[0]])
+            if code == 530:
+                # G53: this line's coordinates are machine coordinates (the placement frame), no offsets
+                if st.motion not in (0, 10):
+                    raise err("G53 needs G0 or G1 in effect", col)
+                if not st.absolute:
+                    raise err("G53 is not allowed in incremental mode (G91)", col)
+                target = pos.copy()
+                for i, k in enumerate("XYZ"):
+                    if k in values:
+                        target[i] = values[k] * st.unit
+                if st.motion == 0:
+                    rapid_to(target, retract=True)
+                else:
+                    if st.feed is None:
+                        raise err("feed move before any feed rate F was programmed", col)
+                    if np.linalg.norm(target - pos) > 0.0:
+                        segments.append(Linear(start=pos.copy(), end=target.copy(), feed=st.feed, rapid=False,
+                                               retract=True, **common))
+                    st.pos = target
+            else:
+                # G28: rapid to the intermediate point (program coordinates), then the named axes home
+                home = _home(work_table, col, err)
+                if axis:
+                    rapid_to(_target(st, values), retract=True)
+                    target = st.pos.copy()
+                    for i, k in enumerate("XYZ"):
+                        if k in values:
+                            target[i] = home[i]
+                else:
+                    target = home.copy()
+                rapid_to(target, retract=True)
+            continue
+
         if not axis and not arcw:
             continue
         motion = st.motion
@@ -574,29 +668,92 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         if arcw and motion not in (20, 30):
             k = arcw[0]
             raise err(f"word '{k}' is only allowed with G2/G3", seen[k])
-        pos = st.pos
-        target = pos.copy()
-        for i, k in enumerate("XYZ"):
-            if k in values:
-                target[i] = values[k] * st.unit if st.absolute else pos[i] + values[k] * st.unit
-        spindle = st.spindle_rpm / 60.0 if st.spindle_on else 0.0
+        target = _target(st, values)
         first_col = min(seen[k] for k in axis + arcw)
         if motion in (10, 20, 30) and st.feed is None:
             raise err("feed move before any feed rate F was programmed", first_col)
-        common: dict[str, Any] = dict(line=lineno, spindle=spindle, tool=st.tool, blend=st.blend,
-                      blend_tolerance=st.blend_tolerance if st.blend else 0.0,
-                      spindle_ccw=st.spindle_on and st.spindle_ccw)
         if motion in (0, 10):
             if np.linalg.norm(target - pos) > 0.0:
                 segments.append(Linear(start=pos.copy(), end=target.copy(), feed=st.feed if st.feed else 0.0,
                                        rapid=motion == 0, **common))
         else:
-            centre_origin = np.zeros(3) if st.arc_absolute else pos
+            centre_origin = st.shift if st.arc_absolute else pos
             seg = _arc(pos, target, values, seen, motion // 10, st.plane, st.unit, st.feed, lineno, spindle,
                        st.tool, _arc_tolerance(arc_tolerance, st.unit), err, centre_origin)
             segments.append(replace(seg, **common))
         st.pos = target
     return Program(segments=segments, source=source)
+
+
+def _target(st: _State, values: dict[str, float]) -> np.ndarray:
+    """End point (placement frame, m) of this line's axis words: absolute words are program
+    coordinates shifted by the active offsets, incremental ones add to the position; axes not
+    given stay where they are."""
+    target = st.pos.copy()
+    for i, k in enumerate("XYZ"):
+        if k in values:
+            target[i] = values[k] * st.unit + st.shift[i] if st.absolute else st.pos[i] + values[k] * st.unit
+    return target
+
+
+def _offset_name(code: int, values, seen, col: int, err) -> str:
+    """'G54'..'G59', or 'G54.1 P<n>' for the extended work offsets."""
+    if code != 541:
+        return _name("G", code)
+    if "P" not in values:
+        raise err("G54.1 needs P (the number of the extended work offset)", col)
+    n = values["P"]
+    if n != int(n) or n < 1:
+        raise err("G54.1 P must be a positive integer", seen["P"])
+    return f"G54.1 P{int(n)}"
+
+
+def _work_offset(name: str, table: dict[str, np.ndarray], col: int, err) -> np.ndarray:
+    if name in table:
+        return table[name]
+    if name == "G54":
+        return np.zeros(3)  # the power-on coordinate system with no table entry: program = frame
+    known = ", ".join(k for k in table if k not in _HOME_KEYS) or "none"
+    raise err(f"work offset {name} is not in the work-offset table (given: {known})", col)
+
+
+def _home(table: dict[str, np.ndarray], col: int, err) -> np.ndarray:
+    if "G28" not in table:
+        raise err("G28 needs the home position: give 'G28' (x, y, z in m, placement frame) in the "
+                  "work-offset table", col)
+    return table["G28"]
+
+
+_HOME_KEYS = ("G28",)
+_OFFSET_KEY = re.compile(r"G5[4-9]|G54\.1 ?P\d+|G28")
+
+
+def work_offset_table(offsets: Mapping[str, Sequence[float]] | None, *,
+                      field_name: str = "work_offsets") -> dict[str, np.ndarray]:
+    """Checked work-offset table: name -> (x, y, z) in m, placement frame (see :func:`parse_program`).
+
+    Names are ``G54``..``G59``, ``G54.1 P<n>`` and ``G28`` (the home position of ``G28``).
+
+    Raises
+    ------
+    InputError
+        Naming the entry (``field``) that is not a known name or not three finite numbers.
+    """
+    table: dict[str, np.ndarray] = {}
+    for key, value in (offsets or {}).items():
+        name = str(key).strip().upper()
+        if not _OFFSET_KEY.fullmatch(name):
+            raise InputError(f"unknown work offset name {key!r} (G54..G59, 'G54.1 P<n>', G28)",
+                             field=f"{field_name}.{key}")
+        name = name.replace("P", " P").replace("  ", " ") if name.startswith("G54.1") else name
+        try:
+            vec = np.asarray(value, dtype=float).reshape(3)
+        except (TypeError, ValueError):
+            raise InputError("must be three numbers (x, y, z in m)", field=f"{field_name}.{key}") from None
+        if not np.all(np.isfinite(vec)):
+            raise InputError("must be finite numbers (x, y, z in m)", field=f"{field_name}.{key}")
+        table[name] = vec
+    return table
 
 
 def _arc_tolerance(given: float | None, unit: float) -> float:
