@@ -33,6 +33,9 @@ Supported words
   no offset. ``G28``: rapid to the intermediate point the axis words give (program coordinates),
   then those axes (all three without axis words) to the table's ``G28`` home. Both are marked
   ``retract``: for a robot they are retracts and returns in the placement frame (docs/gcode.md).
+- ``G43 H<n>`` tool length offset from the ``tools`` table (m), ``G49`` cancels: the robot's TCP
+  is the tip of the tool in the spindle, so ``H`` naming that tool changes nothing, another ``H``
+  moves the tip by the length difference (docs/gcode.md). ``T`` selects, ``M6`` loads.
 - Rotary words ``A B C`` only at 0 (posts write ``A0.`` on 3-axis programs); any other value is
   refused.
 - Comments ``( ... )`` and ``; ...``, line numbers ``N...`` (named in error messages as the block),
@@ -54,7 +57,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -97,7 +100,8 @@ class Linear:
     spindle : float
         Spindle speed, rev/s (0 when off).
     tool : int
-        Active tool number (``T``), 0 if none was selected.
+        Tool in the spindle: the ``T`` of the last ``M6`` (a ``T`` after it only preselects the
+        next tool), or the last ``T`` while no ``M6`` has come; 0 if none was selected.
     blend : bool
         ``G64`` (continuous-path blending) was active for this move; ``False`` under ``G61``.
 
@@ -155,7 +159,7 @@ class Arc:
     spindle : float
         Spindle speed, rev/s (0 when off).
     tool : int
-        Active tool number.
+        Tool in the spindle (as for :class:`Linear`).
     blend : bool
         ``G64`` was active for this move.
 
@@ -232,7 +236,8 @@ class Program:
 
 
 def read_program(path: str | Path, *, arc_tolerance: float | None = None,
-                 work_offsets: Mapping[str, Sequence[float]] | None = None) -> Program:
+                 work_offsets: Mapping[str, Sequence[float]] | None = None,
+                 tools: Mapping[int, Sequence[float]] | None = None) -> Program:
     """Read a G-code file. See :func:`parse_program` (same keyword arguments).
 
     Encodings: UTF-8 with or without a byte order mark; a file that is not valid UTF-8 is read as
@@ -247,7 +252,7 @@ def read_program(path: str | Path, *, arc_tolerance: float | None = None,
     except IsADirectoryError:
         raise InputError("program path is a directory, not a file", source=str(p)) from None
     return parse_program(decode_program(data, source=str(p)), source=str(p), arc_tolerance=arc_tolerance,
-                         work_offsets=work_offsets)
+                         work_offsets=work_offsets, tools=tools)
 
 
 _UTF8_BOM = b"\xef\xbb\xbf"
@@ -386,10 +391,10 @@ _G_GROUP = {
     **{c: "arc centre" for c in (901, 911)},
     940: "feed mode",
     400: "cutter compensation",
-    490: "tool length",
     **{c: "path mode" for c in (610, 640)},
     **{c: "coordinate system" for c in (540, 550, 560, 570, 580, 590, 541)},
     **{c: "non-modal" for c in (280, 530)},
+    **{c: "tool length" for c in (430, 490)},
 }
 #: refused G codes with what they are (the rest: "not supported")
 _G_REFUSED = {
@@ -430,15 +435,25 @@ class _State:
     pos: np.ndarray = field(default_factory=lambda: np.zeros(3))  # placement frame, m
     offset_name: str = "G54"
     work_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m
+    loaded: int | None = None        # tool in the spindle (the T of the last M6)
+    length_h: int | None = None      # H of the G43 in force, None under G49
+    length_shift: float = 0.0        # m, tool tip displacement along +z from G43 (L_H - L_loaded)
 
     @property
     def shift(self) -> np.ndarray:
-        """m, placement-frame position of the program origin (work offset)."""
-        return self.work_offset
+        """m, placement-frame position of the program origin for the tool tip (work offset and the
+        tool length offset in force)."""
+        return self.work_offset + np.array([0.0, 0.0, self.length_shift])
+
+    @property
+    def spindle_tool(self) -> int:
+        """The tool whose tip the robot's TCP is: the last M6's, else the last T (no changer)."""
+        return self.loaded if self.loaded is not None else self.tool
 
 
 def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float | None = None,
-                  work_offsets: Mapping[str, Sequence[float]] | None = None) -> Program:
+                  work_offsets: Mapping[str, Sequence[float]] | None = None,
+                  tools: Mapping[int, Sequence[float]] | None = None) -> Program:
     """Parse G-code text into a :class:`Program` (paper 3.1).
 
     Parameters
@@ -460,6 +475,12 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         then shifted by it. Default: an empty table, where ``G54`` (active from the start) has zero
         offset, so program coordinates are the placement frame, and any other offset is refused
         naming it. The entry ``G28`` is the home position ``G28`` returns to.
+    tools : mapping of int to (length, radius), optional
+        m, the tool table keyed by tool number (:func:`tool_table`). ``G43 H<n>`` with tool ``T``
+        in the spindle (the last ``M6``) puts the tool tip ``L_n - L_T`` above the programmed
+        z: zero when ``H`` names the loaded tool, since the robot's TCP is that tool's tip
+        (docs/gcode.md); ``G49`` cancels. Default empty: only ``G43`` naming the loaded tool (or
+        without ``H``) is accepted.
 
     Returns
     -------
@@ -472,6 +493,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
     """
     st = _State()
     work_table = work_offset_table(work_offsets)
+    tool_table_ = tool_table(tools)
     st.work_offset = _work_offset("G54", work_table, 1, None)
     segments: list[Segment] = []
     ended_at: int | None = None
@@ -580,7 +602,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         if "Q" in values and not ("path mode" in groups and st.blend):
             # (G64 Q, LinuxCNC's naive CAM detector, only merges colinear points: the path stays the same)
             raise err("word 'Q' is only allowed with G64 here", seen["Q"])
-        if "H" in values:
+        if "H" in values and 430 not in [c for c, _ in gcodes]:
             raise err("word 'H' is only allowed with G43", seen["H"])
         if "F" in values:
             if values["F"] <= 0:
@@ -597,6 +619,22 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         spindle_words = [col for code, col in mcodes if code in (3, 4, 5)]
         if len(spindle_words) > 1:
             raise err("two spindle words (M3/M4/M5) on one line", spindle_words[1])
+        for code, col in mcodes:
+            if code == 6:
+                st.loaded = st.tool
+                if st.length_h is not None:
+                    # the H offset stays in force: the new tool's tip sits L_H - L_new from the programmed z
+                    st.length_shift = _length_shift(st.length_h, st.loaded, tool_table_, col, err)
+        for code, col in gcodes:
+            if code == 490:
+                st.length_h, st.length_shift = None, 0.0
+            elif code == 430:
+                h = values.get("H", float(st.spindle_tool))
+                if h != int(h) or h < 0:
+                    raise err("tool length offset H must be a non-negative integer", seen.get("H", col))
+                st.length_h = int(h)
+                st.length_shift = _length_shift(st.length_h, st.spindle_tool, tool_table_,
+                                                seen.get("H", col), err)
         for code, _col in mcodes:
             if code in (3, 4):
                 st.spindle_on, st.spindle_ccw = True, code == 4
@@ -608,7 +646,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         axis = [k for k in "XYZ" if k in values]
         arcw = [k for k in "IJKR" if k in values]
         spindle = st.spindle_rpm / 60.0 if st.spindle_on else 0.0
-        common: dict[str, Any] = dict(line=lineno, spindle=spindle, tool=st.tool, blend=st.blend,
+        common: dict[str, Any] = dict(line=lineno, spindle=spindle, tool=st.spindle_tool, blend=st.blend,
                                       blend_tolerance=st.blend_tolerance if st.blend else 0.0,
                                       spindle_ccw=st.spindle_on and st.spindle_ccw)
         pos = st.pos
@@ -679,7 +717,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         else:
             centre_origin = st.shift if st.arc_absolute else pos
             seg = _arc(pos, target, values, seen, motion // 10, st.plane, st.unit, st.feed, lineno, spindle,
-                       st.tool, _arc_tolerance(arc_tolerance, st.unit), err, centre_origin)
+                       st.spindle_tool, _arc_tolerance(arc_tolerance, st.unit), err, centre_origin)
             segments.append(replace(seg, **common))
         st.pos = target
     return Program(segments=segments, source=source)
@@ -715,6 +753,59 @@ def _work_offset(name: str, table: dict[str, np.ndarray], col: int, err) -> np.n
         return np.zeros(3)  # the power-on coordinate system with no table entry: program = frame
     known = ", ".join(k for k in table if k not in _HOME_KEYS) or "none"
     raise err(f"work offset {name} is not in the work-offset table (given: {known})", col)
+
+
+def _length_shift(h: int, loaded: int, tools: dict[int, ToolEntry], col: int, err) -> float:
+    """m, tool tip displacement along +z under ``G43 H<h>`` with tool ``loaded`` in the spindle.
+
+    The controller adds L_H to the programmed z of the spindle gauge line; the tip of the loaded
+    tool is L_loaded below it, so it sits L_H - L_loaded above the programmed z (0 when H names
+    the loaded tool, the normal case: the robot's TCP is that tool's tip).
+    """
+    if h == loaded:
+        return 0.0
+    for n, what in ((h, f"H{h}"), (loaded, f"tool T{loaded} in the spindle")):
+        if n not in tools:
+            known = ", ".join(str(k) for k in sorted(tools)) or "none"
+            raise err(f"G43 {what}: tool {n} is not in the tool table (given: {known})", col)
+    return tools[h].length - tools[loaded].length
+
+
+class ToolEntry(NamedTuple):
+    """One tool of the tool table: ``length`` (gauge line to tip) and ``radius``, m."""
+
+    length: float
+    radius: float
+
+
+def tool_table(tools: Mapping[int, Sequence[float]] | None, *, field_name: str = "tools") -> dict[int, ToolEntry]:
+    """Checked tool table: tool number -> :class:`ToolEntry` (length, radius in m).
+
+    Raises
+    ------
+    InputError
+        Naming the entry (``field``) whose number is not a non-negative integer, or whose length
+        is not a finite positive number or radius not finite and >= 0.
+    """
+    table: dict[int, ToolEntry] = {}
+    for key, value in (tools or {}).items():
+        where = f"{field_name}.{key}"
+        try:
+            n = int(key)
+        except (TypeError, ValueError):
+            raise InputError(f"tool number must be a non-negative integer, got {key!r}", field=where) from None
+        if n < 0 or str(n) != str(key).strip():
+            raise InputError(f"tool number must be a non-negative integer, got {key!r}", field=where)
+        try:
+            length, radius = (float(v) for v in value)
+        except (TypeError, ValueError):
+            raise InputError("must be (length, radius) in m", field=where) from None
+        if not (math.isfinite(length) and length > 0):
+            raise InputError(f"tool length must be a positive number (m), got {length}", field=where)
+        if not (math.isfinite(radius) and radius >= 0):
+            raise InputError(f"tool radius must be a number >= 0 (m), got {radius}", field=where)
+        table[n] = ToolEntry(length, radius)
+    return table
 
 
 def _home(table: dict[str, np.ndarray], col: int, err) -> np.ndarray:
