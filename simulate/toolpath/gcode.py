@@ -36,6 +36,9 @@ Supported words
 - ``G43 H<n>`` tool length offset from the ``tools`` table (m), ``G49`` cancels: the robot's TCP
   is the tip of the tool in the spindle, so ``H`` naming that tool changes nothing, another ``H``
   moves the tip by the length difference (docs/gcode.md). ``T`` selects, ``M6`` loads.
+- Canned cycles ``G81``, ``G82``, ``G83``, ``G73`` (XY plane) with ``G98``/``G99`` and ``R Z Q P F``,
+  expanded into straight moves (:mod:`simulate.toolpath.cycles`), repeated at every following line
+  with ``X``/``Y``/``Z`` until ``G80`` or another motion mode; all moves of a hole carry its line.
 - Rotary words ``A B C`` only at 0 (posts write ``A0.`` on 3-axis programs); any other value is
   refused.
 - Comments ``( ... )`` and ``; ...``, line numbers ``N...`` (named in error messages as the block),
@@ -46,7 +49,8 @@ Files are UTF-8 (with or without byte order mark) or, when not valid UTF-8, Lati
 
 Everything else (``G41``/``G42`` cutter compensation, ``G15``/``G16`` polar coordinates, ``G65``
 and ``M98`` macro and subprogram calls, ``#`` parameters, ``[...]`` expressions, o-word control flow
-such as ``o100 if``, other G codes and canned cycles) is refused in one line that names the word and
+such as ``o100 if``, other G codes such as ``G4`` dwell and the tapping and boring cycles, ``L``
+repeats) is refused in one line that names the word and
 says it is not supported, as an :class:`~identify.errors.InputError` that carries file, 1-based line
 and 1-based column.
 """
@@ -62,6 +66,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from identify.errors import InputError
+from simulate.toolpath.cycles import CycleLevels, DrillCycle, drill_moves
 
 #: metres per programmed length unit, keyed by G20 (inch) / G21 (mm)
 _UNIT_M = {20: 0.0254, 21: 1e-3}
@@ -115,6 +120,9 @@ class Linear:
     retract : bool
         A ``G53`` or ``G28`` move: given in machine coordinates (the placement frame, no work
         offset). For a robot these are retracts and returns, not cuts.
+    dwell : float
+        s, pause at the end of the move (``G82 P`` at the hole bottom). Recorded only: the
+        interpolator does not hold there.
     """
 
     start: np.ndarray
@@ -128,6 +136,7 @@ class Linear:
     blend_tolerance: float = 0.0
     spindle_ccw: bool = False
     retract: bool = False
+    dwell: float = 0.0
 
     @property
     def length(self) -> float:
@@ -384,7 +393,8 @@ def _name(letter: str, code10: int) -> str:
 
 #: G codes (tenths) -> modal group, as in LinuxCNC's groups
 _G_GROUP = {
-    **{c: "motion" for c in (0, 10, 20, 30, 800)},
+    **{c: "motion" for c in (0, 10, 20, 30, 800, 730, 810, 820, 830)},
+    **{c: "return mode" for c in (980, 990)},
     **{c: "plane" for c in (170, 180, 190)},
     **{c: "units" for c in (200, 210)},
     **{c: "distance" for c in (900, 910)},
@@ -408,6 +418,8 @@ _G_REFUSED = {
     330: "threading", 50: "splines", 51: "splines", 520: "local coordinate system",
     **{c: "this canned cycle" for c in (740, 760, 840, 850, 860, 870, 880, 890)},
 }
+#: canned cycles (tenths) -> the cycle
+_CYCLES = {730: DrillCycle.G73, 810: DrillCycle.G81, 820: DrillCycle.G82, 830: DrillCycle.G83}
 #: M codes that do not move the tool: stops, spindle, tool change, coolant, program end
 _M_ACCEPTED = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 30}
 _M_REFUSED = {98: "subprogram call", 99: "subprogram return", 97: "local subprogram call"}
@@ -438,6 +450,12 @@ class _State:
     loaded: int | None = None        # tool in the spindle (the T of the last M6)
     length_h: int | None = None      # H of the G43 in force, None under G49
     length_shift: float = 0.0        # m, tool tip displacement along +z from G43 (L_H - L_loaded)
+    retract_to_r: bool = False       # G99; G98 (the default) retracts to the initial level
+    cycle_initial: float | None = None  # m, frame z before the first cycle of the current series
+    cycle_r: float | None = None     # R, Z (program values), Q (m), P (s): sticky in a series
+    cycle_z: float | None = None
+    cycle_q: float | None = None
+    cycle_p: float | None = None
 
     @property
     def shift(self) -> np.ndarray:
@@ -581,8 +599,14 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
                 new_motion = code
             elif group == "non-modal":
                 non_modal = (code, col)
+        prev_motion = st.motion
         if new_motion is not None:
             st.motion = None if new_motion == 800 else new_motion
+            if new_motion not in _CYCLES:
+                st.cycle_initial = None  # the series of cycles ends
+        if "return mode" in groups:
+            st.retract_to_r = 990 in [c for c, _ in gcodes]
+        cycle_mode = st.motion in _CYCLES
 
         p_owner = [g for g in ("coordinate system", "path mode") if g in groups]
         if "P" in values:
@@ -593,15 +617,15 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
                 if values["P"] < 0:
                     raise err("blending tolerance P must be >= 0", seen["P"])
                 st.blend_tolerance = values["P"] * st.unit
-            else:
-                raise err("word 'P' is only allowed with G64 or G54.1 here", seen["P"])
+            elif not cycle_mode:
+                raise err("word 'P' is only allowed with G64, G54.1 or a canned cycle here", seen["P"])
         for code, col in gcodes:
             if _G_GROUP[code] == "coordinate system":
                 st.offset_name = _offset_name(code, values, seen, col, err)
                 st.work_offset = _work_offset(st.offset_name, work_table, col, err)
-        if "Q" in values and not ("path mode" in groups and st.blend):
+        if "Q" in values and not ("path mode" in groups and st.blend) and not cycle_mode:
             # (G64 Q, LinuxCNC's naive CAM detector, only merges colinear points: the path stays the same)
-            raise err("word 'Q' is only allowed with G64 here", seen["Q"])
+            raise err("word 'Q' is only allowed with G64 or a canned cycle here", seen["Q"])
         if "H" in values and 430 not in [c for c, _ in gcodes]:
             raise err("word 'H' is only allowed with G43", seen["H"])
         if "F" in values:
@@ -697,6 +721,16 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
                 rapid_to(target, retract=True)
             continue
 
+        if cycle_mode:
+            cycle_here = new_motion in _CYCLES
+            for k in "IJK":
+                if k in values:
+                    raise err(f"word '{k}' is not allowed in a canned cycle", seen[k])
+            if axis or cycle_here:
+                _run_cycle(st, values, seen, groups, prev_motion, common, segments, err)
+            elif "R" in values:
+                raise err("word 'R' without a hole position (X, Y or Z)", seen["R"])
+            continue
         if not axis and not arcw:
             continue
         motion = st.motion
@@ -721,6 +755,61 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
             segments.append(replace(seg, **common))
         st.pos = target
     return Program(segments=segments, source=source)
+
+
+def _run_cycle(st: _State, values, seen, groups, prev_motion, common, segments, err) -> None:
+    """Expand one hole of the canned cycle in force (:mod:`simulate.toolpath.cycles`)."""
+    code = st.motion
+    assert code is not None
+    name = _name("G", code)
+    col = groups.get("motion") or min(seen[k] for k in "XYZ" if k in seen)
+    if st.plane != 17:
+        raise err(f"canned cycle {name} is only supported in the XY plane (G17)", col)
+    new_series = prev_motion != code
+    for k in ("Z", "R"):
+        if k not in values and (new_series or getattr(st, f"cycle_{k.lower()}") is None):
+            raise err(f"{name} needs {k} on its first line", col)
+    if "Z" in values:
+        st.cycle_z = values["Z"]
+    if "R" in values:
+        st.cycle_r = values["R"]
+    if "Q" in values:
+        if values["Q"] <= 0:
+            raise err("peck depth Q must be > 0", seen["Q"])
+        st.cycle_q = values["Q"] * st.unit
+    if "P" in values:
+        if values["P"] < 0:
+            raise err("dwell P must be >= 0 (s)", seen["P"])
+        st.cycle_p = values["P"]
+    cycle = _CYCLES[code]
+    if cycle in (DrillCycle.G73, DrillCycle.G83) and (st.cycle_q is None or (new_series and "Q" not in values)):
+        raise err(f"{name} needs the peck depth Q on its first line", col)
+    if cycle == DrillCycle.G82 and (st.cycle_p is None or (new_series and "P" not in values)):
+        raise err(f"{name} needs the dwell P (s) on its first line", col)
+    if st.feed is None:
+        raise err("feed move before any feed rate F was programmed", col)
+    if st.cycle_initial is None:
+        st.cycle_initial = float(st.pos[2])
+    assert st.cycle_r is not None and st.cycle_z is not None
+    if st.absolute:
+        x = values["X"] * st.unit + st.shift[0] if "X" in values else st.pos[0]
+        y = values["Y"] * st.unit + st.shift[1] if "Y" in values else st.pos[1]
+        r = st.cycle_r * st.unit + st.shift[2]
+        bottom = st.cycle_z * st.unit + st.shift[2]
+    else:
+        # G91: X, Y from the current point, R from the initial level, Z from R (RS-274/NGC)
+        x = st.pos[0] + values.get("X", 0.0) * st.unit
+        y = st.pos[1] + values.get("Y", 0.0) * st.unit
+        r = st.cycle_initial + st.cycle_r * st.unit
+        bottom = r + st.cycle_z * st.unit
+    if bottom > r:
+        raise err(f"{name}: the R plane is below the hole bottom Z", seen.get("R", seen.get("Z", col)))
+    levels = CycleLevels(initial=st.cycle_initial, r=r, bottom=bottom, retract_to_r=st.retract_to_r)
+    for mv in drill_moves(cycle, st.pos, (x, y), levels, peck=st.cycle_q or 0.0, dwell=st.cycle_p or 0.0):
+        if np.linalg.norm(mv.end - st.pos) > 0.0:
+            segments.append(Linear(start=st.pos.copy(), end=mv.end.copy(), feed=st.feed, rapid=mv.rapid,
+                                   dwell=mv.dwell, **common))
+        st.pos = mv.end
 
 
 def _target(st: _State, values: dict[str, float]) -> np.ndarray:
