@@ -39,6 +39,9 @@ Supported words
 - Canned cycles ``G81``, ``G82``, ``G83``, ``G73`` (XY plane) with ``G98``/``G99`` and ``R Z Q P F``,
   expanded into straight moves (:mod:`simulate.toolpath.cycles`), repeated at every following line
   with ``X``/``Y``/``Z`` until ``G80`` or another motion mode; all moves of a hole carry its line.
+- Cutter radius compensation ``G41``/``G42`` with ``D`` (tool radius from the ``tools`` table; no
+  ``D``: the tool in the spindle), ``G40`` off, XY plane: the contour is replaced by the tool
+  centre path (:mod:`simulate.toolpath.cutter_comp`, the RS-274 entry, corner and exit rules).
 - Rotary words ``A B C`` only at 0 (posts write ``A0.`` on 3-axis programs); any other value is
   refused.
 - Comments ``( ... )`` and ``; ...``, line numbers ``N...`` (named in error messages as the block),
@@ -47,7 +50,7 @@ Supported words
 Files are UTF-8 (with or without byte order mark) or, when not valid UTF-8, Latin-1
 (:func:`decode_program`); an error message shows an invisible character by its code point.
 
-Everything else (``G41``/``G42`` cutter compensation, ``G15``/``G16`` polar coordinates, ``G65``
+Everything else (``G41.1``/``G42.1`` dynamic compensation, ``G15``/``G16`` polar coordinates, ``G65``
 and ``M98`` macro and subprogram calls, ``#`` parameters, ``[...]`` expressions, o-word control flow
 such as ``o100 if``, other G codes such as ``G4`` dwell and the tapping and boring cycles, ``L``
 repeats) is refused in one line that names the word and
@@ -400,7 +403,7 @@ _G_GROUP = {
     **{c: "distance" for c in (900, 910)},
     **{c: "arc centre" for c in (901, 911)},
     940: "feed mode",
-    400: "cutter compensation",
+    **{c: "cutter compensation" for c in (400, 410, 420)},
     **{c: "path mode" for c in (610, 640)},
     **{c: "coordinate system" for c in (540, 550, 560, 570, 580, 590, 541)},
     **{c: "non-modal" for c in (280, 530)},
@@ -408,8 +411,7 @@ _G_GROUP = {
 }
 #: refused G codes with what they are (the rest: "not supported")
 _G_REFUSED = {
-    410: "cutter radius compensation", 420: "cutter radius compensation",
-    411: "cutter radius compensation", 421: "cutter radius compensation",
+    411: "dynamic cutter radius compensation", 421: "dynamic cutter radius compensation",
     150: "polar coordinates", 160: "polar coordinates",
     650: "macro call", 660: "macro call", 670: "macro call",
     100: "setting offsets from the program", 920: "coordinate system offset",
@@ -425,7 +427,7 @@ _M_ACCEPTED = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 30}
 _M_REFUSED = {98: "subprogram call", 99: "subprogram return", 97: "local subprogram call"}
 _ROTARY = "ABC"
 #: letters with a value on a supported line (G, M and the rotary axes are handled apart)
-_VALUE_WORDS = set("XYZIJKRFSTNOPQH")
+_VALUE_WORDS = set("XYZIJKRFSTNOPQHD")
 
 
 @dataclass
@@ -450,6 +452,9 @@ class _State:
     loaded: int | None = None        # tool in the spindle (the T of the last M6)
     length_h: int | None = None      # H of the G43 in force, None under G49
     length_shift: float = 0.0        # m, tool tip displacement along +z from G43 (L_H - L_loaded)
+    comp_start: int | None = None    # G41/G42 in force: index of the first segment of the contour
+    comp_left: bool = True
+    comp_radius: float = 0.0         # m
     retract_to_r: bool = False       # G99; G98 (the default) retracts to the initial level
     cycle_initial: float | None = None  # m, frame z before the first cycle of the current series
     cycle_r: float | None = None     # R, Z (program values), Q (m), P (s): sticky in a series
@@ -563,8 +568,6 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
                     raise err("line number 'N' must be the first word", col)
                 seen[letter] = col
                 values[letter] = value
-            elif letter == "D":
-                raise err(f"unsupported word '{wtext}': cutter compensation offsets are not supported", col)
             else:
                 raise err(f"unsupported word '{wtext}': not supported", col)
         if "O" in seen:
@@ -628,6 +631,32 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
             raise err("word 'Q' is only allowed with G64 or a canned cycle here", seen["Q"])
         if "H" in values and 430 not in [c for c, _ in gcodes]:
             raise err("word 'H' is only allowed with G43", seen["H"])
+        comp_code = next(((c, col) for c, col in gcodes if c in (400, 410, 420)), None)
+        if "D" in values and (comp_code is None or comp_code[0] == 400):
+            raise err("word 'D' is only allowed with G41/G42", seen["D"])
+        if st.comp_start is not None and (non_modal is not None or cycle_mode or "plane" in groups):
+            what = ("G28/G53" if non_modal is not None else "a canned cycle" if cycle_mode else "a plane change")
+            raise err(f"{what} under cutter compensation is not supported (program G40 first)",
+                      non_modal[1] if non_modal else groups.get("motion") or groups.get("plane") or 1)
+        if comp_code is not None:
+            if comp_code[0] == 400:
+                if st.comp_start is not None:
+                    _end_compensation(st, segments, source)
+            else:
+                if st.comp_start is not None:
+                    raise err("G41/G42 while cutter compensation is on: program G40 first", comp_code[1])
+                if st.plane != 17:
+                    raise err("cutter compensation is only supported in the XY plane (G17)", comp_code[1])
+                d = values.get("D", float(st.spindle_tool))
+                dcol = seen.get("D", comp_code[1])
+                if d != int(d) or d < 0:
+                    raise err("tool radius offset D must be a non-negative integer", dcol)
+                if int(d) not in tool_table_:
+                    known = ", ".join(str(k) for k in sorted(tool_table_)) or "none"
+                    raise err(f"{_name('G', comp_code[0])} D{int(d)}: tool {int(d)} is not in the tool table "
+                              f"(given: {known})", dcol)
+                st.comp_start, st.comp_left = len(segments), comp_code[0] == 410
+                st.comp_radius = tool_table_[int(d)].radius
         if "F" in values:
             if values["F"] <= 0:
                 raise err("feed F must be > 0", seen["F"])
@@ -754,7 +783,28 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
                        st.spindle_tool, _arc_tolerance(arc_tolerance, st.unit), err, centre_origin)
             segments.append(replace(seg, **common))
         st.pos = target
+    if st.comp_start is not None:
+        _end_compensation(st, segments, source)
     return Program(segments=segments, source=source)
+
+
+def _end_compensation(st: _State, segments: list[Segment], source: str) -> None:
+    """Replace the contour programmed under G41/G42 by the tool centre path; the tool is then at
+    the offset end point (the move after G40 starts there)."""
+    from simulate.toolpath.cutter_comp import compensate  # it builds on this module's segment types
+
+    assert st.comp_start is not None
+    chain = segments[st.comp_start:]
+
+    def err(msg: str, line: int) -> InputError:
+        return InputError(msg, source=source, line=line)
+
+    done = compensate(chain, st.comp_radius, st.comp_left, err)
+    del segments[st.comp_start:]
+    segments.extend(done)
+    if done:
+        st.pos = done[-1].end.copy()
+    st.comp_start = None
 
 
 def _run_cycle(st: _State, values, seen, groups, prev_motion, common, segments, err) -> None:

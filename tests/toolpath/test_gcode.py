@@ -95,7 +95,8 @@ def test_random_arcs_have_exact_endpoints(cx, cy, r, a0, a1, cw):
 
 
 @pytest.mark.parametrize("text, line, column, words", [
-    ("G21\nG1 X10 F100\nG41 X5\n", 3, 1, ["unsupported", "G41"]),
+    ("G21\nG1 X10 F100\nG41.1 X5\n", 3, 1, ["unsupported", "G41.1"]),
+    ("G21\nG1 X10 F100\nG41 X5\n", 3, 1, ["G41 D0", "not in the tool table"]),
     ("G21\nG1 X10 F100 M98\n", 2, 13, ["unsupported", "M98", "subprogram call is not supported"]),
     ("G21\nG1 X10 A5 F100\n", 2, 8, ["unsupported", "A5"]),
     ("G21\nG1 X10\n", 2, 4, ["feed"]),
