@@ -27,6 +27,7 @@ Supported words
 - ``M3``/``M4`` spindle on clockwise / counter-clockwise (``spindle_ccw``), ``M5`` spindle off,
   ``M6`` tool change, ``M7``/``M8``/``M9`` coolant, ``M0``/``M1`` stops: none moves the tool.
   ``M2``/``M30`` program end; nothing but blank lines and comments may follow the end.
+  ``G4 P`` dwell (s, LinuxCNC's unit) is recorded as ``dwell`` on the move before it.
 - Work offsets ``G54``-``G59`` and ``G54.1 P<n>`` from the ``work_offsets`` table (m, placement
   frame; ``G54`` is active from the start, zero when the table has no entry). ``G53`` (non-modal,
   with ``G0``/``G1``): this line's coordinates are machine coordinates, i.e. the placement frame with
@@ -52,10 +53,9 @@ Files are UTF-8 (with or without byte order mark) or, when not valid UTF-8, Lati
 
 Everything else (``G41.1``/``G42.1`` dynamic compensation, ``G15``/``G16`` polar coordinates, ``G65``
 and ``M98`` macro and subprogram calls, ``#`` parameters, ``[...]`` expressions, o-word control flow
-such as ``o100 if``, other G codes such as ``G4`` dwell and the tapping and boring cycles, ``L``
-repeats) is refused in one line that names the word and
-says it is not supported, as an :class:`~identify.errors.InputError` that carries file, 1-based line
-and 1-based column.
+such as ``o100 if``, other G codes such as the tapping and boring cycles, ``L`` repeats) is
+refused in one line that names the word and says it is not supported, as an
+:class:`~identify.errors.InputError` that carries file, 1-based line and 1-based column.
 """
 from __future__ import annotations
 
@@ -124,8 +124,8 @@ class Linear:
         A ``G53`` or ``G28`` move: given in machine coordinates (the placement frame, no work
         offset). For a robot these are retracts and returns, not cuts.
     dwell : float
-        s, pause at the end of the move (``G82 P`` at the hole bottom). Recorded only: the
-        interpolator does not hold there.
+        s, pause at the end of the move (``G4 P`` after it, ``G82 P`` at the hole bottom).
+        Recorded only: the interpolator does not hold there.
     """
 
     start: np.ndarray
@@ -182,6 +182,8 @@ class Arc:
     spindle_ccw : bool
         The spindle turns counter-clockwise (``M4``); ``False`` for ``M3`` or a stopped spindle.
         ``spindle`` stays a positive speed either way.
+    dwell : float
+        s, pause at the end of the move (``G4 P``), as for :class:`Linear`.
     """
 
     start: np.ndarray
@@ -197,6 +199,7 @@ class Arc:
     blend: bool = False
     blend_tolerance: float = 0.0
     spindle_ccw: bool = False
+    dwell: float = 0.0
 
     @property
     def rise(self) -> float:
@@ -407,6 +410,7 @@ _G_GROUP = {
     **{c: "path mode" for c in (610, 640)},
     **{c: "coordinate system" for c in (540, 550, 560, 570, 580, 590, 541)},
     **{c: "non-modal" for c in (280, 530)},
+    40: "dwell",
     **{c: "tool length" for c in (430, 490)},
 }
 #: refused G codes with what they are (the rest: "not supported")
@@ -612,7 +616,17 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         cycle_mode = st.motion in _CYCLES
 
         p_owner = [g for g in ("coordinate system", "path mode") if g in groups]
-        if "P" in values:
+        if "dwell" in groups:
+            if "P" not in values:
+                raise err("G4 needs the dwell time P (s)", groups["dwell"])
+            if p_owner:
+                raise err(f"word 'P' with both G4 and {p_owner[0]} on one line", seen["P"])
+            if values["P"] < 0:
+                raise err("dwell P must be >= 0 (s)", seen["P"])
+            if segments:
+                # the pause happens where the tool is: at the end of the move before
+                segments[-1] = replace(segments[-1], dwell=segments[-1].dwell + values["P"])
+        elif "P" in values:
             if "coordinate system" in groups:
                 if len(p_owner) > 1:
                     raise err("word 'P' with both G54.1 and G64 on one line", seen["P"])

@@ -106,3 +106,12 @@ def test_g80_cancels_the_motion_mode_and_m_words_do_not_move():
     p = parse_program("G21 G90\nG0 X1\nM0\nM1\nM7\nM8\nM9\nM6 T2\nG1 X2 F10\nM2\n")
     assert [tuple(np.round(s.end / MM, 9)) for s in p.segments] == [(1, 0, 0), (2, 0, 0)]
     assert p.segments[1].tool == 2
+
+
+def test_g4_dwell_is_recorded_on_the_move_before():
+    p = parse_program("G21 G90\nG4 P1\nG1 X1 F10\nG4 P0.5\nG3 X3 Y0 R1\nG4 P2\nG4 P1\n")
+    assert [s.dwell for s in p.segments] == [0.5, 3.0]   # nothing moved before the first G4
+    with pytest.raises(InputError, match="G4 needs the dwell time P"):
+        parse_program("G21\nG4\n")
+    with pytest.raises(InputError, match="both G4 and path mode"):
+        parse_program("G21\nG64 G4 P1\n")
