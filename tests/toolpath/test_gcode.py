@@ -95,8 +95,9 @@ def test_random_arcs_have_exact_endpoints(cx, cy, r, a0, a1, cw):
 
 
 @pytest.mark.parametrize("text, line, column, words", [
-    ("G21\nG1 X10 F100\nG41 X5\n", 3, 1, ["unsupported", "G41"]),
-    ("G21\nG1 X10 F100 M8\n", 2, 13, ["unsupported", "M8"]),
+    ("G21\nG1 X10 F100\nG41.1 X5\n", 3, 1, ["unsupported", "G41.1"]),
+    ("G21\nG1 X10 F100\nG41 X5\n", 3, 1, ["G41 D0", "not in the tool table"]),
+    ("G21\nG1 X10 F100 M98\n", 2, 13, ["unsupported", "M98", "subprogram call is not supported"]),
     ("G21\nG1 X10 A5 F100\n", 2, 8, ["unsupported", "A5"]),
     ("G21\nG1 X10\n", 2, 4, ["feed"]),
     ("G21\nX10\n", 2, 1, ["motion mode"]),
@@ -110,7 +111,8 @@ def test_random_arcs_have_exact_endpoints(cx, cy, r, a0, a1, cw):
     ("G21 G0 X1\nM30\nG1 X5 F1\n", 3, 1, ["after its end"]),
     ("G21\nG0 G1 X10 F10\n", 2, 4, ["modal group"]),
     ("G21\nG1 X10 F-5\n", 2, 8, ["F must be > 0"]),
-    ("G21\nG1 X10 F10 #5\n", 2, 12, ["word letter"]),
+    ("G21\nG1 X10 F10 #5\n", 2, 12, ["parameter '#5'", "not supported"]),
+    ("G21\nG1 X10 F10 $5\n", 2, 12, ["word letter", "'$'"]),
     ("G21\nG17\nG2 X10 Y0 K3 F10\n", 3, 11, ["not an arc centre"]),
     ("G21\nG1 X1 F1\nG1 X2 N20\n", 3, 7, ["first word"]),
 ])
