@@ -344,6 +344,8 @@ class Robot:
         only takes the new values. (``with_changes`` replaces fields as given and checks them.)"""
         k = self.stiffness if stiffness is None else np.asarray(stiffness, float)
         b = self.backlash if backlash is None else np.asarray(backlash, float)
+        if self.drive is None:
+            return self.with_changes(stiffness=k, backlash=b)
         lm = self.drive.lost_motion.copy()
         soft = lm > 0.0
         with np.errstate(divide="ignore", invalid="ignore"):
