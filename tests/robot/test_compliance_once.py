@@ -210,3 +210,37 @@ def test_attribution_keeps_the_tool_offset_and_moves_the_lagged_windup():
         target = jac[k] @ (jac[k].T @ st.force[k] / c)
         g = g + a * (target - g)
         np.testing.assert_allclose(st.deflection[k] - d0[k], g, rtol=1e-9, atol=1e-18)
+
+
+def _catalogue_twist(c, t1, p1, tau):
+    """Twist [rad] of the catalogue curve's midline (no play) at torque tau [Nm]: slope t1 / p1 up to
+    the lost-motion torque t1, then the rigidity c (written out here, not the production law)."""
+    a = np.abs(tau)
+    return np.sign(tau) * np.where(a <= t1, a * p1 / t1, p1 + (a - t1) / c)
+
+
+def test_held_force_with_the_catalogue_soft_zone(make_pin_model):
+    """The shipped robot with its soft zone: the held tool moves by J [twist(-g + J^T F) - twist(-g)],
+    twist the catalogue curve, -g each gear's static torque in the drives' sign (g Pinocchio's RNEA
+    gravity torque), with and without the force.
+    A joint whose load stays inside +-3 % of its rated torque moves on the soft slope."""
+    import pinocchio as pin
+
+    from simulate.robot.model import load_robot
+
+    from .conftest import MAX100
+
+    shipped = load_robot(MAX100)
+    res = _held(shipped, Compliance.LINK)
+    model = make_pin_model(shipped)
+    data = model.createData()
+    g = pin.rnea(model, data, Q_HELD, np.zeros(6), np.zeros(6))
+    J = _pin_jacobian(make_pin_model, shipped, Q_HELD)
+    lm, t1, b = shipped.drive.lost_motion, shipped.drive.lost_motion_torque, shipped.backlash
+    p1 = (lm - b) / 2
+    tw = [_catalogue_twist(shipped.stiffness, t1, p1, tau) for tau in (-g, -g + J.T @ FORCE)]
+    want = J @ (tw[1] - tw[0])
+    linear = J @ ((J.T @ FORCE) / shipped.stiffness)
+    got = res.steps.tool_offset()[-1]
+    assert np.linalg.norm(want - linear) > 0.1 * np.linalg.norm(linear)   # the soft zone matters here
+    assert np.linalg.norm(got - want) < 0.02 * np.linalg.norm(want)
