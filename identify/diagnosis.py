@@ -714,7 +714,11 @@ def render_report(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, 
     mu = f"m{a.unit}"
     lines = [f"# Friction diagnosis: {a.cause.value}", "",
              f"Training record `{train.source}` ({train.n} samples), test record `{test.source}` ({test.n} samples). "
-             f"Baseline: conventional LuGre (GA + least squares, paper 2.2.1).", "", "## What was wrong", ""]
+             f"Baseline: conventional LuGre (GA + least squares, paper 2.2.1).", ""]
+    notes = list(dict.fromkeys((*train.warnings, *test.warnings)))
+    if notes:
+        lines += ["Warnings on the records:", "", *[f"- {w}" for w in notes], ""]
+    lines += ["## What was wrong", ""]
     if not a.causes:
         lines.append(f"Nothing the candidates can name. No candidate explains more than {a.threshold * 1e3:.3g} {mu} "
                      "RMS "

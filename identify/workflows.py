@@ -153,6 +153,12 @@ def load_pair(train: Path, test: Path | None, axis: int | None, *, linear: bool 
     return train_rec, test_rec
 
 
+def record_warnings(*records: AxisRecord | None) -> list[str]:
+    """The records' own warnings (axis kind assumed or contradicted, :func:`identify.records.axis_kind_warnings`),
+    each once, in order."""
+    return list(dict.fromkeys(w for r in records if r is not None for w in r.warnings))
+
+
 @dataclass
 class FitOutcome:
     """What :func:`fit_model` gives: the fit time [s], the metrics per record (``train``, ``test``;
@@ -315,11 +321,13 @@ class Diagnosed:
 
 def diagnose_files(train: Path, test: Path, out_dir: Path, *, seed: int = 0, generations: int = 30,
                    threshold: float | None = None, track: bool = True, linear: bool = False,
-                   cutoff: float | None = None, advance: Advance | None = None) -> Diagnosed:
+                   cutoff: float | None = None, advance: Advance | None = None,
+                   on_warnings: Callable[[list[str]], None] | None = None) -> Diagnosed:
     """Diagnose a friction record pair (:func:`identify.diagnosis.diagnose`: baseline fit, held-out
     tests, extended refit) and save it into ``out_dir`` (:func:`identify.diagnosis.save_diagnosis`,
     with MLflow runs when ``track``). ``threshold`` [-] as a share of the held-out noise RMS (default
-    :data:`identify.diagnosis.SCORE_THRESHOLD`); ``cutoff`` [Hz] for records without qd/qdd."""
+    :data:`identify.diagnosis.SCORE_THRESHOLD`); ``cutoff`` [Hz] for records without qd/qdd;
+    ``on_warnings`` gets the records' warnings (:func:`record_warnings`) before the long work starts."""
     from identify.diagnosis import SCORE_THRESHOLD, diagnose, save_diagnosis
     from identify.records import load_record, record_params
 
@@ -332,6 +340,8 @@ def diagnose_files(train: Path, test: Path, out_dir: Path, *, seed: int = 0, gen
     test_rec = load_record(test, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
     if (train_rec.tau_rb is None) != (test_rec.tau_rb is None):
         raise InputError("both records need a 'tau_rb' column, or neither", source=str(test), field="tau_rb")
+    if on_warnings is not None:
+        on_warnings(record_warnings(train_rec, test_rec))
     (advance or Advance()).describe("baseline fit, held-out tests, extended refit")
     result = diagnose(train_rec, test_rec, seed=seed, generations=generations, threshold=threshold)
     saved = save_diagnosis(result, train_rec, test_rec, out_dir, track=track, extra_params=record_params(train_rec))

@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import out, print_table, progress, show
+from greybench.support import out, print_table, progress, show, warn
 from identify.diagnosis_defaults import SCORE_THRESHOLD
 from identify.workflows import diagnose_files
 
@@ -40,7 +40,7 @@ def diagnose(
 
     with progress("diagnosing (baseline fit, held-out tests, extended refit)", total=None) as advance:
         d = diagnose_files(train, test, out_dir, seed=seed, generations=generations, threshold=threshold, track=track,
-                           linear=linear, cutoff=cutoff, advance=advance)
+                           linear=linear, cutoff=cutoff, advance=advance, on_warnings=warn)
     # the JSON object is the diagnosis JSON contract; the cut-off is in MLflow
     show(as_json, d.result.to_json(), lambda: out.print(derivative_note(d.train), highlight=False),
          lambda: print_table(*d.table(threshold)), lambda: out.print(d.gain_text()))

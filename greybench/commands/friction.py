@@ -8,12 +8,12 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
+from greybench.support import emit_json, out, print_table, progress, resolve_robot, show, warn
 from identify import workflows as wf
 from identify.models import MODELS, FrictionModel, make_seeded, parse_model_names
 from identify.plant import Effect
 from identify.records import derivative_note
-from identify.workflows import COMPARE_MODELS, fit_model, load_pair, predict_record, synth_record
+from identify.workflows import COMPARE_MODELS, fit_model, load_pair, predict_record, record_warnings, synth_record
 
 
 def synth(
@@ -79,9 +79,8 @@ def fit(
     est = _make(model, seed, epochs)
     train_rec, test_rec = load_pair(train, test, axis, linear=linear, cutoff=cutoff)
     robot_file = resolve_robot(robot)
-    warnings = coupling_warnings(train_rec, robot_file, axis)
-    for w in warnings:
-        err.print(f"[bold yellow]warning:[/] {w}", highlight=False, markup=True, soft_wrap=True)
+    warnings = [*record_warnings(train_rec, test_rec), *coupling_warnings(train_rec, robot_file, axis)]
+    warn(warnings)
     if not as_json:
         out.print(derivative_note(train_rec), highlight=False)
     with progress(f"fit {model}") as advance:
@@ -126,6 +125,7 @@ def predict(
     est = load_any_model(model_ref)
     rec, _ = load_pair(data, None, axis, linear=bool(getattr(est, "linear_", False)),
                        cutoff=cutoff or getattr(est, "cutoff_hz_", None))
+    warn(record_warnings(rec))
     _, m = predict_record(est, rec, out_file, source=str(data))
     show(as_json, {"model": est.name, "out": str(out_file), "metrics": m.to_dict(),
                    "derivative_cutoff_hz": rec.cutoff_hz}, lambda: out.print(derivative_note(rec), highlight=False),
@@ -157,6 +157,7 @@ def compare(
     names = parse_model_names(models, COMPARE_MODELS, "--models")
     train_rec, test_rec = load_pair(train, test, axis, linear=linear, cutoff=cutoff)
     assert test_rec is not None
+    warn(record_warnings(train_rec, test_rec))
     robot_name = resolve_robot(robot).stem
     models_ = [_make(name, seed, epochs) for name in names]  # unknown names and bad --epochs fail first
     with progress("compare", total=len(names) + (1 if track else 0)) as advance:

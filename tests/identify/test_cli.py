@@ -86,3 +86,17 @@ def test_trajectory_bad_robot_and_axis(tmp_path):
     assert r.exit_code == 2 and "axis" in r.output and not (tmp_path / "u.csv").exists()
     r = run("trajectory", "universal", "--robot", "nosuchrobot", "--out", tmp_path / "u.csv")
     assert r.exit_code == 2 and "unknown robot" in r.output
+
+
+def test_fit_warns_when_an_undeclared_record_looks_like_metres(chain, tmp_path):
+    df = pd.read_csv(chain / "train.csv")
+    df["q"] *= 0.01                          # a drive's 12 mm written without unit headers
+    df = df.drop(columns=["qd", "qdd"])
+    df.to_csv(tmp_path / "drive.csv", index=False)
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "drive.csv", "--no-track", "--json")
+    assert r.exit_code == 0, r.output
+    assert "warning:" in r.stderr and "drive.csv" in r.stderr and "read as rotary [rad, Nm]" in r.stderr
+    assert "'q [m]'" in r.stderr                # markup escaped: the header advice survives
+    assert any("looks like metres" in w for w in json.loads(r.stdout)["warnings"])
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "drive.csv", "--no-track", "--linear", "--json")
+    assert r.exit_code == 0 and "warning:" not in r.stderr and json.loads(r.stdout)["warnings"] == []
