@@ -44,6 +44,11 @@ Method
    periodogram's peak lies inside that range (a power still rising at two periods is a trend,
    not a resolved ripple); order 1 is the gravity
    candidate's, which exists for rotary axes only (a linear axis's weight is a constant).
+   Without a resolved ripple, a second periodogram searches one to three periods in the travel
+   (:data:`UNRESOLVED_PERIODS`); a peak inside that band is a ripple of about two periods or
+   fewer, too few to be told from a trend. It is tested like a candidate, so a weight torque or a
+   drift is named only for what it explains beyond it, but it is reported as ``unresolved``,
+   never named nor modelled (a record whose travel holds two of its periods resolves it).
 3. **Held-out nested-model test.** Coefficients are fitted on the training record only; the
    score of a candidate is the torque it explains *on the test record*,
    ``score = sgn(d) sqrt(|d|)``, ``d = MSE_test(without) - MSE_test(with)`` [Nm] -- the RMS
@@ -100,6 +105,9 @@ class Cause(str, Enum):
     INERTIA = "inertia"
     DRIFT = "drift"
     GRAVITY = "gravity"
+    #: Not a cause: a position ripple whose period the training travel does not resolve
+    #: (:data:`UNRESOLVED_PERIODS`); reported as the verdict when nothing else is named.
+    UNRESOLVED = "unresolved"
 
 
 #: The candidates in a fixed order (ties and tables).
@@ -119,6 +127,12 @@ LEVEL_SHARE = 1e-3
 SECONDARY_SHARE = 0.1
 #: Periods a position ripple must complete inside the travel to be a candidate [-].
 MIN_RIPPLE_PERIODS = 2.0
+#: Periods inside the training travel searched for a ripple the travel does not resolve [-]: from
+#: one period (below it a ripple is a trend, left to the other candidates: on a rotary axis the
+#: weight torque, order 1 per rad, is below one period for any travel under a turn) to three, so
+#: that a ripple just under :data:`MIN_RIPPLE_PERIODS` peaks inside the band
+#: (:func:`unresolved_orders`).
+UNRESOLVED_PERIODS = (1.0, 3.0)
 #: Shortest ripple period searched, in samples at the 90th-percentile speed [-].
 MIN_RIPPLE_SAMPLES = 4.0
 #: Most ripple periods searched inside the travel [-] (bounds the periodogram's cost).
@@ -148,6 +162,26 @@ def ripple_orders(train: AxisRecord, test: AxisRecord) -> tuple[float, float] | 
     if step > 0:
         hi = min(hi, 2 * np.pi / (MIN_RIPPLE_SAMPLES * step))
     return (lo, hi) if hi > 1.05 * lo else None
+
+def unresolved_orders(train: AxisRecord) -> tuple[float, float] | None:
+    """Orders [1/rad] (1/m on linear axes) of the search for an unresolved ripple:
+    :data:`UNRESOLVED_PERIODS` periods inside the training travel, the upper end also bounded
+    like :func:`ripple_orders` by :data:`MIN_RIPPLE_SAMPLES` samples per period. None when the
+    travel is zero or the band is too narrow."""
+    span = float(np.ptp(train.q))
+    if not span > 0:
+        return None
+    lo, hi = (k * 2 * np.pi / span for k in UNRESOLVED_PERIODS)
+    step = float(np.percentile(np.abs(train.qd), 90)) * train.sample_time
+    if step > 0:
+        hi = min(hi, 2 * np.pi / (MIN_RIPPLE_SAMPLES * step))
+    return (lo, hi) if hi > 1.05 * lo else None
+
+
+def periods_in_travel(order: float, record: AxisRecord) -> float:
+    """How many periods of a ripple of ``order`` [1/rad] fit the record's travel [-]."""
+    return float(order * np.ptp(record.q) / (2 * np.pi))
+
 
 @dataclass(frozen=True)
 class References:
@@ -294,6 +328,9 @@ class CandidateScore:
         Train-fitted coefficients of its regressors (alone), with units.
     evidence : str
         One plain sentence.
+    unresolved : bool
+        A position ripple the training travel does not resolve (:data:`UNRESOLVED_PERIODS`): tested,
+        never named.
     """
 
     cause: Cause
@@ -302,6 +339,7 @@ class CandidateScore:
     selected: bool
     coefficients: dict[str, float] = field(default_factory=dict)
     evidence: str = ""
+    unresolved: bool = False
 
     def to_dict(self) -> dict:
         return {"cause": self.cause.value, "score": self.score, "evidence": self.evidence}
@@ -329,6 +367,13 @@ class ResidualAnalysis:
         Noise RMS of the held-out residual [Nm] (:func:`noise_rms`).
     unit : str
         Torque unit of the record (Nm, or N on a linear axis).
+    unresolved : Periodogram or None
+        The search for a ripple of :data:`UNRESOLVED_PERIODS` periods in the travel, when no
+        resolved ripple was a candidate and it found a peak inside its band.
+    ripple_unresolved : bool
+        That unresolved ripple passed the held-out tests: reported, not named.
+    periods : float or None
+        Periods of the unresolved ripple inside the training travel [-].
     """
 
     causes: list[Cause]
@@ -339,10 +384,16 @@ class ResidualAnalysis:
     residual_rms: tuple[float, float]
     noise: float = float("nan")
     unit: str = "Nm"
+    unresolved: Periodogram | None = None
+    ripple_unresolved: bool = False
+    periods: float | None = None
 
     @property
     def cause(self) -> Cause:
-        return self.causes[0] if self.causes else Cause.NONE
+        """The top named cause; ``unresolved`` when only an unresolved ripple passed the tests."""
+        if self.causes:
+            return self.causes[0]
+        return Cause.UNRESOLVED if self.ripple_unresolved else Cause.NONE
 
 
 class _Design:
@@ -408,11 +459,24 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
     ripple = ripple_periodogram(train.q, p_tr.residual - Xb @ beta0, orders or RIPPLE_ORDERS)
     ripple = _refine_order(ripple, train.q, Xb, p_tr.residual)
     available = [c for c in available_candidates(train, test) if c is not Cause.POSITION or ripple.resolved]
+    # no resolved ripple: one of one to three periods in the travel is still tested, so that it takes
+    # its own share of the residual instead of a trend-like candidate (gravity, drift), but it is
+    # reported as unresolved, never named (module docstring, step 2)
+    unresolved = None
+    low = unresolved_orders(train)
+    if Cause.POSITION not in available and low is not None:
+        p_low = ripple_periodogram(train.q, p_tr.residual - Xb @ beta0, low)
+        if p_low.resolved:
+            unresolved = _refine_order(p_low, train.q, Xb, p_tr.residual)
+            available = [c for c in CANDIDATES if c in available or c is Cause.POSITION]
+    order = {c: ripple.best for c in available}
+    if unresolved is not None:
+        order[Cause.POSITION] = unresolved.best
     noise = noise_rms(p_te.residual)
     threshold = max(share * noise, LEVEL_SHARE * float(np.std(test.friction_target)))
     unit = test.units["tau"]
-    cands = {c: (candidate_regressors(c, train, p_tr, refs, ripple.best),
-                 candidate_regressors(c, test, p_te, refs, ripple.best)) for c in available}
+    cands = {c: (candidate_regressors(c, train, p_tr, refs, order[c]),
+                 candidate_regressors(c, test, p_te, refs, order[c])) for c in available}
     design = _Design(base, cands, p_tr.residual, p_te.residual)
 
     accepted: list[Cause] = []
@@ -436,13 +500,22 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
     for c in available:
         alone = design.gain(c, ())
         beta = design.fit({c})[base[0].shape[1]:]
-        ranking.append(CandidateScore(cause=c, score=scores[c], alone=alone, selected=c in accepted,
-                                      coefficients=_coefficients(c, beta, ripple.best),
-                                      evidence=_evidence(c, scores[c], alone, accepted, threshold, ripple, unit)))
+        is_unresolved = c is Cause.POSITION and unresolved is not None
+        shown = unresolved if is_unresolved and unresolved is not None else ripple
+        named = c in accepted and not is_unresolved
+        ranking.append(CandidateScore(cause=c, score=scores[c], alone=alone, selected=named,
+                                      coefficients=_coefficients(c, beta, order[c]),
+                                      evidence=_evidence(c, scores[c], alone, accepted, threshold, shown, unit,
+                                                         is_unresolved),
+                                      unresolved=is_unresolved))
     ranking.sort(key=lambda s: -s.score)
-    return ResidualAnalysis(causes=accepted, ranking=ranking, ripple=ripple, references=refs, threshold=threshold,
+    ripple_unresolved = unresolved is not None and Cause.POSITION in accepted
+    causes = [c for c in accepted if not (c is Cause.POSITION and unresolved is not None)]
+    return ResidualAnalysis(causes=causes, ranking=ranking, ripple=ripple, references=refs, threshold=threshold,
                             residual_rms=(float(np.sqrt(np.mean(p_tr.residual**2))),
-                                          float(np.sqrt(np.mean(p_te.residual**2)))), noise=noise, unit=unit)
+                                          float(np.sqrt(np.mean(p_te.residual**2)))), noise=noise, unit=unit,
+                            unresolved=unresolved, ripple_unresolved=ripple_unresolved,
+                            periods=periods_in_travel(unresolved.best, train) if unresolved is not None else None)
 
 
 def _coefficients(cause: Cause, beta: np.ndarray, order: float) -> dict[str, float]:
@@ -457,7 +530,7 @@ def _coefficients(cause: Cause, beta: np.ndarray, order: float) -> dict[str, flo
 
 
 def _evidence(cause: Cause, score: float, alone: float, accepted: list[Cause], threshold: float,
-              ripple: Periodogram, unit: str = "Nm") -> str:
+              ripple: Periodogram, unit: str = "Nm", unresolved: bool = False) -> str:
     what = {Cause.LOAD: "friction levels scaled by |tau_load|",
             Cause.TEMPERATURE: "viscous and dry friction varying with temperature",
             Cause.POSITION: f"a position ripple of order {ripple.best:.2f}/rad",
@@ -467,7 +540,7 @@ def _evidence(cause: Cause, score: float, alone: float, accepted: list[Cause], t
             Cause.GRAVITY: "a pose-dependent torque a cos q + b sin q"}[cause]
     others = [c.value for c in accepted if c is not cause]
     given = f" given {', '.join(others)}" if others else ""
-    verdict = "named" if cause in accepted else "not named"
+    verdict = "unresolved" if unresolved else "named" if cause in accepted else "not named"
     return (f"{what} explains {score * 1e3:.3g} m{unit} RMS of the held-out torque{given} "
             f"({alone * 1e3:.3g} m{unit} alone; threshold {threshold * 1e3:.3g} m{unit}): {verdict}")
 
@@ -719,13 +792,20 @@ def render_report(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, 
     if notes:
         lines += ["Warnings on the records:", "", *[f"- {w}" for w in notes], ""]
     lines += ["## What was wrong", ""]
-    if not a.causes:
+    if not a.causes and not a.ripple_unresolved:
         lines.append(f"Nothing the candidates can name. No candidate explains more than {a.threshold * 1e3:.3g} {mu} "
                      "RMS "
                      f"of the held-out torque; the baseline's held-out residual is {result.baseline_test.rmse:.4f} Nm "
                      "RMS, which is what is left as noise (or as an effect none of the candidates describes).")
     for c in a.causes:
         lines += [f"- **{c.value}**: {_plain_words(c, p)}"]
+    if a.ripple_unresolved and a.unresolved is not None and a.periods is not None:
+        n = a.unresolved.best
+        lines += [f"- **{Cause.UNRESOLVED.value}**: a torque ripple repeats with the joint position, order {n:.3f} per "
+                  f"rad (period {2 * np.pi / n:.4f} rad), but only {a.periods:.2f} of its periods fit the training "
+                  f"travel, fewer than {MIN_RIPPLE_PERIODS:g}: too few to tell a ripple from a trend, a weight torque "
+                  "or a drift. It is not named and not modelled; a record whose travel holds at least "
+                  f"{MIN_RIPPLE_PERIODS:g} periods ({MIN_RIPPLE_PERIODS * 2 * np.pi / n:.4f} rad) resolves it."]
     lines += ["", "## Why the evidence points there", "",
               "Each candidate is a small set of physically structured regressors (module `identify.diagnosis`), "
               "fitted to the baseline's residual on the *training* record and judged only on the *test* record: its "
@@ -806,7 +886,8 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
     with atomic_folder(target) as stage:
         result.extended.save(stage)
         result.baseline.save(stage / BASELINE_DIR)
-        shown = list(result.analysis.causes) or [Cause.NONE]
+        shown = list(result.analysis.causes) + ([Cause.POSITION] if result.analysis.ripple_unresolved else [])
+        shown = shown or [Cause.NONE]
         plots = {}
         for c in shown:
             fname = f"residual_{c.value}.png"
