@@ -331,6 +331,10 @@ class CandidateScore:
     unresolved : bool
         A position ripple the training travel does not resolve (:data:`UNRESOLVED_PERIODS`): tested,
         never named.
+    decision : Decision
+        Named, not named, or unresolved (an unresolved ripple that passed the tests).
+    why : str
+        The reason for the decision, with the numbers of the selection [torque unit].
     """
 
     cause: Cause
@@ -340,6 +344,15 @@ class CandidateScore:
     coefficients: dict[str, float] = field(default_factory=dict)
     evidence: str = ""
     unresolved: bool = False
+    decision: Decision | None = None
+    why: str = ""
+
+    @property
+    def verdict(self) -> Decision:
+        """The decision (from ``selected`` when none was recorded)."""
+        if self.decision is not None:
+            return self.decision
+        return Decision.NAMED if self.selected else Decision.NOT_NAMED
 
     def to_dict(self) -> dict:
         return {"cause": self.cause.value, "score": self.score, "evidence": self.evidence}
@@ -374,6 +387,8 @@ class ResidualAnalysis:
         That unresolved ripple passed the held-out tests: reported, not named.
     periods : float or None
         Periods of the unresolved ripple inside the training travel [-].
+    excluded : dict
+        Candidates not tested on this record pair -> why (:func:`excluded_candidates`).
     """
 
     causes: list[Cause]
@@ -387,6 +402,7 @@ class ResidualAnalysis:
     unresolved: Periodogram | None = None
     ripple_unresolved: bool = False
     periods: float | None = None
+    excluded: dict[Cause, str] = field(default_factory=dict)
 
     @property
     def cause(self) -> Cause:
@@ -481,6 +497,7 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
 
     accepted: list[Cause] = []
     first = 0.0  # what the first named cause explains [Nm]
+    admitted: dict[Cause, tuple[float, float]] = {}  # gain and bar when accepted [Nm]
     while True:
         rest = [c for c in available if c not in accepted]
         if not rest:
@@ -492,6 +509,7 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
             break
         if not accepted:
             first = gains[best]
+        admitted[best] = (gains[best], bar)
         accepted.append(best)
     # unique contribution of each accepted cause; partial gain of the others
     scores = {c: design.gain(c, accepted) for c in available}
@@ -503,11 +521,13 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
         is_unresolved = c is Cause.POSITION and unresolved is not None
         shown = unresolved if is_unresolved and unresolved is not None else ripple
         named = c in accepted and not is_unresolved
+        decision, why = _decision(c, scores[c], admitted, threshold, first, accepted, is_unresolved,
+                                  periods_in_travel(order[c], train) if is_unresolved else 0.0, unit)
         ranking.append(CandidateScore(cause=c, score=scores[c], alone=alone, selected=named,
                                       coefficients=_coefficients(c, beta, order[c]),
                                       evidence=_evidence(c, scores[c], alone, accepted, threshold, shown, unit,
-                                                         is_unresolved),
-                                      unresolved=is_unresolved))
+                                                         decision == Decision.UNRESOLVED, why),
+                                      unresolved=is_unresolved, decision=decision, why=why))
     ranking.sort(key=lambda s: -s.score)
     ripple_unresolved = unresolved is not None and Cause.POSITION in accepted
     causes = [c for c in accepted if not (c is Cause.POSITION and unresolved is not None)]
@@ -515,7 +535,64 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
                             residual_rms=(float(np.sqrt(np.mean(p_tr.residual**2))),
                                           float(np.sqrt(np.mean(p_te.residual**2)))), noise=noise, unit=unit,
                             unresolved=unresolved, ripple_unresolved=ripple_unresolved,
-                            periods=periods_in_travel(unresolved.best, train) if unresolved is not None else None)
+                            periods=periods_in_travel(unresolved.best, train) if unresolved is not None else None,
+                            excluded=excluded_candidates(train, test, ripple, unresolved is not None))
+
+
+class Decision(str, Enum):
+    """What the diagnosis made of one candidate."""
+
+    NAMED = "named"
+    NOT_NAMED = "not named"
+    UNRESOLVED = "unresolved"
+    NOT_TESTED = "not tested"
+
+
+def _decision(cause: Cause, score: float, admitted: dict[Cause, tuple[float, float]], threshold: float,
+              first: float, accepted: list[Cause], unresolved: bool, periods: float,
+              unit: str) -> tuple[Decision, str]:
+    """A tested candidate's decision and why, from the forward selection's numbers [``unit``]."""
+    def m(x: float) -> str:
+        return f"{x * 1e3:.3g} m{unit}"
+
+    if cause in admitted:
+        gain, bar = admitted[cause]
+        if unresolved:
+            return Decision.UNRESOLVED, (f"a ripple of {periods:.2f} periods in the training travel, fewer than "
+                                         f"{MIN_RIPPLE_PERIODS:g}: passed the test ({m(gain)} above {m(bar)}) but "
+                                         "cannot be told from a trend")
+        order = list(admitted)  # the selection order
+        prior = order[:order.index(cause)]
+        given = f" given {', '.join(c.value for c in prior)}" if prior else ""
+        return Decision.NAMED, f"{m(gain)} when selected{given}, above the bar of {m(bar)}"
+    if score < 0:
+        return Decision.NOT_NAMED, "it makes the held-out prediction worse"
+    if score <= threshold:
+        return Decision.NOT_NAMED, f"below the threshold of {m(threshold)}"
+    return Decision.NOT_NAMED, (f"above the threshold but under {SECONDARY_SHARE * 100:g} % of the {m(first)} the "
+                                "first accepted candidate explains (a remainder of a stronger effect)")
+
+
+def excluded_candidates(train: AxisRecord, test: AxisRecord, ripple: Periodogram,
+                        unresolved_tested: bool) -> dict[Cause, str]:
+    """The candidates not tested on this record pair, each with why (missing columns, the axis kind,
+    a travel without a ripple band)."""
+    out: dict[Cause, str] = {}
+    for c in CANDIDATES:
+        missing = [col for col in REQUIRES[c] if getattr(train, col) is None or getattr(test, col) is None]
+        if missing:
+            out[c] = f"no '{missing[0]}' column in both records"
+        elif c is Cause.GRAVITY and (train.linear or test.linear):
+            out[c] = "a linear axis has no rotary gravity term (a constant weight is part of the offset)"
+        elif c is Cause.POSITION and not unresolved_tested:
+            if ripple_orders(train, test) is None:
+                out[c] = (f"the training travel holds fewer than {MIN_RIPPLE_PERIODS:g} periods of the shortest "
+                          "ripple the sampling resolves")
+            elif not ripple.resolved:
+                out[c] = (f"no ripple peak between {MIN_RIPPLE_PERIODS:g} periods in the travel and the sampling's "
+                          f"limit, none between {UNRESOLVED_PERIODS[0]:g} and {UNRESOLVED_PERIODS[1]:g} periods "
+                          "either (a trend)")
+    return out
 
 
 def _coefficients(cause: Cause, beta: np.ndarray, order: float) -> dict[str, float]:
@@ -530,7 +607,7 @@ def _coefficients(cause: Cause, beta: np.ndarray, order: float) -> dict[str, flo
 
 
 def _evidence(cause: Cause, score: float, alone: float, accepted: list[Cause], threshold: float,
-              ripple: Periodogram, unit: str = "Nm", unresolved: bool = False) -> str:
+              ripple: Periodogram, unit: str = "Nm", unresolved: bool = False, why: str = "") -> str:
     what = {Cause.LOAD: "friction levels scaled by |tau_load|",
             Cause.TEMPERATURE: "viscous and dry friction varying with temperature",
             Cause.POSITION: f"a position ripple of order {ripple.best:.2f}/rad",
@@ -541,8 +618,9 @@ def _evidence(cause: Cause, score: float, alone: float, accepted: list[Cause], t
     others = [c.value for c in accepted if c is not cause]
     given = f" given {', '.join(others)}" if others else ""
     verdict = "unresolved" if unresolved else "named" if cause in accepted else "not named"
+    because = f" ({why})" if why else ""
     return (f"{what} explains {score * 1e3:.3g} m{unit} RMS of the held-out torque{given} "
-            f"({alone * 1e3:.3g} m{unit} alone; threshold {threshold * 1e3:.3g} m{unit}): {verdict}")
+            f"({alone * 1e3:.3g} m{unit} alone; threshold {threshold * 1e3:.3g} m{unit}): {verdict}{because}")
 
 
 # ---- the whole diagnosis: baseline, analysis, extension, gain --------------------------------
@@ -633,6 +711,16 @@ def diagnose(train: AxisRecord, test: AxisRecord, *, seed: int = 0, population: 
     gain = 1.0 - e_test.rmse / b_test.rmse if b_test.rmse > 0 else 0.0
     return DiagnosisResult(analysis=analysis, baseline=baseline, extended=extended, baseline_test=b_test,
                            extended_test=e_test, gain=float(gain), timings=timings)
+
+
+def candidate_rows(a: ResidualAnalysis) -> list[dict]:
+    """Every candidate, tested or not: its held-out gain and gain alone [torque unit ``unit``; None
+    when not tested], the decision and why (``diagnosis.json``)."""
+    rows: list[dict[str, object]] = [{"cause": s.cause.value, "held_out_gain": s.score, "alone": s.alone,
+                                      "unit": a.unit, "decision": s.verdict.value, "why": s.why} for s in a.ranking]
+    rows += [{"cause": c.value, "held_out_gain": None, "alone": None, "unit": a.unit,
+              "decision": Decision.NOT_TESTED.value, "why": why} for c, why in a.excluded.items()]
+    return rows
 
 
 # ---- report ------------------------------------------------------------------------------
@@ -810,14 +898,16 @@ def render_report(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, 
               "Each candidate is a small set of physically structured regressors (module `identify.diagnosis`), "
               "fitted to the baseline's residual on the *training* record and judged only on the *test* record: its "
               "score is the RMS torque it predicts correctly on data it never saw (negative: it makes the prediction "
-              "worse). Structure separates look-alikes: temperature enters multiplied by velocity or the dry friction, "
+              "worse); this held-out gain decides. Structure separates look-alikes: temperature enters multiplied by "
+              "velocity or the dry friction, "
               "a drift is additive; load scales the friction levels, an inertia error scales the acceleration. "
               "After the best candidate is accepted the others are re-scored *given* it, so a candidate that only "
               f"echoes the accepted one scores about zero. Threshold: {a.threshold * 1e3:.3g} {mu} "
               f"({SCORE_THRESHOLD:g} x the held-out residual's noise RMS of {a.noise * 1e3:.3g} {mu}).", ""]
-    lines += markdown_table(("cause", f"score [{mu}]", f"alone [{mu}]", "named", "evidence"),
-                            [(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}",
-                              "yes" if s.selected else "no", s.evidence) for s in a.ranking])
+    lines += markdown_table(("cause", f"held-out gain [{mu}]", f"alone [{mu}]", "decision", "evidence and why"),
+                            [*[(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", s.verdict.value,
+                                s.evidence) for s in a.ranking],
+                             *[(c.value, "-", "-", Decision.NOT_TESTED.value, why) for c, why in a.excluded.items()]])
     if Cause.POSITION in a.causes:
         lines += ["", f"Position ripple order from the residual periodogram: {a.ripple.best:.3f} per rad."]
     lines += ["", "## What the extension bought", ""]
@@ -898,7 +988,8 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
         if track:
             runs = _track(result, train, test, experiment, extra_params or {})
         doc = {**result.to_json(), "causes": [c.value for c in result.analysis.causes],
-               "threshold": result.analysis.threshold, "timings": result.timings, "mlflow_runs": runs}
+               "threshold": result.analysis.threshold, "candidates": candidate_rows(result.analysis),
+               "timings": result.timings, "mlflow_runs": runs}
         (stage / RESULT_FILE).write_text(json.dumps(doc, indent=2) + "\n")
     return SavedDiagnosis(directory=target, report=target / REPORT_FILE, plots=[target / f for f in plots.values()],
                           runs=runs)

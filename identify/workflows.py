@@ -301,15 +301,16 @@ class Diagnosed:
     saved: SavedDiagnosis
 
     def table(self, threshold: float) -> Table:
-        """The causes ranked by held-out score and alone [m<torque unit>], and which were named;
-        ``threshold`` [-] as given (a share of the noise RMS)."""
+        """Every candidate: its held-out gain and gain alone [m<torque unit>], the decision and why (the
+        untested ones last); ``threshold`` [-] as given (a share of the noise RMS)."""
         res, a = self.result, self.result.analysis
         mu = f"m{a.unit}"  # escaped: rich would read "[mNm]" as markup
         return Table(f"diagnosis: {res.cause.value} (threshold {a.threshold * 1e3:.3g} {mu} held-out RMS = "
                      f"{threshold:g} x noise RMS {a.noise * 1e3:.3g} {mu})",
-                     ("cause", f"score \\[{mu}]", f"alone \\[{mu}]", "named"),
-                     [(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", "yes" if s.selected else "no")
-                      for s in a.ranking])
+                     ("cause", f"held-out gain \\[{mu}]", f"alone \\[{mu}]", "decision", "why"),
+                     [*[(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", s.verdict.value, s.why)
+                        for s in a.ranking],
+                      *[(c.value, "-", "-", "not tested", why) for c, why in a.excluded.items()]])
 
     def gain_text(self) -> str:
         """Test RMSE [torque unit] of the baseline and the extended model, the gain [%], the report."""

@@ -34,7 +34,8 @@ def test_ripple_of_fewer_than_two_periods_is_unresolved_not_gravity_or_drift(tra
     assert a.unresolved is not None and a.unresolved.best == pytest.approx(n, rel=0.05)
     assert a.periods == pytest.approx(periods, rel=0.05)
     pos = next(s for s in a.ranking if s.cause is Cause.POSITION)
-    assert pos.unresolved and not pos.selected and pos.evidence.endswith(": unresolved")
+    assert pos.unresolved and not pos.selected and pos.decision.value == "unresolved"
+    assert f": unresolved (a ripple of {a.periods:.2f} periods in the training travel, fewer than 2" in pos.evidence
     assert pos.score > a.threshold
     assert res.to_json()["cause"] == "unresolved"
     report = render_report(res, train, test, {})
