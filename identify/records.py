@@ -72,7 +72,7 @@ MAX_CUTOFF_SHARE = 0.25
 MIN_CUTOFF_CYCLES = 10.0
 
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau": "Nm", "temp": "degC",
-         "tau_load": "Nm", "tau_rb": "Nm", "tau_pred": "Nm"}
+         "tau_load": "Nm", "tau_rb": "Nm", "tau_pred": "Nm", "tau_friction_pred": "Nm"}
 
 
 @dataclass

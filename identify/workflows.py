@@ -218,7 +218,10 @@ def predict_record(est: FrictionModel, rec: AxisRecord, out_file: Path, source: 
                                                                                                    Metrics]:
     """Write the record's columns plus ``tau_friction_pred`` (the friction) and ``tau_pred`` (the total
     joint torque, comparable to ``tau``) [Nm; N on a linear axis] to ``out_file``; gives the table and
-    the metrics of ``tau_pred`` against ``tau``. A model fitted on the other axis kind is refused."""
+    the metrics of ``tau_pred`` against ``tau``. A model fitted on the other axis kind is refused. A
+    record whose axis kind was declared (unit headers, or linear) gets unit headers on every record
+    column (``q [m]``, ``tau_pred [N]``), so reading the output back gives the same axis kind; an
+    undeclared rotary record keeps its plain headers."""
     from identify.records import write_table
 
     if bool(getattr(est, "linear_", False)) != rec.linear:
@@ -229,6 +232,11 @@ def predict_record(est: FrictionModel, rec: AxisRecord, out_file: Path, source: 
     frame = rec.frame.copy()
     frame["tau_friction_pred"] = friction
     frame["tau_pred"] = tau_pred
+    if rec.linear or rec.kind_declared:
+        # the axis kind travels with the table: read back, it is the same record (a linear one without
+        # headers would come back rotary)
+        units = rec.units
+        frame = frame.rename(columns={c: f"{c} [{units[c]}]" for c in frame.columns if c in units})
     write_table(frame, out_file)
     return frame, est.score(rec)
 
