@@ -472,31 +472,40 @@ def validate_frame(df: pd.DataFrame, source: str = "<memory>", *, linear: bool |
     return AxisRecord(t=t, q=q, qd=qd, qdd=qdd, tau=cols["tau"], temp=cols.get("temp"),
                       tau_load=cols.get("tau_load"), tau_rb=cols.get("tau_rb"), source=source,
                       frame=df.reset_index(drop=True), derived=tuple(derived), cutoff_hz=cutoff, linear=linear,
-                      kind_declared=declared is not None, warnings=axis_kind_warnings(q, declared, source))
+                      kind_declared=declared is not None,
+                      warnings=axis_kind_warnings(q, cols["tau"], declared, source))
 
 
-#: An undeclared record travelling less than this [rad] looks like metres of a linear axis [-]:
-#: identification records excite a rotary joint over much of its range (the Panda log of Gaz et
-#: al. 2019 travels 1.5-3.2 rad per joint, the demo robot's excitation 1.3-2.6 rad), while a
-#: linear drive's travel in metres is mostly below this (a ball-screw bench, a machine axis of a
-#: few hundred mm). Only a warning: short rotary records exist.
+#: An undeclared record travelling less than this [rad] looks like metres of a linear axis [-]
+#: (with :data:`LINEAR_LOOKING_FORCE`): identification records excite a rotary joint over much of
+#: its range (the Panda log of Gaz et al. 2019 travels 1.5-3.2 rad per joint, the demo robot's
+#: 20 s excitation 1.3 rad), while a linear drive's travel in metres is mostly below this (a
+#: ball-screw bench, a machine axis of a few hundred mm). Only a warning: short rotary records exist.
 LINEAR_LOOKING_TRAVEL = 0.5
+#: ... and whose torque's standard deviation exceeds this [Nm] looks like a force in N [-]: a
+#: drive's force over a travel of centimetres is tens to hundreds of N (an electro-mechanical
+#: positioning bench: Coulomb about 20 N, viscous about 200 N s/m), while a joint record that short,
+#: a few degrees of a robot joint, carries a few Nm (the demo plant's Coulomb level is 2 Nm, the
+#: Panda's joint friction below 1 Nm).
+LINEAR_LOOKING_FORCE = 10.0
 #: A declared linear axis travelling more than this [m] looks like millimetres [-] (no
 #: identification record of one drive spans a gantry's tens of metres).
 MAX_LINEAR_TRAVEL = 5.0
 
 
-def axis_kind_warnings(q: np.ndarray, declared: bool | None, source: str) -> tuple[str, ...]:
-    """Warnings on the axis kind, from the position's travel ``ptp(q)``: an undeclared record
-    (``declared`` None, read as rotary) whose travel is below :data:`LINEAR_LOOKING_TRAVEL` looks
-    like metres; a declared linear one (True) beyond :data:`MAX_LINEAR_TRAVEL` [m] looks like
+def axis_kind_warnings(q: np.ndarray, tau: np.ndarray, declared: bool | None, source: str) -> tuple[str, ...]:
+    """Warnings on the axis kind, from the position's travel ``ptp(q)`` and the torque's spread
+    ``std(tau)``: an undeclared record (``declared`` None, read as rotary) travelling less than
+    :data:`LINEAR_LOOKING_TRAVEL` with a spread above :data:`LINEAR_LOOKING_FORCE` looks like metres
+    and newtons; a declared linear one (True) beyond :data:`MAX_LINEAR_TRAVEL` [m] looks like
     millimetres. Each names the source and the assumption; empty when nothing is doubtful."""
     travel = float(np.ptp(q)) if q.size else 0.0
-    if declared is None and 0 < travel < LINEAR_LOOKING_TRAVEL:
+    force = float(np.std(tau)) if tau.size else 0.0
+    if declared is None and 0 < travel < LINEAR_LOOKING_TRAVEL and force > LINEAR_LOOKING_FORCE:
         return (f"{source}: the axis kind is not declared (no unit headers such as 'q [m]', 'tau [N]', no --linear), "
-                f"so the record is read as rotary [rad, Nm]; its travel of {travel:.3g} is short for a rotary joint "
-                f"record and looks like metres of a linear axis: declare a linear axis with the headers 'q [m]', "
-                f"'tau [N]' or --linear, or a rotary one with 'q [rad]', 'tau [Nm]'",)
+                f"so the record is read as rotary [rad, Nm]; its travel of {travel:.3g} with a torque spread of "
+                f"{force:.3g} looks like metres and newtons of a linear axis, not a joint record: declare a linear "
+                f"axis with the headers 'q [m]', 'tau [N]' or --linear, or a rotary one with 'q [rad]', 'tau [Nm]'",)
     if declared is True and travel > MAX_LINEAR_TRAVEL:
         return (f"{source}: declared linear [m, N] but the position travels {travel:.4g} m, more than "
                 f"{MAX_LINEAR_TRAVEL:g} m: it looks like millimetres; positions must be in m",)

@@ -186,12 +186,32 @@ class FitOutcome:
                 "run": self.run.to_dict() if self.run else None, **{k: v.to_dict() for k, v in self.metrics.items()}}
 
 
+#: Characters a registered-model name is made of (others in a record's file name become ``-``).
+_NAME_CHARS = r"A-Za-z0-9._-"
+
+
+def fit_model_name(train: Path, axis: int, robot: str | None = None, name: str | None = None) -> str:
+    """The registered-model name of a fit: ``name`` when given (``--name``); ``<robot>-axis<N>-friction``
+    for an axis of a robot (``--robot``: the name the simulation looks up); else from the record,
+    ``<file stem>-axis<N>-friction``, so a drive's model never takes the demo robot's name."""
+    import re
+
+    if name is not None:
+        if not name or re.search(f"[^{_NAME_CHARS}]", name):
+            raise InputError(f"not a model name: {name!r} (use letters, digits, '.', '_', '-')", field="--name")
+        return name
+    if robot:
+        return f"{robot}-axis{axis}-friction"
+    stem = re.sub(f"[^{_NAME_CHARS}]+", "-", Path(train).stem).strip("-.") or "record"
+    return f"{stem}-axis{axis}-friction"
+
+
 def fit_model(est: FrictionModel, train: AxisRecord, test: AxisRecord | None = None, *, out_dir: Path | None = None,
-              track: bool = True, experiment: str = "friction", axis: int = 1, robot: str = "",
-              register: bool = True, advance: Advance | None = None) -> FitOutcome:
+              track: bool = True, experiment: str = "friction", axis: int = 1, robot: str | None = None,
+              register: bool = True, name: str | None = None, advance: Advance | None = None) -> FitOutcome:
     """Fit ``est`` on ``train``, score it on ``test``, save it into ``out_dir`` and, with ``track``, log
-    it as an MLflow run (:func:`identify.tracking.log_fit`), registered as ``<robot>-axis<N>-friction``
-    (alias challenger) when ``register``."""
+    it as an MLflow run (:func:`identify.tracking.log_fit`), registered as ``name`` (default
+    ``<robot>-axis<N>-friction``; :func:`fit_model_name`) with alias challenger when ``register``."""
     from identify.records import record_params
 
     adv = advance if advance is not None else Advance()
@@ -209,7 +229,7 @@ def fit_model(est: FrictionModel, train: AxisRecord, test: AxisRecord | None = N
 
         adv.describe("logging to MLflow (plots, residual analysis, model)")
         outcome.run = log_fit(est, train, test, fit_time=outcome.fit_time, experiment=experiment, axis=axis,
-                              robot=robot, register=registered_name(robot, axis) if register else None,
+                              robot=robot, register=(name or registered_name(robot or "", axis)) if register else None,
                               extra_params=record_params(train))
     return outcome
 

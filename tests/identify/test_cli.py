@@ -1,5 +1,6 @@
 """The CLI chain trajectory -> synth -> fit -> predict, and its bad-input contract (exit 2, nothing written)."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -91,7 +92,8 @@ def test_trajectory_bad_robot_and_axis(tmp_path):
 
 def test_fit_warns_when_an_undeclared_record_looks_like_metres(chain, tmp_path):
     df = pd.read_csv(chain / "train.csv")
-    df["q"] *= 0.01                          # a drive's 12 mm written without unit headers
+    df["q"] *= 0.01                          # a drive's 12 mm and its force [N] written without unit headers
+    df["tau"] /= 0.01
     df = df.drop(columns=["qd", "qdd"])
     df.to_csv(tmp_path / "drive.csv", index=False)
     r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "drive.csv", "--no-track", "--json")
@@ -132,3 +134,27 @@ def test_predict_keeps_the_axis_kind_for_reading_back(chain, tmp_path, declared)
     assert r2.exit_code == 0, r2.output
     np.testing.assert_allclose(pd.read_csv(tmp_path / "p2.csv")["tau_pred [N]"], pd.read_csv(tmp_path / "p.csv")[
         "tau_pred [N]"], rtol=1e-9)
+
+
+def test_fit_registers_a_name_from_the_record_or_the_given_one(chain, tmp_path):
+    """Not the demo robot's axis: the record's file stem, --name, or --robot's axis when asked."""
+    df = pd.read_csv(chain / "train.csv")
+    df.to_csv(tmp_path / "my drive#2.csv", index=False)
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "my drive#2.csv", "--json")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["run"]["registered"] == "my-drive-2-axis1-friction"
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "my drive#2.csv", "--name", "emps.x_1", "--json")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["run"]["registered"] == "emps.x_1"
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "my drive#2.csv", "--name", "a b",
+            "--out", tmp_path / "m")
+    assert r.exit_code == 2 and "--name" in r.output and "'a b'" in r.output and not (tmp_path / "m").exists()
+
+
+def test_fit_model_name_rules():
+    from identify.workflows import fit_model_name
+
+    assert fit_model_name(Path("d/train.csv"), 3) == "train-axis3-friction"
+    assert fit_model_name(Path("d/train.csv"), 3, robot="max100") == "max100-axis3-friction"
+    assert fit_model_name(Path("d/train.csv"), 3, robot="max100", name="x") == "x"
+    assert fit_model_name(Path("d/..csv"), 1) == "record-axis1-friction"

@@ -137,7 +137,7 @@ def test_undeclared_record_with_metre_like_travel_warns_of_the_rotary_assumption
     assert not rec.linear and not rec.kind_declared
     assert len(rec.warnings) == 1
     w = rec.warnings[0]
-    assert str(p) in w and "not declared" in w and "read as rotary [rad, Nm]" in w and "0.2 " in w
+    assert str(p) in w and "not declared" in w and "read as rotary [rad, Nm]" in w and "travel of 0.2 " in w
     assert "'q [m]'" in w and "--linear" in w
     assert rec.slice(0, 500).warnings == rec.warnings       # a train/validation split keeps them
     # declared, either kind: no doubt left
@@ -148,15 +148,21 @@ def test_undeclared_record_with_metre_like_travel_warns_of_the_rotary_assumption
     assert not rot.linear and rot.kind_declared and rot.warnings == ()
 
 
-def test_undeclared_record_with_a_rotary_travel_gets_no_warning(tmp_path):
+def test_undeclared_record_with_a_rotary_travel_or_torque_gets_no_warning(tmp_path):
     df = good_frame()
     df["q"] *= 2.4                                              # 1.2 rad of travel
+    df["tau"] = 30.0 * df["tau"] / df["tau"].std()             # a spread of 30
     rec = load_record(write(tmp_path, df))
     assert not rec.kind_declared and rec.warnings == ()
     travel = float(np.ptp(df["q"]))
     df["q"] *= 0.99 * 0.5 / travel                              # just under 0.5 of travel: warned
     assert len(validate_frame(df).warnings) == 1
     df["q"] *= 1.01 / 0.99                                      # just over: not
+    assert validate_frame(df).warnings == ()
+    df["q"] *= 0.1                                              # a few degrees of a joint ...
+    df["tau"] *= 10.1 / 30.0                                    # ... with a force-like spread: warned
+    assert "10.1" in validate_frame(df).warnings[0]
+    df["tau"] *= 9.9 / 10.1                                     # a torque of a few Nm: a short joint record
     assert validate_frame(df).warnings == ()
 
 

@@ -50,7 +50,7 @@ def test_seven_joint_log_axis_7(plant_frames, tmp_path, mlflow_store):
     seven_joint_log(train).to_csv(tmp_path / "log.csv", index=False)
     seven_joint_log(test).to_csv(tmp_path / "log_test.csv", index=False)
     r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "log.csv", "--test", tmp_path / "log_test.csv",
-            "--axis", 7, "--json")
+            "--axis", 7, "--json", "--robot", "max100")
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
     assert doc["run"]["registered"] == "max100-axis7-friction"
@@ -121,7 +121,7 @@ def test_linear_axis_units_everywhere(plant_frames, tmp_path, mlflow_store):
     r = run("predict", "--model", tmp_path / "m", "--data", tmp_path / "test.csv", "--out", tmp_path / "p.csv")
     assert r.exit_code == 0, r.output
     p = pd.read_csv(tmp_path / "p.csv")
-    err = np.sqrt(np.mean((p["tau_friction_pred"] - truth / LEAD) ** 2))
+    err = np.sqrt(np.mean((p["tau_friction_pred [N]"] - truth / LEAD) ** 2))  # the output keeps the unit headers
     assert err < 0.1 * np.std(truth / LEAD)  # friction in N, right to a tenth of its spread
 
 
