@@ -87,6 +87,7 @@ from identify.errors import InputError
 from identify.files import atomic_folder
 from identify.metrics import Metrics
 from identify.models.base import FrictionModel
+from identify.progress import Advance
 from identify.records import AxisRecord, markdown_table
 from identify.ripple import RIPPLE_ORDERS, Periodogram, ripple_periodogram
 
@@ -672,8 +673,13 @@ class DiagnosisResult:
                 "gain": self.gain}
 
 
+#: The stages :func:`diagnose` reports to its :class:`~identify.progress.Advance`, one step each.
+DIAGNOSIS_STAGES = ("baseline fit", "held-out tests", "extended refit")
+
+
 def diagnose(train: AxisRecord, test: AxisRecord, *, seed: int = 0, population: int = 48, generations: int = 30,
-             threshold: float = SCORE_THRESHOLD, baseline: FrictionModel | None = None) -> DiagnosisResult:
+             threshold: float = SCORE_THRESHOLD, baseline: FrictionModel | None = None,
+             advance: Advance | None = None) -> DiagnosisResult:
     """Fit the baseline, name the causes on held-out data, extend, refit, measure the gain.
 
     Parameters
@@ -687,26 +693,35 @@ def diagnose(train: AxisRecord, test: AxisRecord, *, seed: int = 0, population: 
         Held-out RMS torque [Nm] a candidate must explain to be named.
     baseline : LuGre, optional
         An already fitted baseline (on ``train``) to reuse.
+    advance : Advance, optional
+        Told each of the :data:`DIAGNOSIS_STAGES` as it starts, and advanced by one step as each ends.
     """
     import time
 
     from identify.models.extended import LuGreExtended
     from identify.models.lugre import LuGre
 
+    adv = advance if advance is not None else Advance()
     timings = {}
     t0 = time.perf_counter()
+    adv.describe(DIAGNOSIS_STAGES[0])
     if baseline is None:
         baseline = LuGre(population=population, generations=generations, seed=seed).fit(train)
     elif not isinstance(baseline, LuGre):
         raise TypeError("the diagnosis baseline must be a fitted LuGre model (module docstring, step 1)")
     timings["baseline fit"] = time.perf_counter() - t0
+    adv(1)
+    adv.describe(DIAGNOSIS_STAGES[1])
     t0 = time.perf_counter()
     analysis = analyse_residual(baseline, train, test, threshold=threshold)
     timings["analysis"] = time.perf_counter() - t0
+    adv(1)
+    adv.describe(DIAGNOSIS_STAGES[2])
     t0 = time.perf_counter()
     extended = LuGreExtended(causes=[c.value for c in analysis.causes], ripple_order=analysis.ripple.best,
                              population=population, generations=generations, seed=seed).fit_from(baseline, train)
     timings["extended refit"] = time.perf_counter() - t0
+    adv(1)
     b_test, e_test = baseline.score(test), extended.score(test)
     gain = 1.0 - e_test.rmse / b_test.rmse if b_test.rmse > 0 else 0.0
     return DiagnosisResult(analysis=analysis, baseline=baseline, extended=extended, baseline_test=b_test,

@@ -348,6 +348,10 @@ class Diagnosed:
                 f"report: {self.saved.report}")
 
 
+#: The steps :func:`diagnose_files` reports, one each (the diagnosis's stages, then saving).
+DIAGNOSE_STEPS = ("baseline fit", "held-out tests", "extended refit", "saving the report, plots and runs")
+
+
 def diagnose_files(train: Path, test: Path, out_dir: Path, *, seed: int = 0, generations: int = 30,
                    threshold: float | None = None, track: bool = True, linear: bool = False,
                    cutoff: float | None = None, advance: Advance | None = None,
@@ -356,7 +360,8 @@ def diagnose_files(train: Path, test: Path, out_dir: Path, *, seed: int = 0, gen
     tests, extended refit) and save it into ``out_dir`` (:func:`identify.diagnosis.save_diagnosis`,
     with MLflow runs when ``track``). ``threshold`` [-] as a share of the held-out noise RMS (default
     :data:`identify.diagnosis.SCORE_THRESHOLD`); ``cutoff`` [Hz] for records without qd/qdd;
-    ``on_warnings`` gets the records' warnings (:func:`record_warnings`) before the long work starts."""
+    ``on_warnings`` gets the records' warnings (:func:`record_warnings`) before the long work starts;
+    ``advance`` is told each of :data:`DIAGNOSE_STEPS` and advanced by one as each ends."""
     from identify.diagnosis import SCORE_THRESHOLD, diagnose, save_diagnosis
     from identify.records import load_record, record_params
 
@@ -371,7 +376,9 @@ def diagnose_files(train: Path, test: Path, out_dir: Path, *, seed: int = 0, gen
         raise InputError("both records need a 'tau_rb' column, or neither", source=str(test), field="tau_rb")
     if on_warnings is not None:
         on_warnings(record_warnings(train_rec, test_rec))
-    (advance or Advance()).describe("baseline fit, held-out tests, extended refit")
-    result = diagnose(train_rec, test_rec, seed=seed, generations=generations, threshold=threshold)
+    adv = advance if advance is not None else Advance()
+    result = diagnose(train_rec, test_rec, seed=seed, generations=generations, threshold=threshold, advance=adv)
+    adv.describe(DIAGNOSE_STEPS[-1])
     saved = save_diagnosis(result, train_rec, test_rec, out_dir, track=track, extra_params=record_params(train_rec))
+    adv(1)
     return Diagnosed(train_rec, result, saved)

@@ -109,7 +109,8 @@ def test_diagnose_fits_its_own_baseline_and_refuses_another_model():
         diagnose(train, test, baseline=CoulombViscous().fit(train))
     # the defaults the docstring gives: 30 GA generations of 48, seed 0, the module's threshold
     kw = {k: v.default for k, v in inspect.signature(diagnose).parameters.items() if k not in ("train", "test")}
-    assert kw == {"seed": 0, "population": 48, "generations": 30, "threshold": dg.SCORE_THRESHOLD, "baseline": None}
+    assert kw == {"seed": 0, "population": 48, "generations": 30, "threshold": dg.SCORE_THRESHOLD, "baseline": None,
+                  "advance": None}
 
 
 # ---- what the plots show ----------------------------------------------------------------------
