@@ -151,3 +151,9 @@ def print_table(title: str, columns: Sequence[str], rows: Iterable[Sequence[obje
 def print_summary(title: str, info: dict[str, Any]) -> None:
     """A two-column (item, value) table of a command's summary on stdout."""
     print_table(title, ("item", "value"), info.items())
+
+
+def warn(lines: Iterable[str]) -> None:
+    """Each line as a ``warning:`` on stderr (doubts that are not errors; stdout stays for results)."""
+    for line in lines:
+        err.print(f"[bold yellow]warning:[/] {escape(line)}", highlight=False, markup=True, soft_wrap=True)

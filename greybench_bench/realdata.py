@@ -47,13 +47,15 @@ class JointResult:
     n_train, n_test : int
         Samples.
     published : float
-        RMSE [Nm] of ``tau - tau_rb - tau_f`` (the published friction model).
+        RMSE [``unit``] of ``tau - tau_rb - tau_f`` (the published friction model).
     no_friction : float
-        RMSE [Nm] of ``tau - tau_rb`` (no friction model at all).
+        RMSE [``unit``] of ``tau - tau_rb`` (no friction model at all).
     rmse : dict
-        Model name -> RMSE [Nm] of ``tau - tau_rb - tau_friction_pred``.
+        Model name -> RMSE [``unit``] of ``tau - tau_rb - tau_friction_pred``.
     fit_time : dict
         Model name -> fit wall time [s].
+    unit : str
+        The records' torque unit: Nm, or N on a linear axis (declared by the headers).
     """
 
     joint: int
@@ -63,6 +65,7 @@ class JointResult:
     no_friction: float
     rmse: dict[str, float] = field(default_factory=dict)
     fit_time: dict[str, float] = field(default_factory=dict)
+    unit: str = "Nm"
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -110,14 +113,16 @@ def run_joint(data: Path, joint: int, models=COMPARE_MODELS, *, seed: int = 0, e
     """Fit ``models`` on one joint's training record and score them on its test record."""
     data = Path(data)
     train = load_record(data / f"joint{joint}_train.csv")
-    test = load_record(data / f"joint{joint}_test.csv", cutoff_hz=train.cutoff_hz)
+    test = load_record(data / f"joint{joint}_test.csv", cutoff_hz=train.cutoff_hz,
+                       linear=True if train.linear else None)
     for rec in (train, test):
         if rec.tau_rb is None:
             raise InputError("the benchmark needs the rigid-body torque column 'tau_rb'", source=rec.source,
                              field="tau_rb")
     tau_f = _published(data, joint, test.t)
     y = test.friction_target
-    res = JointResult(joint=joint, n_train=train.n, n_test=test.n, published=_rmse(y - tau_f), no_friction=_rmse(y))
+    res = JointResult(joint=joint, n_train=train.n, n_test=test.n, published=_rmse(y - tau_f), no_friction=_rmse(y),
+                      unit=train.units["tau"])
     for name in models:
         kwargs = dict(BENCH_SETTINGS.get(name, {}))
         est0 = make_model(name)
@@ -164,7 +169,8 @@ def summary(results: list[JointResult], grey: str = "greybox", residual: str = "
 def bench_realdata(
     data: Path = typer.Option(..., "--data", help="Folder with joint<J>_train.csv, joint<J>_test.csv (t [s], q [rad], "
                                                   "qd [rad/s], qdd [rad/s^2], tau [Nm], tau_rb [Nm]) and "
-                                                  "published_friction_joint<J>_test.csv (t [s], tau_f [Nm])."),
+                                                  "published_friction_joint<J>_test.csv (t [s], tau_f [Nm]); a linear "
+                                                  "axis declares m and N by headers (q [m], tau [N])."),
     models: str | None = typer.Option(None, "--models", help="Comma-separated models (default: "
                                                              f"{','.join(COMPARE_MODELS)})."),
     joints: str | None = typer.Option(None, "--joints", help="Comma-separated joints (default: every joint in "
@@ -172,11 +178,12 @@ def bench_realdata(
     epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] of the learned models "
                                                                 "(default: the benchmark's modest settings)."),
     seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
-    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "summary": {...}} (RMSE in Nm) as one '
-                                                       'JSON object.'),
+    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "summary": {...}} (RMSE in each '
+                                                       "joint's unit, Nm or N) as one JSON object."),
 ) -> None:
-    """Fit every model type on every joint of a real log and print, per joint, the test RMSE [Nm] of
-    tau - tau_rb - tau_friction_pred beside the published friction model's (same samples)."""
+    """Fit every model type on every joint of a real log and print, per joint, the test RMSE [Nm; N on a
+    linear axis, as the record's headers declare] of tau - tau_rb - tau_friction_pred beside the
+    published friction model's (same samples)."""
     names = parse_model_names(models, COMPARE_MODELS, "--models")
     found = joints_in(data)
     if joints:
@@ -203,12 +210,15 @@ def bench_realdata(
         emit_json({"data": str(data), "models": names, "settings": BENCH_SETTINGS, "wall_time_s": wall,
                    "joints": [r.to_dict() for r in results], "summary": summ})
         return
-    # models as rows, joints as columns: seven joints fit an 80-column terminal
-    table = Table(title=f"bench realdata: test RMSE \\[mNm] of tau - tau_rb - friction ({wall:.0f} s)",
+    # models as rows, joints as columns: seven joints fit an 80-column terminal; the unit is the records'
+    units = {r.unit for r in results}
+    one = units.pop() if len(units) == 1 else None
+    what = f"\\[m{one}]" if one else "\\[mNm, mN on linear axes]"
+    table = Table(title=f"bench realdata: test RMSE {what} of tau - tau_rb - friction ({wall:.0f} s)",
                   pad_edge=False)
     table.add_column("model", no_wrap=True)
     for r in results:
-        table.add_column(f"J{r.joint}", justify="right")
+        table.add_column(f"J{r.joint}" if one else f"J{r.joint} \\[m{r.unit}]", justify="right")
     table.add_row("published", *[f"{r.published * 1e3:.1f} " for r in results])
     table.add_row("no friction", *[f"{r.no_friction * 1e3:.1f} " for r in results])
     for n in names:

@@ -44,6 +44,11 @@ Method
    periodogram's peak lies inside that range (a power still rising at two periods is a trend,
    not a resolved ripple); order 1 is the gravity
    candidate's, which exists for rotary axes only (a linear axis's weight is a constant).
+   Without a resolved ripple, a second periodogram searches one to three periods in the travel
+   (:data:`UNRESOLVED_PERIODS`); a peak inside that band is a ripple of about two periods or
+   fewer, too few to be told from a trend. It is tested like a candidate, so a weight torque or a
+   drift is named only for what it explains beyond it, but it is reported as ``unresolved``,
+   never named nor modelled (a record whose travel holds two of its periods resolves it).
 3. **Held-out nested-model test.** Coefficients are fitted on the training record only; the
    score of a candidate is the torque it explains *on the test record*,
    ``score = sgn(d) sqrt(|d|)``, ``d = MSE_test(without) - MSE_test(with)`` [Nm] -- the RMS
@@ -82,6 +87,7 @@ from identify.errors import InputError
 from identify.files import atomic_folder
 from identify.metrics import Metrics
 from identify.models.base import FrictionModel
+from identify.progress import Advance
 from identify.records import AxisRecord, markdown_table
 from identify.ripple import RIPPLE_ORDERS, Periodogram, ripple_periodogram
 
@@ -100,6 +106,9 @@ class Cause(str, Enum):
     INERTIA = "inertia"
     DRIFT = "drift"
     GRAVITY = "gravity"
+    #: Not a cause: a position ripple whose period the training travel does not resolve
+    #: (:data:`UNRESOLVED_PERIODS`); reported as the verdict when nothing else is named.
+    UNRESOLVED = "unresolved"
 
 
 #: The candidates in a fixed order (ties and tables).
@@ -119,6 +128,12 @@ LEVEL_SHARE = 1e-3
 SECONDARY_SHARE = 0.1
 #: Periods a position ripple must complete inside the travel to be a candidate [-].
 MIN_RIPPLE_PERIODS = 2.0
+#: Periods inside the training travel searched for a ripple the travel does not resolve [-]: from
+#: one period (below it a ripple is a trend, left to the other candidates: on a rotary axis the
+#: weight torque, order 1 per rad, is below one period for any travel under a turn) to three, so
+#: that a ripple just under :data:`MIN_RIPPLE_PERIODS` peaks inside the band
+#: (:func:`unresolved_orders`).
+UNRESOLVED_PERIODS = (1.0, 3.0)
 #: Shortest ripple period searched, in samples at the 90th-percentile speed [-].
 MIN_RIPPLE_SAMPLES = 4.0
 #: Most ripple periods searched inside the travel [-] (bounds the periodogram's cost).
@@ -148,6 +163,26 @@ def ripple_orders(train: AxisRecord, test: AxisRecord) -> tuple[float, float] | 
     if step > 0:
         hi = min(hi, 2 * np.pi / (MIN_RIPPLE_SAMPLES * step))
     return (lo, hi) if hi > 1.05 * lo else None
+
+def unresolved_orders(train: AxisRecord) -> tuple[float, float] | None:
+    """Orders [1/rad] (1/m on linear axes) of the search for an unresolved ripple:
+    :data:`UNRESOLVED_PERIODS` periods inside the training travel, the upper end also bounded
+    like :func:`ripple_orders` by :data:`MIN_RIPPLE_SAMPLES` samples per period. None when the
+    travel is zero or the band is too narrow."""
+    span = float(np.ptp(train.q))
+    if not span > 0:
+        return None
+    lo, hi = (k * 2 * np.pi / span for k in UNRESOLVED_PERIODS)
+    step = float(np.percentile(np.abs(train.qd), 90)) * train.sample_time
+    if step > 0:
+        hi = min(hi, 2 * np.pi / (MIN_RIPPLE_SAMPLES * step))
+    return (lo, hi) if hi > 1.05 * lo else None
+
+
+def periods_in_travel(order: float, record: AxisRecord) -> float:
+    """How many periods of a ripple of ``order`` [1/rad] fit the record's travel [-]."""
+    return float(order * np.ptp(record.q) / (2 * np.pi))
+
 
 @dataclass(frozen=True)
 class References:
@@ -294,6 +329,13 @@ class CandidateScore:
         Train-fitted coefficients of its regressors (alone), with units.
     evidence : str
         One plain sentence.
+    unresolved : bool
+        A position ripple the training travel does not resolve (:data:`UNRESOLVED_PERIODS`): tested,
+        never named.
+    decision : Decision
+        Named, not named, or unresolved (an unresolved ripple that passed the tests).
+    why : str
+        The reason for the decision, with the numbers of the selection [torque unit].
     """
 
     cause: Cause
@@ -302,6 +344,16 @@ class CandidateScore:
     selected: bool
     coefficients: dict[str, float] = field(default_factory=dict)
     evidence: str = ""
+    unresolved: bool = False
+    decision: Decision | None = None
+    why: str = ""
+
+    @property
+    def verdict(self) -> Decision:
+        """The decision (from ``selected`` when none was recorded)."""
+        if self.decision is not None:
+            return self.decision
+        return Decision.NAMED if self.selected else Decision.NOT_NAMED
 
     def to_dict(self) -> dict:
         return {"cause": self.cause.value, "score": self.score, "evidence": self.evidence}
@@ -329,6 +381,15 @@ class ResidualAnalysis:
         Noise RMS of the held-out residual [Nm] (:func:`noise_rms`).
     unit : str
         Torque unit of the record (Nm, or N on a linear axis).
+    unresolved : Periodogram or None
+        The search for a ripple of :data:`UNRESOLVED_PERIODS` periods in the travel, when no
+        resolved ripple was a candidate and it found a peak inside its band.
+    ripple_unresolved : bool
+        That unresolved ripple passed the held-out tests: reported, not named.
+    periods : float or None
+        Periods of the unresolved ripple inside the training travel [-].
+    excluded : dict
+        Candidates not tested on this record pair -> why (:func:`excluded_candidates`).
     """
 
     causes: list[Cause]
@@ -339,10 +400,17 @@ class ResidualAnalysis:
     residual_rms: tuple[float, float]
     noise: float = float("nan")
     unit: str = "Nm"
+    unresolved: Periodogram | None = None
+    ripple_unresolved: bool = False
+    periods: float | None = None
+    excluded: dict[Cause, str] = field(default_factory=dict)
 
     @property
     def cause(self) -> Cause:
-        return self.causes[0] if self.causes else Cause.NONE
+        """The top named cause; ``unresolved`` when only an unresolved ripple passed the tests."""
+        if self.causes:
+            return self.causes[0]
+        return Cause.UNRESOLVED if self.ripple_unresolved else Cause.NONE
 
 
 class _Design:
@@ -408,15 +476,29 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
     ripple = ripple_periodogram(train.q, p_tr.residual - Xb @ beta0, orders or RIPPLE_ORDERS)
     ripple = _refine_order(ripple, train.q, Xb, p_tr.residual)
     available = [c for c in available_candidates(train, test) if c is not Cause.POSITION or ripple.resolved]
+    # no resolved ripple: one of one to three periods in the travel is still tested, so that it takes
+    # its own share of the residual instead of a trend-like candidate (gravity, drift), but it is
+    # reported as unresolved, never named (module docstring, step 2)
+    unresolved = None
+    low = unresolved_orders(train)
+    if Cause.POSITION not in available and low is not None:
+        p_low = ripple_periodogram(train.q, p_tr.residual - Xb @ beta0, low)
+        if p_low.resolved:
+            unresolved = _refine_order(p_low, train.q, Xb, p_tr.residual)
+            available = [c for c in CANDIDATES if c in available or c is Cause.POSITION]
+    order = {c: ripple.best for c in available}
+    if unresolved is not None:
+        order[Cause.POSITION] = unresolved.best
     noise = noise_rms(p_te.residual)
     threshold = max(share * noise, LEVEL_SHARE * float(np.std(test.friction_target)))
     unit = test.units["tau"]
-    cands = {c: (candidate_regressors(c, train, p_tr, refs, ripple.best),
-                 candidate_regressors(c, test, p_te, refs, ripple.best)) for c in available}
+    cands = {c: (candidate_regressors(c, train, p_tr, refs, order[c]),
+                 candidate_regressors(c, test, p_te, refs, order[c])) for c in available}
     design = _Design(base, cands, p_tr.residual, p_te.residual)
 
     accepted: list[Cause] = []
     first = 0.0  # what the first named cause explains [Nm]
+    admitted: dict[Cause, tuple[float, float]] = {}  # gain and bar when accepted [Nm]
     while True:
         rest = [c for c in available if c not in accepted]
         if not rest:
@@ -428,6 +510,7 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
             break
         if not accepted:
             first = gains[best]
+        admitted[best] = (gains[best], bar)
         accepted.append(best)
     # unique contribution of each accepted cause; partial gain of the others
     scores = {c: design.gain(c, accepted) for c in available}
@@ -436,13 +519,81 @@ def _analyse(baseline: FrictionModel, train: AxisRecord, test: AxisRecord, share
     for c in available:
         alone = design.gain(c, ())
         beta = design.fit({c})[base[0].shape[1]:]
-        ranking.append(CandidateScore(cause=c, score=scores[c], alone=alone, selected=c in accepted,
-                                      coefficients=_coefficients(c, beta, ripple.best),
-                                      evidence=_evidence(c, scores[c], alone, accepted, threshold, ripple, unit)))
+        is_unresolved = c is Cause.POSITION and unresolved is not None
+        shown = unresolved if is_unresolved and unresolved is not None else ripple
+        named = c in accepted and not is_unresolved
+        decision, why = _decision(c, scores[c], admitted, threshold, first, accepted, is_unresolved,
+                                  periods_in_travel(order[c], train) if is_unresolved else 0.0, unit)
+        ranking.append(CandidateScore(cause=c, score=scores[c], alone=alone, selected=named,
+                                      coefficients=_coefficients(c, beta, order[c]),
+                                      evidence=_evidence(c, scores[c], alone, accepted, threshold, shown, unit,
+                                                         decision == Decision.UNRESOLVED, why),
+                                      unresolved=is_unresolved, decision=decision, why=why))
     ranking.sort(key=lambda s: -s.score)
-    return ResidualAnalysis(causes=accepted, ranking=ranking, ripple=ripple, references=refs, threshold=threshold,
+    ripple_unresolved = unresolved is not None and Cause.POSITION in accepted
+    causes = [c for c in accepted if not (c is Cause.POSITION and unresolved is not None)]
+    return ResidualAnalysis(causes=causes, ranking=ranking, ripple=ripple, references=refs, threshold=threshold,
                             residual_rms=(float(np.sqrt(np.mean(p_tr.residual**2))),
-                                          float(np.sqrt(np.mean(p_te.residual**2)))), noise=noise, unit=unit)
+                                          float(np.sqrt(np.mean(p_te.residual**2)))), noise=noise, unit=unit,
+                            unresolved=unresolved, ripple_unresolved=ripple_unresolved,
+                            periods=periods_in_travel(unresolved.best, train) if unresolved is not None else None,
+                            excluded=excluded_candidates(train, test, ripple, unresolved is not None))
+
+
+class Decision(str, Enum):
+    """What the diagnosis made of one candidate."""
+
+    NAMED = "named"
+    NOT_NAMED = "not named"
+    UNRESOLVED = "unresolved"
+    NOT_TESTED = "not tested"
+
+
+def _decision(cause: Cause, score: float, admitted: dict[Cause, tuple[float, float]], threshold: float,
+              first: float, accepted: list[Cause], unresolved: bool, periods: float,
+              unit: str) -> tuple[Decision, str]:
+    """A tested candidate's decision and why, from the forward selection's numbers [``unit``]."""
+    def m(x: float) -> str:
+        return f"{x * 1e3:.3g} m{unit}"
+
+    if cause in admitted:
+        gain, bar = admitted[cause]
+        if unresolved:
+            return Decision.UNRESOLVED, (f"a ripple of {periods:.2f} periods in the training travel, fewer than "
+                                         f"{MIN_RIPPLE_PERIODS:g}: passed the test ({m(gain)} above {m(bar)}) but "
+                                         "cannot be told from a trend")
+        order = list(admitted)  # the selection order
+        prior = order[:order.index(cause)]
+        given = f" given {', '.join(c.value for c in prior)}" if prior else ""
+        return Decision.NAMED, f"{m(gain)} when selected{given}, above the bar of {m(bar)}"
+    if score < 0:
+        return Decision.NOT_NAMED, "it makes the held-out prediction worse"
+    if score <= threshold:
+        return Decision.NOT_NAMED, f"below the threshold of {m(threshold)}"
+    return Decision.NOT_NAMED, (f"above the threshold but under {SECONDARY_SHARE * 100:g} % of the {m(first)} the "
+                                "first accepted candidate explains (a remainder of a stronger effect)")
+
+
+def excluded_candidates(train: AxisRecord, test: AxisRecord, ripple: Periodogram,
+                        unresolved_tested: bool) -> dict[Cause, str]:
+    """The candidates not tested on this record pair, each with why (missing columns, the axis kind,
+    a travel without a ripple band)."""
+    out: dict[Cause, str] = {}
+    for c in CANDIDATES:
+        missing = [col for col in REQUIRES[c] if getattr(train, col) is None or getattr(test, col) is None]
+        if missing:
+            out[c] = f"no '{missing[0]}' column in both records"
+        elif c is Cause.GRAVITY and (train.linear or test.linear):
+            out[c] = "a linear axis has no rotary gravity term (a constant weight is part of the offset)"
+        elif c is Cause.POSITION and not unresolved_tested:
+            if ripple_orders(train, test) is None:
+                out[c] = (f"the training travel holds fewer than {MIN_RIPPLE_PERIODS:g} periods of the shortest "
+                          "ripple the sampling resolves")
+            elif not ripple.resolved:
+                out[c] = (f"no ripple peak between {MIN_RIPPLE_PERIODS:g} periods in the travel and the sampling's "
+                          f"limit, none between {UNRESOLVED_PERIODS[0]:g} and {UNRESOLVED_PERIODS[1]:g} periods "
+                          "either (a trend)")
+    return out
 
 
 def _coefficients(cause: Cause, beta: np.ndarray, order: float) -> dict[str, float]:
@@ -457,7 +608,7 @@ def _coefficients(cause: Cause, beta: np.ndarray, order: float) -> dict[str, flo
 
 
 def _evidence(cause: Cause, score: float, alone: float, accepted: list[Cause], threshold: float,
-              ripple: Periodogram, unit: str = "Nm") -> str:
+              ripple: Periodogram, unit: str = "Nm", unresolved: bool = False, why: str = "") -> str:
     what = {Cause.LOAD: "friction levels scaled by |tau_load|",
             Cause.TEMPERATURE: "viscous and dry friction varying with temperature",
             Cause.POSITION: f"a position ripple of order {ripple.best:.2f}/rad",
@@ -467,9 +618,10 @@ def _evidence(cause: Cause, score: float, alone: float, accepted: list[Cause], t
             Cause.GRAVITY: "a pose-dependent torque a cos q + b sin q"}[cause]
     others = [c.value for c in accepted if c is not cause]
     given = f" given {', '.join(others)}" if others else ""
-    verdict = "named" if cause in accepted else "not named"
+    verdict = "unresolved" if unresolved else "named" if cause in accepted else "not named"
+    because = f" ({why})" if why else ""
     return (f"{what} explains {score * 1e3:.3g} m{unit} RMS of the held-out torque{given} "
-            f"({alone * 1e3:.3g} m{unit} alone; threshold {threshold * 1e3:.3g} m{unit}): {verdict}")
+            f"({alone * 1e3:.3g} m{unit} alone; threshold {threshold * 1e3:.3g} m{unit}): {verdict}{because}")
 
 
 # ---- the whole diagnosis: baseline, analysis, extension, gain --------------------------------
@@ -521,8 +673,13 @@ class DiagnosisResult:
                 "gain": self.gain}
 
 
+#: The stages :func:`diagnose` reports to its :class:`~identify.progress.Advance`, one step each.
+DIAGNOSIS_STAGES = ("baseline fit", "held-out tests", "extended refit")
+
+
 def diagnose(train: AxisRecord, test: AxisRecord, *, seed: int = 0, population: int = 48, generations: int = 30,
-             threshold: float = SCORE_THRESHOLD, baseline: FrictionModel | None = None) -> DiagnosisResult:
+             threshold: float = SCORE_THRESHOLD, baseline: FrictionModel | None = None,
+             advance: Advance | None = None) -> DiagnosisResult:
     """Fit the baseline, name the causes on held-out data, extend, refit, measure the gain.
 
     Parameters
@@ -536,30 +693,49 @@ def diagnose(train: AxisRecord, test: AxisRecord, *, seed: int = 0, population: 
         Held-out RMS torque [Nm] a candidate must explain to be named.
     baseline : LuGre, optional
         An already fitted baseline (on ``train``) to reuse.
+    advance : Advance, optional
+        Told each of the :data:`DIAGNOSIS_STAGES` as it starts, and advanced by one step as each ends.
     """
     import time
 
     from identify.models.extended import LuGreExtended
     from identify.models.lugre import LuGre
 
+    adv = advance if advance is not None else Advance()
     timings = {}
     t0 = time.perf_counter()
+    adv.describe(DIAGNOSIS_STAGES[0])
     if baseline is None:
         baseline = LuGre(population=population, generations=generations, seed=seed).fit(train)
     elif not isinstance(baseline, LuGre):
         raise TypeError("the diagnosis baseline must be a fitted LuGre model (module docstring, step 1)")
     timings["baseline fit"] = time.perf_counter() - t0
+    adv(1)
+    adv.describe(DIAGNOSIS_STAGES[1])
     t0 = time.perf_counter()
     analysis = analyse_residual(baseline, train, test, threshold=threshold)
     timings["analysis"] = time.perf_counter() - t0
+    adv(1)
+    adv.describe(DIAGNOSIS_STAGES[2])
     t0 = time.perf_counter()
     extended = LuGreExtended(causes=[c.value for c in analysis.causes], ripple_order=analysis.ripple.best,
                              population=population, generations=generations, seed=seed).fit_from(baseline, train)
     timings["extended refit"] = time.perf_counter() - t0
+    adv(1)
     b_test, e_test = baseline.score(test), extended.score(test)
     gain = 1.0 - e_test.rmse / b_test.rmse if b_test.rmse > 0 else 0.0
     return DiagnosisResult(analysis=analysis, baseline=baseline, extended=extended, baseline_test=b_test,
                            extended_test=e_test, gain=float(gain), timings=timings)
+
+
+def candidate_rows(a: ResidualAnalysis) -> list[dict]:
+    """Every candidate, tested or not: its held-out gain and gain alone [torque unit ``unit``; None
+    when not tested], the decision and why (``diagnosis.json``)."""
+    rows: list[dict[str, object]] = [{"cause": s.cause.value, "held_out_gain": s.score, "alone": s.alone,
+                                      "unit": a.unit, "decision": s.verdict.value, "why": s.why} for s in a.ranking]
+    rows += [{"cause": c.value, "held_out_gain": None, "alone": None, "unit": a.unit,
+              "decision": Decision.NOT_TESTED.value, "why": why} for c, why in a.excluded.items()]
+    return rows
 
 
 # ---- report ------------------------------------------------------------------------------
@@ -714,26 +890,39 @@ def render_report(result: DiagnosisResult, train: AxisRecord, test: AxisRecord, 
     mu = f"m{a.unit}"
     lines = [f"# Friction diagnosis: {a.cause.value}", "",
              f"Training record `{train.source}` ({train.n} samples), test record `{test.source}` ({test.n} samples). "
-             f"Baseline: conventional LuGre (GA + least squares, paper 2.2.1).", "", "## What was wrong", ""]
-    if not a.causes:
+             f"Baseline: conventional LuGre (GA + least squares, paper 2.2.1).", ""]
+    notes = list(dict.fromkeys((*train.warnings, *test.warnings)))
+    if notes:
+        lines += ["Warnings on the records:", "", *[f"- {w}" for w in notes], ""]
+    lines += ["## What was wrong", ""]
+    if not a.causes and not a.ripple_unresolved:
         lines.append(f"Nothing the candidates can name. No candidate explains more than {a.threshold * 1e3:.3g} {mu} "
                      "RMS "
                      f"of the held-out torque; the baseline's held-out residual is {result.baseline_test.rmse:.4f} Nm "
                      "RMS, which is what is left as noise (or as an effect none of the candidates describes).")
     for c in a.causes:
         lines += [f"- **{c.value}**: {_plain_words(c, p)}"]
+    if a.ripple_unresolved and a.unresolved is not None and a.periods is not None:
+        n = a.unresolved.best
+        lines += [f"- **{Cause.UNRESOLVED.value}**: a torque ripple repeats with the joint position, order {n:.3f} per "
+                  f"rad (period {2 * np.pi / n:.4f} rad), but only {a.periods:.2f} of its periods fit the training "
+                  f"travel, fewer than {MIN_RIPPLE_PERIODS:g}: too few to tell a ripple from a trend, a weight torque "
+                  "or a drift. It is not named and not modelled; a record whose travel holds at least "
+                  f"{MIN_RIPPLE_PERIODS:g} periods ({MIN_RIPPLE_PERIODS * 2 * np.pi / n:.4f} rad) resolves it."]
     lines += ["", "## Why the evidence points there", "",
               "Each candidate is a small set of physically structured regressors (module `identify.diagnosis`), "
               "fitted to the baseline's residual on the *training* record and judged only on the *test* record: its "
               "score is the RMS torque it predicts correctly on data it never saw (negative: it makes the prediction "
-              "worse). Structure separates look-alikes: temperature enters multiplied by velocity or the dry friction, "
+              "worse); this held-out gain decides. Structure separates look-alikes: temperature enters multiplied by "
+              "velocity or the dry friction, "
               "a drift is additive; load scales the friction levels, an inertia error scales the acceleration. "
               "After the best candidate is accepted the others are re-scored *given* it, so a candidate that only "
               f"echoes the accepted one scores about zero. Threshold: {a.threshold * 1e3:.3g} {mu} "
               f"({SCORE_THRESHOLD:g} x the held-out residual's noise RMS of {a.noise * 1e3:.3g} {mu}).", ""]
-    lines += markdown_table(("cause", f"score [{mu}]", f"alone [{mu}]", "named", "evidence"),
-                            [(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}",
-                              "yes" if s.selected else "no", s.evidence) for s in a.ranking])
+    lines += markdown_table(("cause", f"held-out gain [{mu}]", f"alone [{mu}]", "decision", "evidence and why"),
+                            [*[(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", s.verdict.value,
+                                s.evidence) for s in a.ranking],
+                             *[(c.value, "-", "-", Decision.NOT_TESTED.value, why) for c, why in a.excluded.items()]])
     if Cause.POSITION in a.causes:
         lines += ["", f"Position ripple order from the residual periodogram: {a.ripple.best:.3f} per rad."]
     lines += ["", "## What the extension bought", ""]
@@ -802,7 +991,8 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
     with atomic_folder(target) as stage:
         result.extended.save(stage)
         result.baseline.save(stage / BASELINE_DIR)
-        shown = list(result.analysis.causes) or [Cause.NONE]
+        shown = list(result.analysis.causes) + ([Cause.POSITION] if result.analysis.ripple_unresolved else [])
+        shown = shown or [Cause.NONE]
         plots = {}
         for c in shown:
             fname = f"residual_{c.value}.png"
@@ -813,7 +1003,8 @@ def save_diagnosis(result: DiagnosisResult, train: AxisRecord, test: AxisRecord,
         if track:
             runs = _track(result, train, test, experiment, extra_params or {})
         doc = {**result.to_json(), "causes": [c.value for c in result.analysis.causes],
-               "threshold": result.analysis.threshold, "timings": result.timings, "mlflow_runs": runs}
+               "threshold": result.analysis.threshold, "candidates": candidate_rows(result.analysis),
+               "timings": result.timings, "mlflow_runs": runs}
         (stage / RESULT_FILE).write_text(json.dumps(doc, indent=2) + "\n")
     return SavedDiagnosis(directory=target, report=target / REPORT_FILE, plots=[target / f for f in plots.values()],
                           runs=runs)

@@ -72,7 +72,7 @@ MAX_CUTOFF_SHARE = 0.25
 MIN_CUTOFF_CYCLES = 10.0
 
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau": "Nm", "temp": "degC",
-         "tau_load": "Nm", "tau_rb": "Nm", "tau_pred": "Nm"}
+         "tau_load": "Nm", "tau_rb": "Nm", "tau_pred": "Nm", "tau_friction_pred": "Nm"}
 
 
 @dataclass
@@ -95,6 +95,12 @@ class AxisRecord:
         The table as read, all columns, so predictions can be written beside the input.
     derived : tuple of str
         Which of ``qd``/``qdd`` were derived rather than read.
+    kind_declared : bool
+        The axis kind (rotary or linear) was declared, by unit headers or an option; False: the
+        record was read as rotary by assumption.
+    warnings : tuple of str
+        Doubts about the record that are not errors (:func:`axis_kind_warnings`), one line each,
+        naming the source.
     """
 
     t: np.ndarray
@@ -111,6 +117,8 @@ class AxisRecord:
     cutoff_hz: float | None = None
     linear: bool = False
     other_joints_moving: tuple[int, ...] = ()
+    kind_declared: bool = True
+    warnings: tuple[str, ...] = ()
 
     @property
     def units(self) -> dict[str, str]:
@@ -153,7 +161,8 @@ class AxisRecord:
                           source=f"{self.source}[{start}:{stop}]",
                           frame=None if self.frame is None else self.frame.iloc[sl].reset_index(drop=True),
                           derived=self.derived, cutoff_hz=self.cutoff_hz, linear=self.linear,
-                          other_joints_moving=self.other_joints_moving, **opt)
+                          other_joints_moving=self.other_joints_moving, kind_declared=self.kind_declared,
+                          warnings=self.warnings, **opt)
 
 
 def column_units(linear: bool = False) -> dict[str, str]:
@@ -417,7 +426,8 @@ def validate_frame(df: pd.DataFrame, source: str = "<memory>", *, linear: bool |
         look like degrees on a rotary axis, units that are not SI or mix rotary and linear.
     """
     df, units = split_unit_headers(df, source)
-    linear = bool(declared_linear(units, source, linear))
+    declared = declared_linear(units, source, linear)
+    linear = bool(declared)
     for name in REQUIRED:
         if name not in df.columns:
             raise InputError(f"missing required column '{name}' (have: {', '.join(map(str, df.columns))})",
@@ -461,7 +471,45 @@ def validate_frame(df: pd.DataFrame, source: str = "<memory>", *, linear: bool |
         derived = [c for c in ("qd", "qdd") if c not in cols]
     return AxisRecord(t=t, q=q, qd=qd, qdd=qdd, tau=cols["tau"], temp=cols.get("temp"),
                       tau_load=cols.get("tau_load"), tau_rb=cols.get("tau_rb"), source=source,
-                      frame=df.reset_index(drop=True), derived=tuple(derived), cutoff_hz=cutoff, linear=linear)
+                      frame=df.reset_index(drop=True), derived=tuple(derived), cutoff_hz=cutoff, linear=linear,
+                      kind_declared=declared is not None,
+                      warnings=axis_kind_warnings(q, cols["tau"], declared, source))
+
+
+#: An undeclared record travelling less than this [rad] looks like metres of a linear axis [-]
+#: (with :data:`LINEAR_LOOKING_FORCE`): identification records excite a rotary joint over much of
+#: its range (the Panda log of Gaz et al. 2019 travels 1.5-3.2 rad per joint, the demo robot's
+#: 20 s excitation 1.3 rad), while a linear drive's travel in metres is mostly below this (a
+#: ball-screw bench, a machine axis of a few hundred mm). Only a warning: short rotary records exist.
+LINEAR_LOOKING_TRAVEL = 0.5
+#: ... and whose torque's standard deviation exceeds this [Nm] looks like a force in N [-]: a
+#: drive's force over a travel of centimetres is tens to hundreds of N (an electro-mechanical
+#: positioning bench: Coulomb about 20 N, viscous about 200 N s/m), while a joint record that short,
+#: a few degrees of a robot joint, carries a few Nm (the demo plant's Coulomb level is 2 Nm, the
+#: Panda's joint friction below 1 Nm).
+LINEAR_LOOKING_FORCE = 10.0
+#: A declared linear axis travelling more than this [m] looks like millimetres [-] (no
+#: identification record of one drive spans a gantry's tens of metres).
+MAX_LINEAR_TRAVEL = 5.0
+
+
+def axis_kind_warnings(q: np.ndarray, tau: np.ndarray, declared: bool | None, source: str) -> tuple[str, ...]:
+    """Warnings on the axis kind, from the position's travel ``ptp(q)`` and the torque's spread
+    ``std(tau)``: an undeclared record (``declared`` None, read as rotary) travelling less than
+    :data:`LINEAR_LOOKING_TRAVEL` with a spread above :data:`LINEAR_LOOKING_FORCE` looks like metres
+    and newtons; a declared linear one (True) beyond :data:`MAX_LINEAR_TRAVEL` [m] looks like
+    millimetres. Each names the source and the assumption; empty when nothing is doubtful."""
+    travel = float(np.ptp(q)) if q.size else 0.0
+    force = float(np.std(tau)) if tau.size else 0.0
+    if declared is None and 0 < travel < LINEAR_LOOKING_TRAVEL and force > LINEAR_LOOKING_FORCE:
+        return (f"{source}: the axis kind is not declared (no unit headers such as 'q [m]', 'tau [N]', no --linear), "
+                f"so the record is read as rotary [rad, Nm]; its travel of {travel:.3g} with a torque spread of "
+                f"{force:.3g} looks like metres and newtons of a linear axis, not a joint record: declare a linear "
+                f"axis with the headers 'q [m]', 'tau [N]' or --linear, or a rotary one with 'q [rad]', 'tau [Nm]'",)
+    if declared is True and travel > MAX_LINEAR_TRAVEL:
+        return (f"{source}: declared linear [m, N] but the position travels {travel:.4g} m, more than "
+                f"{MAX_LINEAR_TRAVEL:g} m: it looks like millimetres; positions must be in m",)
+    return ()
 
 
 def _check_velocity_units(t: np.ndarray, q: np.ndarray, qd: np.ndarray, source: str) -> None:

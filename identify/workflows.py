@@ -153,6 +153,12 @@ def load_pair(train: Path, test: Path | None, axis: int | None, *, linear: bool 
     return train_rec, test_rec
 
 
+def record_warnings(*records: AxisRecord | None) -> list[str]:
+    """The records' own warnings (axis kind assumed or contradicted, :func:`identify.records.axis_kind_warnings`),
+    each once, in order."""
+    return list(dict.fromkeys(w for r in records if r is not None for w in r.warnings))
+
+
 @dataclass
 class FitOutcome:
     """What :func:`fit_model` gives: the fit time [s], the metrics per record (``train``, ``test``;
@@ -180,12 +186,32 @@ class FitOutcome:
                 "run": self.run.to_dict() if self.run else None, **{k: v.to_dict() for k, v in self.metrics.items()}}
 
 
+#: Characters a registered-model name is made of (others in a record's file name become ``-``).
+_NAME_CHARS = r"A-Za-z0-9._-"
+
+
+def fit_model_name(train: Path, axis: int, robot: str | None = None, name: str | None = None) -> str:
+    """The registered-model name of a fit: ``name`` when given (``--name``); ``<robot>-axis<N>-friction``
+    for an axis of a robot (``--robot``: the name the simulation looks up); else from the record,
+    ``<file stem>-axis<N>-friction``, so a drive's model never takes the demo robot's name."""
+    import re
+
+    if name is not None:
+        if not name or re.search(f"[^{_NAME_CHARS}]", name):
+            raise InputError(f"not a model name: {name!r} (use letters, digits, '.', '_', '-')", field="--name")
+        return name
+    if robot:
+        return f"{robot}-axis{axis}-friction"
+    stem = re.sub(f"[^{_NAME_CHARS}]+", "-", Path(train).stem).strip("-.") or "record"
+    return f"{stem}-axis{axis}-friction"
+
+
 def fit_model(est: FrictionModel, train: AxisRecord, test: AxisRecord | None = None, *, out_dir: Path | None = None,
-              track: bool = True, experiment: str = "friction", axis: int = 1, robot: str = "",
-              register: bool = True, advance: Advance | None = None) -> FitOutcome:
+              track: bool = True, experiment: str = "friction", axis: int = 1, robot: str | None = None,
+              register: bool = True, name: str | None = None, advance: Advance | None = None) -> FitOutcome:
     """Fit ``est`` on ``train``, score it on ``test``, save it into ``out_dir`` and, with ``track``, log
-    it as an MLflow run (:func:`identify.tracking.log_fit`), registered as ``<robot>-axis<N>-friction``
-    (alias challenger) when ``register``."""
+    it as an MLflow run (:func:`identify.tracking.log_fit`), registered as ``name`` (default
+    ``<robot>-axis<N>-friction``; :func:`fit_model_name`) with alias challenger when ``register``."""
     from identify.records import record_params
 
     adv = advance if advance is not None else Advance()
@@ -203,7 +229,7 @@ def fit_model(est: FrictionModel, train: AxisRecord, test: AxisRecord | None = N
 
         adv.describe("logging to MLflow (plots, residual analysis, model)")
         outcome.run = log_fit(est, train, test, fit_time=outcome.fit_time, experiment=experiment, axis=axis,
-                              robot=robot, register=registered_name(robot, axis) if register else None,
+                              robot=robot, register=(name or registered_name(robot or "", axis)) if register else None,
                               extra_params=record_params(train))
     return outcome
 
@@ -212,7 +238,10 @@ def predict_record(est: FrictionModel, rec: AxisRecord, out_file: Path, source: 
                                                                                                    Metrics]:
     """Write the record's columns plus ``tau_friction_pred`` (the friction) and ``tau_pred`` (the total
     joint torque, comparable to ``tau``) [Nm; N on a linear axis] to ``out_file``; gives the table and
-    the metrics of ``tau_pred`` against ``tau``. A model fitted on the other axis kind is refused."""
+    the metrics of ``tau_pred`` against ``tau``. A model fitted on the other axis kind is refused. A
+    record whose axis kind was declared (unit headers, or linear) gets unit headers on every record
+    column (``q [m]``, ``tau_pred [N]``), so reading the output back gives the same axis kind; an
+    undeclared rotary record keeps its plain headers."""
     from identify.records import write_table
 
     if bool(getattr(est, "linear_", False)) != rec.linear:
@@ -223,6 +252,11 @@ def predict_record(est: FrictionModel, rec: AxisRecord, out_file: Path, source: 
     frame = rec.frame.copy()
     frame["tau_friction_pred"] = friction
     frame["tau_pred"] = tau_pred
+    if rec.linear or rec.kind_declared:
+        # the axis kind travels with the table: read back, it is the same record (a linear one without
+        # headers would come back rotary)
+        units = rec.units
+        frame = frame.rename(columns={c: f"{c} [{units[c]}]" for c in frame.columns if c in units})
     write_table(frame, out_file)
     return frame, est.score(rec)
 
@@ -295,15 +329,16 @@ class Diagnosed:
     saved: SavedDiagnosis
 
     def table(self, threshold: float) -> Table:
-        """The causes ranked by held-out score and alone [m<torque unit>], and which were named;
-        ``threshold`` [-] as given (a share of the noise RMS)."""
+        """Every candidate: its held-out gain and gain alone [m<torque unit>], the decision and why (the
+        untested ones last); ``threshold`` [-] as given (a share of the noise RMS)."""
         res, a = self.result, self.result.analysis
         mu = f"m{a.unit}"  # escaped: rich would read "[mNm]" as markup
         return Table(f"diagnosis: {res.cause.value} (threshold {a.threshold * 1e3:.3g} {mu} held-out RMS = "
                      f"{threshold:g} x noise RMS {a.noise * 1e3:.3g} {mu})",
-                     ("cause", f"score \\[{mu}]", f"alone \\[{mu}]", "named"),
-                     [(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", "yes" if s.selected else "no")
-                      for s in a.ranking])
+                     ("cause", f"held-out gain \\[{mu}]", f"alone \\[{mu}]", "decision", "why"),
+                     [*[(s.cause.value, f"{s.score * 1e3:+.2f}", f"{s.alone * 1e3:+.2f}", s.verdict.value, s.why)
+                        for s in a.ranking],
+                      *[(c.value, "-", "-", "not tested", why) for c, why in a.excluded.items()]])
 
     def gain_text(self) -> str:
         """Test RMSE [torque unit] of the baseline and the extended model, the gain [%], the report."""
@@ -313,13 +348,20 @@ class Diagnosed:
                 f"report: {self.saved.report}")
 
 
+#: The steps :func:`diagnose_files` reports, one each (the diagnosis's stages, then saving).
+DIAGNOSE_STEPS = ("baseline fit", "held-out tests", "extended refit", "saving the report, plots and runs")
+
+
 def diagnose_files(train: Path, test: Path, out_dir: Path, *, seed: int = 0, generations: int = 30,
                    threshold: float | None = None, track: bool = True, linear: bool = False,
-                   cutoff: float | None = None, advance: Advance | None = None) -> Diagnosed:
+                   cutoff: float | None = None, advance: Advance | None = None,
+                   on_warnings: Callable[[list[str]], None] | None = None) -> Diagnosed:
     """Diagnose a friction record pair (:func:`identify.diagnosis.diagnose`: baseline fit, held-out
     tests, extended refit) and save it into ``out_dir`` (:func:`identify.diagnosis.save_diagnosis`,
     with MLflow runs when ``track``). ``threshold`` [-] as a share of the held-out noise RMS (default
-    :data:`identify.diagnosis.SCORE_THRESHOLD`); ``cutoff`` [Hz] for records without qd/qdd."""
+    :data:`identify.diagnosis.SCORE_THRESHOLD`); ``cutoff`` [Hz] for records without qd/qdd;
+    ``on_warnings`` gets the records' warnings (:func:`record_warnings`) before the long work starts;
+    ``advance`` is told each of :data:`DIAGNOSE_STEPS` and advanced by one as each ends."""
     from identify.diagnosis import SCORE_THRESHOLD, diagnose, save_diagnosis
     from identify.records import load_record, record_params
 
@@ -332,7 +374,11 @@ def diagnose_files(train: Path, test: Path, out_dir: Path, *, seed: int = 0, gen
     test_rec = load_record(test, linear=train_rec.linear, cutoff_hz=cutoff or train_rec.cutoff_hz)
     if (train_rec.tau_rb is None) != (test_rec.tau_rb is None):
         raise InputError("both records need a 'tau_rb' column, or neither", source=str(test), field="tau_rb")
-    (advance or Advance()).describe("baseline fit, held-out tests, extended refit")
-    result = diagnose(train_rec, test_rec, seed=seed, generations=generations, threshold=threshold)
+    if on_warnings is not None:
+        on_warnings(record_warnings(train_rec, test_rec))
+    adv = advance if advance is not None else Advance()
+    result = diagnose(train_rec, test_rec, seed=seed, generations=generations, threshold=threshold, advance=adv)
+    adv.describe(DIAGNOSE_STEPS[-1])
     saved = save_diagnosis(result, train_rec, test_rec, out_dir, track=track, extra_params=record_params(train_rec))
+    adv(1)
     return Diagnosed(train_rec, result, saved)

@@ -7,9 +7,9 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import out, print_table, progress, show
+from greybench.support import out, print_table, progress, show, warn
 from identify.diagnosis_defaults import SCORE_THRESHOLD
-from identify.workflows import diagnose_files
+from identify.workflows import DIAGNOSE_STEPS, diagnose_files
 
 
 def diagnose(
@@ -38,9 +38,9 @@ def diagnose(
     RMSE gain [-]."""
     from identify.records import derivative_note
 
-    with progress("diagnosing (baseline fit, held-out tests, extended refit)", total=None) as advance:
+    with progress("diagnose", total=len(DIAGNOSE_STEPS)) as advance:
         d = diagnose_files(train, test, out_dir, seed=seed, generations=generations, threshold=threshold, track=track,
-                           linear=linear, cutoff=cutoff, advance=advance)
+                           linear=linear, cutoff=cutoff, advance=advance, on_warnings=warn)
     # the JSON object is the diagnosis JSON contract; the cut-off is in MLflow
     show(as_json, d.result.to_json(), lambda: out.print(derivative_note(d.train), highlight=False),
          lambda: print_table(*d.table(threshold)), lambda: out.print(d.gain_text()))

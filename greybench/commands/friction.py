@@ -8,12 +8,12 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
+from greybench.support import emit_json, out, print_table, progress, resolve_robot, show, warn
 from identify import workflows as wf
 from identify.models import MODELS, FrictionModel, make_seeded, parse_model_names
 from identify.plant import Effect
 from identify.records import derivative_note
-from identify.workflows import COMPARE_MODELS, fit_model, load_pair, predict_record, synth_record
+from identify.workflows import COMPARE_MODELS, fit_model, load_pair, predict_record, record_warnings, synth_record
 
 
 def synth(
@@ -60,15 +60,22 @@ def fit(
     out_dir: Annotated[Path | None, typer.Option("--out", help="Folder for the fitted model (params.json with units, "
                                                                "+ model files); the MLflow run holds it too.")] = None,
     axis: o.Axis = None,
-    robot: Annotated[str, typer.Option("--robot", help="Robot name or file; names the registered "
-                                                       "model.")] = "max100",
+    robot: Annotated[str | None, typer.Option("--robot", help="Robot name or file whose axis the record is: the "
+                                                              "model registers as <robot>-axis<N>-friction, the "
+                                                              "name the simulation uses (default: no robot; the "
+                                                              "arm-coupling warning checks max100).")] = None,
+    name: Annotated[str | None, typer.Option("--name", help="Registered-model name (default: <robot>-axis<N>-friction "
+                                                            "with --robot, else <record file stem>-axis<N>-"
+                                                            "friction).")] = None,
     cutoff: o.Cutoff = None,
     linear: o.Linear = False,
     seed: o.Seed = 0,
     epochs: o.Epochs = None,
     experiment: o.Experiment = "friction",
     track: o.Track = True,
-    register: o.Register = True,
+    register: Annotated[bool, typer.Option("--register/--no-register", help="Register the fit (see --name) with "
+                                                                            "alias challenger (promote makes the "
+                                                                            "champion).")] = True,
     as_json: Annotated[bool, typer.Option("--json", help='Print {"model", "params", "train", "test", "run"} as one '
                                                          'JSON object.')] = False,
 ) -> None:
@@ -77,16 +84,17 @@ def fit(
     from simulate.coupling import coupling_warnings
 
     est = _make(model, seed, epochs)
+    robot_file = resolve_robot(robot or "max100")
+    model_name = wf.fit_model_name(train, axis or 1, robot_file.stem if robot else None, name)
     train_rec, test_rec = load_pair(train, test, axis, linear=linear, cutoff=cutoff)
-    robot_file = resolve_robot(robot)
-    warnings = coupling_warnings(train_rec, robot_file, axis)
-    for w in warnings:
-        err.print(f"[bold yellow]warning:[/] {w}", highlight=False, markup=True, soft_wrap=True)
+    warnings = [*record_warnings(train_rec, test_rec), *coupling_warnings(train_rec, robot_file, axis)]
+    warn(warnings)
     if not as_json:
         out.print(derivative_note(train_rec), highlight=False)
     with progress(f"fit {model}") as advance:
         res = fit_model(est, train_rec, test_rec, out_dir=out_dir, track=track, experiment=experiment, axis=axis or 1,
-                        robot=robot_file.stem, register=register, advance=advance)
+                        robot=robot_file.stem if robot else None, register=register, name=model_name,
+                        advance=advance)
     run = res.run
     if as_json:
         emit_json(res.to_dict(model, est, train_rec, warnings, out_dir))
@@ -126,6 +134,7 @@ def predict(
     est = load_any_model(model_ref)
     rec, _ = load_pair(data, None, axis, linear=bool(getattr(est, "linear_", False)),
                        cutoff=cutoff or getattr(est, "cutoff_hz_", None))
+    warn(record_warnings(rec))
     _, m = predict_record(est, rec, out_file, source=str(data))
     show(as_json, {"model": est.name, "out": str(out_file), "metrics": m.to_dict(),
                    "derivative_cutoff_hz": rec.cutoff_hz}, lambda: out.print(derivative_note(rec), highlight=False),
@@ -157,6 +166,7 @@ def compare(
     names = parse_model_names(models, COMPARE_MODELS, "--models")
     train_rec, test_rec = load_pair(train, test, axis, linear=linear, cutoff=cutoff)
     assert test_rec is not None
+    warn(record_warnings(train_rec, test_rec))
     robot_name = resolve_robot(robot).stem
     models_ = [_make(name, seed, epochs) for name in names]  # unknown names and bad --epochs fail first
     with progress("compare", total=len(names) + (1 if track else 0)) as advance:

@@ -94,3 +94,23 @@ def test_bad_options_exit_2(case_files, tmp_path):
     res = _run("diagnose", "--train", case_files["train"], "--test", case_files["test"], "--out", tmp_path / "d",
                "--threshold", -1)
     assert res.exit_code == 2 and "--threshold" in res.output
+
+
+def test_progress_names_each_stage_once_with_done_and_total(case_files, tmp_path):
+    """Plain progress lines (stderr is no terminal here): one per stage, '<done>/<total>', no label twice."""
+    import re
+
+    from identify.diagnosis import DIAGNOSIS_STAGES
+    from identify.workflows import DIAGNOSE_STEPS
+
+    assert DIAGNOSE_STEPS[:3] == DIAGNOSIS_STAGES
+    res = _run("diagnose", "--train", case_files["train"], "--test", case_files["test"], "--out", tmp_path / "d",
+               "--generations", 5, "--no-track")
+    assert res.exit_code == 0, res.output
+    lines = res.stderr.splitlines()
+    assert any(line.endswith("diagnose: started, 4 steps") for line in lines)
+    for i, stage in enumerate(DIAGNOSE_STEPS):
+        mine = [line for line in lines if f"diagnose ({stage}): " in line]
+        assert mine and re.search(rf"diagnose \({re.escape(stage)}\): {i}/4 \(\d+%\)", mine[0]), lines
+        assert all(line.count(stage) == 1 for line in mine)
+    assert re.search(r"diagnose: done in [0-9.]+ s$", lines[-1])

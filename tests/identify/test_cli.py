@@ -1,6 +1,8 @@
 """The CLI chain trajectory -> synth -> fit -> predict, and its bad-input contract (exit 2, nothing written)."""
 import json
+from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from typer.testing import CliRunner
@@ -86,3 +88,73 @@ def test_trajectory_bad_robot_and_axis(tmp_path):
     assert r.exit_code == 2 and "axis" in r.output and not (tmp_path / "u.csv").exists()
     r = run("trajectory", "universal", "--robot", "nosuchrobot", "--out", tmp_path / "u.csv")
     assert r.exit_code == 2 and "unknown robot" in r.output
+
+
+def test_fit_warns_when_an_undeclared_record_looks_like_metres(chain, tmp_path):
+    df = pd.read_csv(chain / "train.csv")
+    df["q"] *= 0.01                          # a drive's 12 mm and its force [N] written without unit headers
+    df["tau"] /= 0.01
+    df = df.drop(columns=["qd", "qdd"])
+    df.to_csv(tmp_path / "drive.csv", index=False)
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "drive.csv", "--no-track", "--json")
+    assert r.exit_code == 0, r.output
+    assert "warning:" in r.stderr and "drive.csv" in r.stderr and "read as rotary [rad, Nm]" in r.stderr
+    assert "'q [m]'" in r.stderr                # markup escaped: the header advice survives
+    assert any("looks like metres" in w for w in json.loads(r.stdout)["warnings"])
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "drive.csv", "--no-track", "--linear", "--json")
+    assert r.exit_code == 0 and "warning:" not in r.stderr and json.loads(r.stdout)["warnings"] == []
+
+
+@pytest.mark.parametrize("declared", ["headers", "option"])
+def test_predict_keeps_the_axis_kind_for_reading_back(chain, tmp_path, declared):
+    """A linear drive's prediction read back is a linear record again, in m and N."""
+    from identify.records import load_record
+
+    df = pd.read_csv(chain / "train.csv").drop(columns=["temp", "tau_load"])
+    for c in ("q", "qd", "qdd"):
+        df[c] *= 0.01
+    df["tau"] /= 0.01
+    if declared == "headers":
+        df = df.rename(columns={"q": "q [m]", "qd": "qd [m/s]", "qdd": "qdd [m/s^2]", "tau": "tau [N]"})
+    df.to_csv(tmp_path / "drive.csv", index=False)
+    flag = ["--linear"] if declared == "option" else []
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "drive.csv", "--out", tmp_path / "m",
+            "--no-track", *flag)
+    assert r.exit_code == 0, r.output
+    r = run("predict", "--model", tmp_path / "m", "--data", tmp_path / "drive.csv", "--out", tmp_path / "p.csv")
+    assert r.exit_code == 0, r.output
+    cols = list(pd.read_csv(tmp_path / "p.csv").columns)
+    assert cols == ["t [s]", "q [m]", "qd [m/s]", "qdd [m/s^2]", "tau [N]", "tau_friction_pred [N]", "tau_pred [N]"]
+    back = load_record(tmp_path / "p.csv")
+    assert back.linear and back.kind_declared and back.warnings == ()
+    assert back.units["tau"] == "N"
+    np.testing.assert_allclose(back.q, df.iloc[:, 1].to_numpy())
+    # the prediction read back predicts the same again
+    r2 = run("predict", "--model", tmp_path / "m", "--data", tmp_path / "p.csv", "--out", tmp_path / "p2.csv")
+    assert r2.exit_code == 0, r2.output
+    np.testing.assert_allclose(pd.read_csv(tmp_path / "p2.csv")["tau_pred [N]"], pd.read_csv(tmp_path / "p.csv")[
+        "tau_pred [N]"], rtol=1e-9)
+
+
+def test_fit_registers_a_name_from_the_record_or_the_given_one(chain, tmp_path):
+    """Not the demo robot's axis: the record's file stem, --name, or --robot's axis when asked."""
+    df = pd.read_csv(chain / "train.csv")
+    df.to_csv(tmp_path / "my drive#2.csv", index=False)
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "my drive#2.csv", "--json")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["run"]["registered"] == "my-drive-2-axis1-friction"
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "my drive#2.csv", "--name", "emps.x_1", "--json")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["run"]["registered"] == "emps.x_1"
+    r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "my drive#2.csv", "--name", "a b",
+            "--out", tmp_path / "m")
+    assert r.exit_code == 2 and "--name" in r.output and "'a b'" in r.output and not (tmp_path / "m").exists()
+
+
+def test_fit_model_name_rules():
+    from identify.workflows import fit_model_name
+
+    assert fit_model_name(Path("d/train.csv"), 3) == "train-axis3-friction"
+    assert fit_model_name(Path("d/train.csv"), 3, robot="max100") == "max100-axis3-friction"
+    assert fit_model_name(Path("d/train.csv"), 3, robot="max100", name="x") == "x"
+    assert fit_model_name(Path("d/..csv"), 1) == "record-axis1-friction"

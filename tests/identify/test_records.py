@@ -122,3 +122,55 @@ def test_write_table_is_atomic_on_bad_extension(tmp_path):
     with pytest.raises(InputError):
         write_table(good_frame(), tmp_path / "out.xlsx")
     assert list(tmp_path.iterdir()) == []
+
+
+def metre_frame(n=2000, dt=1e-3):
+    """A linear drive's record in SI without unit headers: 0.2 m of travel, forces of a few hundred N."""
+    t = np.arange(n) * dt
+    q = 0.1 + 0.1 * np.sin(2 * np.pi * 0.5 * t)
+    return pd.DataFrame({"t": t, "q": q, "tau": 95.0 * np.gradient(np.gradient(q, t), t) + 20 * np.sign(np.cos(t))})
+
+
+def test_undeclared_record_with_metre_like_travel_warns_of_the_rotary_assumption(tmp_path):
+    p = write(tmp_path, metre_frame(), "drive.csv")
+    rec = load_record(p)
+    assert not rec.linear and not rec.kind_declared
+    assert len(rec.warnings) == 1
+    w = rec.warnings[0]
+    assert str(p) in w and "not declared" in w and "read as rotary [rad, Nm]" in w and "travel of 0.2 " in w
+    assert "'q [m]'" in w and "--linear" in w
+    assert rec.slice(0, 500).warnings == rec.warnings       # a train/validation split keeps them
+    # declared, either kind: no doubt left
+    lin = load_record(write(tmp_path, metre_frame().rename(columns={"q": "q [m]", "tau": "tau [N]"}), "lin.csv"))
+    assert lin.linear and lin.kind_declared and lin.warnings == ()
+    assert load_record(p, linear=True).warnings == ()
+    rot = load_record(write(tmp_path, metre_frame().rename(columns={"q": "q [rad]"}), "rot.csv"))
+    assert not rot.linear and rot.kind_declared and rot.warnings == ()
+
+
+def test_undeclared_record_with_a_rotary_travel_or_torque_gets_no_warning(tmp_path):
+    df = good_frame()
+    df["q"] *= 2.4                                              # 1.2 rad of travel
+    df["tau"] = 30.0 * df["tau"] / df["tau"].std()             # a spread of 30
+    rec = load_record(write(tmp_path, df))
+    assert not rec.kind_declared and rec.warnings == ()
+    travel = float(np.ptp(df["q"]))
+    df["q"] *= 0.99 * 0.5 / travel                              # just under 0.5 of travel: warned
+    assert len(validate_frame(df).warnings) == 1
+    df["q"] *= 1.01 / 0.99                                      # just over: not
+    assert validate_frame(df).warnings == ()
+    df["q"] *= 0.1                                              # a few degrees of a joint ...
+    df["tau"] *= 10.1 / 30.0                                    # ... with a force-like spread: warned
+    assert "10.1" in validate_frame(df).warnings[0]
+    df["tau"] *= 9.9 / 10.1                                     # a torque of a few Nm: a short joint record
+    assert validate_frame(df).warnings == ()
+
+
+def test_declared_linear_travel_of_millimetres_warns(tmp_path):
+    df = metre_frame()
+    df["q"] *= 1000.0                                           # mm written as m: 200 "m" of travel
+    rec = validate_frame(df.rename(columns={"q": "q [m]", "tau": "tau [N]"}), "mm.csv")
+    assert rec.linear and len(rec.warnings) == 1
+    assert "mm.csv" in rec.warnings[0] and "millimetres" in rec.warnings[0] and "200 m" in rec.warnings[0]
+    df["q"] *= 4.9 / 200.0                                      # 4.9 m: a long axis, no warning
+    assert validate_frame(df, linear=True).warnings == ()

@@ -50,7 +50,7 @@ def test_seven_joint_log_axis_7(plant_frames, tmp_path, mlflow_store):
     seven_joint_log(train).to_csv(tmp_path / "log.csv", index=False)
     seven_joint_log(test).to_csv(tmp_path / "log_test.csv", index=False)
     r = run("fit", "--model", "coulomb-viscous", "--train", tmp_path / "log.csv", "--test", tmp_path / "log_test.csv",
-            "--axis", 7, "--json")
+            "--axis", 7, "--json", "--robot", "max100")
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
     assert doc["run"]["registered"] == "max100-axis7-friction"
@@ -121,7 +121,7 @@ def test_linear_axis_units_everywhere(plant_frames, tmp_path, mlflow_store):
     r = run("predict", "--model", tmp_path / "m", "--data", tmp_path / "test.csv", "--out", tmp_path / "p.csv")
     assert r.exit_code == 0, r.output
     p = pd.read_csv(tmp_path / "p.csv")
-    err = np.sqrt(np.mean((p["tau_friction_pred"] - truth / LEAD) ** 2))
+    err = np.sqrt(np.mean((p["tau_friction_pred [N]"] - truth / LEAD) ** 2))  # the output keeps the unit headers
     assert err < 0.1 * np.std(truth / LEAD)  # friction in N, right to a tenth of its spread
 
 
@@ -181,3 +181,21 @@ def test_bench_realdata_bad_input(real_folder, tmp_path):
     assert r.exit_code == 2 and "joint1_test.csv" in r.output
     r = run("bench", "realdata", "--data", tmp_path / "nothing")
     assert r.exit_code == 2 and "nothing" in r.output
+
+
+def test_bench_realdata_prints_the_records_units(real_folder, plant_frames, tmp_path):
+    """mNm on the rotary joints, mN on a linear one (declared by its headers), each in the JSON."""
+    r = run("bench", "realdata", "--data", real_folder, "--models", "coulomb-viscous", "--joints", "1")
+    assert r.exit_code == 0 and "RMSE [mNm]" in " ".join(r.stdout.split())     # the title may wrap
+    (train, _), (test, truth) = plant_frames
+    d = tmp_path / "linear"
+    d.mkdir()
+    linear_copy(train).to_csv(d / "joint1_train.csv", index=False)
+    linear_copy(test).to_csv(d / "joint1_test.csv", index=False)
+    pd.DataFrame({"t": test["t"], "tau_f": truth / LEAD}).to_csv(d / "published_friction_joint1_test.csv", index=False)
+    r = run("bench", "realdata", "--data", d, "--models", "coulomb-viscous")
+    assert r.exit_code == 0, r.output
+    assert "RMSE [mN]" in " ".join(r.stdout.split()) and "mNm" not in r.stdout
+    doc = json.loads(run("bench", "realdata", "--data", d, "--models", "coulomb-viscous", "--json").stdout)
+    assert doc["joints"][0]["unit"] == "N"
+    assert doc["joints"][0]["published"] == pytest.approx(NOISE / LEAD, rel=0.1)  # the noise, in N

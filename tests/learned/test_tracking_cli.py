@@ -37,7 +37,7 @@ def test_default_store_is_local_sqlite(monkeypatch, tmp_path):
 def test_fit_run_params_metrics_plots_and_roundtrips(mlflow_store, short_files, tmp_path):
     train, test = short_files
     res = _run("fit", "--model", "greybox", "--epochs", "5", "--train", train, "--test", test, "--out", tmp_path / "m",
-               "--axis", "2", "--json")
+               "--axis", "2", "--json", "--robot", "max100")
     doc = _json(res)
     run_id = doc["run"]["run_id"]
     # a new version is only the challenger; promote makes it the first champion
@@ -83,20 +83,21 @@ def test_promote_moves_champion_only_when_better(mlflow_store, short_files):
     train, test = short_files
     name = "max100-axis1-friction"
     client = mlflow.MlflowClient(mlflow_store, registry_uri=mlflow_store)
-    first = _json(_run("fit", "--model", "stribeck", "--train", train, "--test", test, "--json"))
+    first = _json(_run("fit", "--model", "stribeck", "--train", train, "--test", test, "--json", "--robot", "max100"))
     assert first["run"]["alias"] == "challenger"  # never champion by itself, even in a fresh store
     with pytest.raises(mlflow.exceptions.MlflowException):
         client.get_model_version_by_alias(name, "champion")
     res = _run("promote", "--name", name)
     assert res.exit_code == 0 and "version 1 becomes the first champion" in res.stdout
     assert str(client.get_model_version_by_alias(name, "champion").version) == "1"
-    worse = _json(_run("fit", "--model", "coulomb-viscous", "--train", train, "--test", test, "--json"))
+    worse = _json(_run("fit", "--model", "coulomb-viscous", "--train", train, "--test", test, "--json",
+                       "--robot", "max100"))
     assert worse["run"]["alias"] == "challenger"
     assert str(client.get_model_version_by_alias(name, "champion").version) == "1"
     doc = _json(_run("promote", "--name", name, "--json"))
     assert doc["promoted"] is False and doc["champion_version"] == "1"
     assert doc["improvement"] == pytest.approx(first["test"]["rmse"] - worse["test"]["rmse"])
-    better = _json(_run("fit", "--model", "lugre", "--train", train, "--test", test, "--json"))
+    better = _json(_run("fit", "--model", "lugre", "--train", train, "--test", test, "--json", "--robot", "max100"))
     assert better["run"]["alias"] == "challenger" and better["test"]["rmse"] < first["test"]["rmse"]
     res = _run("promote", "--name", name)
     assert res.exit_code == 0 and "champion moved to version 3" in res.stdout and "better by" in res.stdout
@@ -110,7 +111,8 @@ def test_promote_moves_champion_only_when_better(mlflow_store, short_files):
 def test_first_promotion_needs_a_tested_challenger(mlflow_store, short_files):
     train, _ = short_files
     name = "max100-axis4-friction"
-    fitted = _json(_run("fit", "--model", "coulomb-viscous", "--train", train, "--axis", "4", "--json"))
+    fitted = _json(_run("fit", "--model", "coulomb-viscous", "--train", train, "--axis", "4", "--json",
+                        "--robot", "max100"))
     assert fitted["run"]["alias"] == "challenger"
     res = _run("promote", "--name", name)
     assert res.exit_code == 2 and "test_rmse" in res.output

@@ -109,7 +109,8 @@ def test_diagnose_fits_its_own_baseline_and_refuses_another_model():
         diagnose(train, test, baseline=CoulombViscous().fit(train))
     # the defaults the docstring gives: 30 GA generations of 48, seed 0, the module's threshold
     kw = {k: v.default for k, v in inspect.signature(diagnose).parameters.items() if k not in ("train", "test")}
-    assert kw == {"seed": 0, "population": 48, "generations": 30, "threshold": dg.SCORE_THRESHOLD, "baseline": None}
+    assert kw == {"seed": 0, "population": 48, "generations": 30, "threshold": dg.SCORE_THRESHOLD, "baseline": None,
+                  "advance": None}
 
 
 # ---- what the plots show ----------------------------------------------------------------------
@@ -320,13 +321,13 @@ Training record `r.csv` (7 samples), test record `r.csv` (5 samples). Baseline: 
 
 ## Why the evidence points there
 
-Each candidate is a small set of physically structured regressors (module `identify.diagnosis`), fitted to the baseline's residual on the *training* record and judged only on the *test* record: its score is the RMS torque it predicts correctly on data it never saw (negative: it makes the prediction worse). Structure separates look-alikes: temperature enters multiplied by velocity or the dry friction, a drift is additive; load scales the friction levels, an inertia error scales the acceleration. After the best candidate is accepted the others are re-scored *given* it, so a candidate that only echoes the accepted one scores about zero. Threshold: 2.1 mNm (0.1 x the held-out residual's noise RMS of 21 mNm).
+Each candidate is a small set of physically structured regressors (module `identify.diagnosis`), fitted to the baseline's residual on the *training* record and judged only on the *test* record: its score is the RMS torque it predicts correctly on data it never saw (negative: it makes the prediction worse); this held-out gain decides. Structure separates look-alikes: temperature enters multiplied by velocity or the dry friction, a drift is additive; load scales the friction levels, an inertia error scales the acceleration. After the best candidate is accepted the others are re-scored *given* it, so a candidate that only echoes the accepted one scores about zero. Threshold: 2.1 mNm (0.1 x the held-out residual's noise RMS of 21 mNm).
 
-| cause | score [mNm] | alone [mNm] | named | evidence |
+| cause | held-out gain [mNm] | alone [mNm] | decision | evidence and why |
 |---|---|---|---|---|
-| position | +12.30 | +20.00 | yes | ev one |
-| drift | +4.50 | +5.00 | yes | ev two |
-| gravity | -0.10 | +0.20 | no | ev \\| three |
+| position | +12.30 | +20.00 | named | ev one |
+| drift | +4.50 | +5.00 | named | ev two |
+| gravity | -0.10 | +0.20 | not named | ev \\| three |
 
 Position ripple order from the residual periodogram: 8.000 per rad.
 
@@ -365,7 +366,7 @@ def test_render_report_without_a_cause_and_on_a_linear_axis():
     assert ("## What was wrong\n\nNothing the candidates can name. No candidate explains more than 2.1 mNm RMS of the "
             "held-out torque; the baseline's held-out residual is 0.0600 Nm RMS, which is what is left as noise (or "
             "as an effect none of the candidates describes).\n\n## Why") in text
-    assert "**-5.0 %**" in text and "| drift | +1.00 | +1.10 | no | e |" in text
+    assert "**-5.0 %**" in text and "| drift | +1.00 | +1.10 | not named | e |" in text
     assert "Identified extension parameters" not in text and "Position ripple order" not in text
     assert "![held-out residual vs the none variable, before and after](residual_none.png)" in text
     assert "# Friction diagnosis: none\n" in text
@@ -392,7 +393,8 @@ def test_save_diagnosis_writes_everything_and_guards_the_folder(case, tmp_path):
     assert text.startswith('{\n  "cause": "') and text.endswith("}\n")      # indented for people to read
     doc = json.loads(text)
     assert doc == json.loads(json.dumps({**res.to_json(), "causes": [c.value for c in res.analysis.causes],
-                                         "threshold": res.analysis.threshold, "timings": res.timings,
+                                         "threshold": res.analysis.threshold,
+                                         "candidates": dg.candidate_rows(res.analysis), "timings": res.timings,
                                          "mlflow_runs": {}}))
     back = LuGreExtended.load(out)
     np.testing.assert_allclose(back.predict(test), res.extended.predict(test), rtol=1e-12)
@@ -523,6 +525,8 @@ def test_a_weak_second_cause_is_not_named_beside_a_strong_one():
     asym = next(s for s in a.ranking if s.cause is Cause.ASYMMETRY)
     drift = next(s for s in a.ranking if s.cause is Cause.DRIFT)
     assert a.threshold < asym.score < dg.SECONDARY_SHARE * drift.score and not asym.selected
+    assert asym.verdict is dg.Decision.NOT_NAMED and asym.why.startswith("above the threshold but under 10 % of the ")
+    assert drift.verdict is dg.Decision.NAMED and "above the bar of" in drift.why and "given" not in drift.why
     # two strong causes: both named, the larger unique contribution first, the ranking by score
     train, test = _pair(lambda r, p: 0.005 * (r.t - r.t[0]) + 0.3 * p.dry * (r.qd < 0))
     a = dg.analyse_residual(_baseline(), train, test)
@@ -530,6 +534,8 @@ def test_a_weak_second_cause_is_not_named_beside_a_strong_one():
     scores = {s.cause: s.score for s in a.ranking}
     assert scores[Cause.ASYMMETRY] > scores[Cause.DRIFT] > a.threshold
     assert [s.cause for s in a.ranking[:2]] == a.causes
+    drift = next(s for s in a.ranking if s.cause is Cause.DRIFT)
+    assert " when selected given asymmetry, above the bar of " in drift.why
 
 
 class _Plain(CoulombViscous):
