@@ -34,7 +34,7 @@ from starlette.routing import Match
 
 from identify.errors import InputError
 from service import registry
-from service.auth import require_key
+from service.auth import may_see, require_key
 from service.jobs import DataDirLock, JobKind, JobManager, JobRecord, JobState, JobStore, QueueFull, owner_of
 from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside, named_file
 from service.schemas import (
@@ -206,7 +206,8 @@ def _status(rec: JobRecord) -> JobStatus:
 def _job(request: Request, job_id: str, kind: JobKind | None = None) -> JobRecord:
     check_job_id(job_id)
     rec = request.app.state.store.get(job_id)
-    if rec is None or (kind is not None and rec.kind is not kind):
+    # another key's job answers exactly like an unknown one: ids are not confirmed to other keys
+    if rec is None or (kind is not None and rec.kind is not kind) or not may_see(request, job_id, rec.owner):
         raise NotFound(f"no {kind.value + ' ' if kind else ''}job '{job_id}'")
     return rec
 

@@ -101,9 +101,7 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
             (d / "program.nc").write_text(text)
             (d / "stock.json").write_text(stock_text)
 
-        rec = request.app.state.manager.submit(JobKind.compensation, job, prepare=prepare)
-        return JSONResponse(status_code=202, content=svc._status(rec).model_dump(mode="json"),
-                            headers={"Location": f"/compensations/{rec.id}"})
+        return svc._submitted(request, JobKind.compensation, job, prepare, "/compensations")
 
     @app.get("/compensations/{job_id}", response_model=JobStatus, dependencies=keyed, tags=["compensations"],
              responses=not_found)

@@ -688,10 +688,14 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
     index = (STATIC / "view" / "index.html").read_text()
 
     def allowed(request: Request, job_id: str, key: str | None, token: str | None) -> bool:
+        # a valid link opens its job only; a valid key opens its own jobs (service.auth.may_see)
+        linked = verify(key_bytes, token, job_id)
+        if linked:
+            request.state.view_link = job_id
         if key_ok(key, request.app.state.settings.keys()):
             request.state.api_key = key
             return True
-        return verify(key_bytes, token, job_id)
+        return linked
 
     def for_kind(view: ViewKind):
         prefix, kind = view.prefix, view.kind

@@ -65,10 +65,10 @@ def test_unknown_job_is_a_clear_404_page(client):
 
 
 def test_unfinished_job_is_a_clear_409_page(client):
-    from service.jobs import JobKind
+    from service.jobs import JobKind, owner_of
 
     store = client.app.state.store
-    rec = store.create(JobKind.simulation, {"poses": []}, boot="test")   # queued, never started
+    rec = store.create(JobKind.simulation, {"poses": []}, boot="test", owner=owner_of(KEY))  # queued, never started
     r = client.get(f"/simulations/{rec.id}/view", headers=HEADERS)
     assert r.status_code == 409 and "queued" in r.text and "Traceback" not in r.text
     link = client.post(f"/simulations/{rec.id}/view-link", headers=HEADERS).json()
@@ -92,9 +92,9 @@ def _fake_compensation(store, jobs_dir) -> str:
     """A succeeded compensation job with a summary and a deviation plot (the view reads only these)."""
     from PIL import Image
 
-    from service.jobs import JobKind, JobState, folder_digests
+    from service.jobs import JobKind, JobState, folder_digests, owner_of
 
-    rec = store.create(JobKind.compensation, {}, boot="test")
+    rec = store.create(JobKind.compensation, {}, boot="test", owner=owner_of(KEY))
     out = jobs_dir / rec.id / "out"
     out.mkdir(parents=True)
     Image.new("RGB", (60, 40), (200, 30, 30)).save(out / "deviation.png")
