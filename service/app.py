@@ -22,7 +22,7 @@ import sys
 import threading
 from contextlib import asynccontextmanager, suppress
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import pandas as pd
 from fastapi import Depends, FastAPI, Query, Request
@@ -34,10 +34,11 @@ from starlette.routing import Match
 
 from identify.errors import InputError
 from service import registry
-from service.auth import may_see, require_key
+from service.auth import is_admin, may_see, require_key
 from service.jobs import DataDirLock, JobKind, JobManager, JobRecord, JobState, JobStore, QueueFull, owner_of
 from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside, named_file
 from service.schemas import (
+    MAX_PAGE,
     STATUS_BY_KIND,
     AnyJobStatus,
     DiagnoseJobStatus,
@@ -48,6 +49,7 @@ from service.schemas import (
     FrictionPredictRequest,
     FrictionPredictResponse,
     Health,
+    JobList,
     JobStatus,
     ModelList,
     QueueInfo,
@@ -607,6 +609,18 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         job = {"program_source": source, "robot": robot, "pose": pose, "spacing_mm": body.spacing_mm,
                "max_sims": body.max_sims}
         return _submitted(request, JobKind.explain, job, prepare, "/jobs")
+
+    @app.get("/jobs", response_model=JobList, dependencies=keyed, tags=["jobs"])
+    def list_jobs(request: Request, kind: Annotated[JobKind | None, Query(description="only jobs of this kind")] = None,
+                  state: Annotated[JobState | None, Query(description="only jobs in this state")] = None,
+                  limit: int = Query(50, ge=1, le=MAX_PAGE, description="most jobs in the page [-]"),
+                  offset: int = Query(0, ge=0, le=10**9, description="jobs to skip, newest first [-]")) -> JobList:
+        key = getattr(request.state, "api_key", None)
+        owner = None if is_admin(key, settings) else owner_of(key)
+        recs, total = request.app.state.store.find(owner=owner, kind=kind, state=state, limit=limit, offset=offset)
+        more = offset + len(recs) < total
+        return JobList(jobs=[_status(r) for r in recs], total=total, limit=limit, offset=offset,
+                       next_offset=offset + len(recs) if more else None)
 
     @app.get("/jobs/{job_id}", response_model=AnyJobStatus, dependencies=keyed, tags=["jobs"], responses=not_found)
     def job_status(request: Request, job_id: str = job_id_param) -> JobStatus:

@@ -243,6 +243,20 @@ STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: Dia
                   JobKind.placement_search: PlacementSearchJobStatus, JobKind.circle: CircleJobStatus}
 
 
+#: Most jobs in one page of ``GET /jobs``.
+MAX_PAGE = 200
+
+
+class JobList(Strict):
+    """One page of ``GET /jobs``: the asking key's jobs (every key's for the admin key), newest first."""
+
+    jobs: list[AnyJobStatus] = Field(description="the jobs of this page, newest first")
+    total: int = Field(description="jobs matching the filters in all [-]")
+    limit: int = Field(description="most jobs per page, as asked [-]")
+    offset: int = Field(description="jobs skipped before this page [-]")
+    next_offset: int | None = Field(None, description="offset of the next page; null on the last page")
+
+
 class RankingEntry(BaseModel):
     pose: str
     score: float = Field(description="ranking score (lower is better) [-]")

@@ -114,6 +114,60 @@ def test_another_key_cannot_read_link_open_or_cancel(jobs_of_a):
         assert c.get(f"/jobs/{job}", headers=A).json()["state"] == "queued", kind   # B's cancels did nothing
 
 
+def test_another_key_does_not_see_them_listed_and_the_admin_sees_all(jobs_of_a):
+    c, jobs = jobs_of_a
+    mine = c.get("/jobs", headers=A).json()
+    assert mine["total"] == 6 and {j["id"] for j in mine["jobs"]} == {j for j, _ in jobs.values()}
+    assert {j["kind"] for j in mine["jobs"]} == set(jobs) and mine["next_offset"] is None
+    assert c.get("/jobs", headers=B).json() == {"jobs": [], "total": 0, "limit": 50, "offset": 0, "next_offset": None}
+    assert c.get("/jobs", headers=B, params={"kind": "circle"}).json()["total"] == 0
+    everyone = c.get("/jobs", headers=ROOT).json()
+    assert {j["id"] for j in everyone["jobs"]} >= {j for j, _ in jobs.values()}
+
+
+def test_the_list_pages_newest_first_and_filters(jobs_of_a):
+    c, jobs = jobs_of_a
+    first = c.get("/jobs", headers=A, params={"limit": 4}).json()
+    assert len(first["jobs"]) == 4 and first["total"] == 6 and first["next_offset"] == 4
+    rest = c.get("/jobs", headers=A, params={"limit": 4, "offset": first["next_offset"]}).json()
+    assert len(rest["jobs"]) == 2 and rest["next_offset"] is None and rest["offset"] == 4
+    listed = [j["id"] for j in first["jobs"] + rest["jobs"]]
+    store = c.app.state.store
+    created = [store.get(j).created for j in listed]
+    assert sorted(listed) == sorted(j for j, _ in jobs.values()) and created == sorted(created, reverse=True)
+    one = c.get("/jobs", headers=A, params={"kind": "circle"}).json()
+    assert [j["id"] for j in one["jobs"]] == [jobs["circle"][0]] and one["total"] == 1
+    assert c.get("/jobs", headers=A, params={"state": "queued"}).json()["total"] == 6
+    assert c.get("/jobs", headers=A, params={"state": "cancelled"}).json()["total"] == 0
+    assert c.get("/jobs", headers=A, params={"kind": "circle", "state": "succeeded"}).json()["total"] == 0
+    for params, field in [({"kind": "nope"}, "kind"), ({"state": "done"}, "state"), ({"limit": 0}, "limit"),
+                          ({"limit": 201}, "limit"), ({"offset": -1}, "offset")]:
+        r = c.get("/jobs", headers=A, params=params)
+        assert r.status_code == 422 and r.json()["detail"][0]["field"] == field, (params, r.text)
+    assert c.get("/jobs").status_code == 401
+
+
+def test_each_kinds_route_cancels_its_own_and_refuses_another_key(tmp_path, monkeypatch):
+    from service.jobs import owner_of
+    from service.states import JobKind
+
+    routes = {JobKind.simulation: "/simulations", JobKind.compensation: "/compensations",
+              JobKind.circle: "/circles", JobKind.placement_search: "/placement-searches",
+              JobKind.explain: "/jobs", JobKind.diagnose: "/jobs"}
+    with _app(tmp_path, monkeypatch, per_key=4) as c:
+        store, boot = c.app.state.store, c.app.state.manager.boot
+        for kind, prefix in routes.items():
+            job = store.create(kind, {}, boot, owner_of(KEY_A)).id
+            assert c.delete(f"{prefix}/{job}", headers=B).status_code == 404, kind
+            assert store.get(job).state.value == "queued"
+            r = c.delete(f"{prefix}/{job}", headers=A)
+            assert r.status_code == 200 and r.json()["state"] == "cancelled" and r.json()["kind"] == kind.value, kind
+            if prefix != "/jobs":   # a kind's route knows its own kind only
+                other = store.create(JobKind.diagnose, {}, boot, owner_of(KEY_A)).id
+                assert c.delete(f"{prefix}/{other}", headers=A).status_code == 404, kind
+                assert store.get(other).state.value == "queued"
+
+
 def test_cancel_refuses_another_key(tmp_path, monkeypatch):
     with _app(tmp_path, monkeypatch, per_key=4) as c:
         route, body, _, prefix = SUBMISSIONS[2]   # a circle: the quickest submission
