@@ -202,7 +202,8 @@ class AnswerOptions:
 def _status(rec: JobRecord) -> JobStatus:
     return STATUS_BY_KIND[rec.kind](id=rec.id, kind=rec.kind, state=rec.state, progress=rec.progress,
                                     message=rec.message, created=rec.created, started=rec.started,
-                                    finished=rec.finished, error=rec.error, result=rec.result)
+                                    finished=rec.finished, error=None if rec.error is None else public_error(rec.error),
+                                    result=rec.result)
 
 
 def _job(request: Request, job_id: str, kind: JobKind | None = None) -> JobRecord:
@@ -260,9 +261,22 @@ def _submitted(request: Request, kind: JobKind, job: dict, prepare, location: st
                             headers={"Location": f"{location}/{rec.id}"})
 
 
-def _program(body, limits) -> tuple[str, str]:
-    """(text, source) of a named program or inline G-code, parsed once to give 422 naming the line
-    (its length checked first: parsing a huge program is itself the cost)."""
+def _ascii_digits(text: str, source: str, field: str) -> None:
+    """422 naming the line and column of the first digit outside 0-9 (Python reads Arabic-Indic and other
+    Unicode digits as numbers; no controller does)."""
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        for col, ch in enumerate(line, start=1):
+            if ch.isdigit() and not ch.isascii():
+                raise InputError(f"non-ASCII digit '{ch}' (U+{ord(ch):04X}): G-code numbers use the digits 0-9",
+                                 source=source, field=field, line=lineno, column=col)
+
+
+def _program(body, limits) -> tuple[str, str, str, str]:
+    """(text, source, stock text, stock source) of a named program or inline G-code and its stock. The
+    program is parsed once to give 422 naming the line (its length checked first: parsing a huge program
+    is itself the cost); a program without motion (empty, comments only) or that never switches the
+    spindle on is refused here, not a minute later in the job (every job kind takes the spindle speed
+    from the program)."""
     from simulate.costs import check_program_size
     from simulate.toolpath.gcode import parse_program
 
@@ -271,9 +285,59 @@ def _program(body, limits) -> tuple[str, str]:
         text, source = path.read_text(), path.name
     else:
         text, source = body.gcode, "gcode"
-    check_program_size(text, limits, source=source, field="program" if body.program is not None else "gcode")
-    parse_program(text, source=source)
-    return text, source
+    field = "program" if body.program is not None else "gcode"
+    check_program_size(text, limits, source=source, field=field)
+    _ascii_digits(text, source, field)
+    prog = parse_program(text, source=source)
+    stock_text, stock_source = _stock(body)
+    if not prog.segments:
+        raise InputError("the program has no motion (empty, or only comments and settings)", source=source,
+                         field=field)
+    if not any(getattr(seg, "spindle", 0) > 0 for seg in prog.segments):
+        raise InputError("the program never switches the spindle on (no S word with M3/M4 before a cut)",
+                         source=source, field=field)
+    return text, source, stock_text, stock_source
+
+
+def _material(name: str | None, field: str) -> None:
+    """422 naming ``field`` for a material not in data/materials.toml (checked before the job starts)."""
+    from simulate.machining.cutting import load_material
+
+    if name is None:
+        return
+    try:
+        load_material(name)
+    except InputError as exc:
+        raise InputError(exc.message, source="materials.toml", field=field) from None
+
+
+def _finite_columns(frame: pd.DataFrame, columns: tuple[str, ...], source: str) -> None:
+    """422 naming the column and row (1 = the first data row) of the first value that is not a finite number."""
+    for col in columns:
+        values = pd.to_numeric(frame[col], errors="coerce").to_numpy(dtype=float)
+        bad = [i for i, v in enumerate(values) if not math.isfinite(v)]
+        if bad:
+            raise InputError(f"'{frame[col].iloc[bad[0]]}' is not a finite number", source=source, field=col,
+                             row=bad[0] + 1)
+
+
+def public_error(detail: dict) -> dict:
+    """An error for a client: a ``source`` that is a server path becomes its file name, and the server's
+    folders are cut from the message (answers never name server paths)."""
+    import tempfile
+
+    out = dict(detail)
+    src = out.get("source")
+    if isinstance(src, str) and ("/" in src or "\\" in src):
+        out["source"] = Path(src).name
+    msg = out.get("message")
+    if isinstance(msg, str):
+        from service.paths import DATA_DIR
+
+        for root in sorted({str(DATA_DIR.parent), tempfile.gettempdir()}, key=len, reverse=True):
+            msg = msg.replace(root + "/", "").replace(root, "")
+        out["message"] = msg
+    return out
 
 
 def _cost(body, text: str, source: str, stock_text: str, stock_source: str, spacing_mm: float, spacing_field: str,
@@ -419,7 +483,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
     @app.exception_handler(InputError)
     async def _input_error(request: Request, exc: InputError):
-        return SafeJSONResponse(status_code=422, content={"detail": _short(exc.to_dict())})
+        return SafeJSONResponse(status_code=422, content={"detail": _short(public_error(exc.to_dict()))})
 
     @app.exception_handler(sqlite3.DatabaseError)
     async def _store_error(request: Request, exc: sqlite3.DatabaseError):
@@ -463,10 +527,10 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
               tags=["simulations"], responses={**not_found, 429: {"model": ErrorBody}})
     def submit_simulation(body: SimulationRequest, request: Request) -> JSONResponse:
         limits = settings.cost_limits()
-        text, source = _program(body, limits)
-        stock_text, stock_source = _stock(body)
+        text, source, stock_text, stock_source = _program(body, limits)
         robot = _robot(body.robot)
         poses = _poses(body)
+        _material(body.options.material, "options.material")
         _cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
               len(poses) * (4 if body.options.shares else 1), limits)
         friction = _friction(body, robot, settings.mlflow_tracking_uri)
@@ -578,8 +642,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         from simulate.toolpath.placement import parse_poses
 
         limits = settings.cost_limits()
-        text, source = _program(body, limits)
-        stock_text, stock_source = _stock(body)
+        text, source, stock_text, stock_source = _program(body, limits)
         from simulate.explain.pipeline import simulations_needed
 
         _cost(body, text, source, stock_text, stock_source, body.spacing_mm, "spacing_mm",
@@ -589,6 +652,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         for col in ("feature", "x", "y", "z"):
             if col not in scan.columns:
                 raise InputError(f"missing required column '{col}'", source="scan.csv", field=col)
+        _finite_columns(scan, ("x", "y", "z"), "scan.csv")
         if isinstance(body.pose, str):
             assert body.pose_set is not None  # the request's validator: a pose by name needs pose_set
             path = named_file("poses", body.pose_set, ".json", "pose_set")

@@ -30,7 +30,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field
 
 from identify.errors import InputError
-from service.schemas import CircleJobStatus, ErrorBody, Finite, JobStatus, Responses, SinglePoseJob, Strict
+from service.schemas import CircleJobStatus, ErrorBody, Finite, JobStatus, Responses, SinglePoseJob, StrictRequest
 
 #: Files a finished job serves, with their media types.
 FILES = {"circle.csv": "text/csv", "circle.png": "image/png", "summary.json": "application/json"}
@@ -40,7 +40,7 @@ MAX_CYCLES = 600_000
 Coordinate = Annotated[float, Field(ge=-5000, le=5000, allow_inf_nan=False)]
 
 
-class CircleOptions(Strict):
+class CircleOptions(StrictRequest):
     radius_mm: Finite = Field(50.0, ge=1, le=2000, description="circle radius [mm]")
     feed_mm_min: Finite = Field(2000.0, ge=1, le=60000, description="feed along the circle [mm/min]")
     plane: Literal["xy", "yz", "zx"] = Field("xy", description="plane of the workpiece frame")

@@ -30,7 +30,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field, model_validator
 
 from identify.errors import InputError
-from service.schemas import CompensationJobStatus, ErrorBody, JobStatus, Name, Responses, SinglePoseJob, Strict
+from service.schemas import CompensationJobStatus, ErrorBody, JobStatus, Name, Responses, SinglePoseJob, StrictRequest
 from simulate.compensation.settings import CompensationSettings
 from simulate.defaults import RANKING_DEXEL_SPACING
 
@@ -40,7 +40,7 @@ FILES = {"compensated.nc": "text/plain", "compensated.stock.json": "application/
          "deviation.png": "image/png"}
 
 
-class CompensationOptions(Strict):
+class CompensationOptions(StrictRequest):
     spacing_mm: float = Field(RANKING_DEXEL_SPACING * 1e3, gt=0.05, le=5.0,
                               description="dexel spacing of the virtual workpiece [mm] (default: the ranking's)")
     iterations: int = Field(CompensationSettings.iterations, ge=1, le=8,
@@ -87,8 +87,7 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
         from service.circle import pose_of
 
         limits = settings.cost_limits()
-        text, source = svc._program(body, limits)
-        stock_text, stock_source = svc._stock(body)
+        text, source, stock_text, stock_source = svc._program(body, limits)
         robot = svc._robot(body.robot)
         pose = pose_of(body)
         # each iteration simulates once, each stiffness check twice (original and compensated program)

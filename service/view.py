@@ -55,12 +55,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 from fastapi import Body, Depends, HTTPException, Query, Request, Security
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, Response
+from pydantic import StrictInt
 
 from identify.errors import InputError
 from identify.files import atomic_file
@@ -732,8 +733,9 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
         @app.post(f"{prefix}/{{job_id}}/view-link", dependencies=keyed, tags=[tag], responses=errors,
                   summary="A short-lived signed link to the job's page")
         def view_link(request: Request, job_id: str = job_id_param,
-                      expires_s: int = Body(LINK_SECONDS, embed=True, ge=10, le=MAX_LINK_SECONDS,
-                                            description="lifetime of the link [s]")) -> dict:
+                      expires_s: Annotated[StrictInt, Body(embed=True, ge=10, le=MAX_LINK_SECONDS,
+                                                            description="lifetime of the link [s]")] = LINK_SECONDS
+                      ) -> dict:
             svc._job(request, job_id, kind)
             expires = int(time.time()) + int(expires_s)
             token = sign(key_bytes, job_id, expires)
