@@ -476,6 +476,9 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
 
     app.add_middleware(AnswerOptions)
+    from service.headers import HtmlHeaders
+
+    app.add_middleware(HtmlHeaders)   # outermost: every HTML answer, error pages included
 
     @app.exception_handler(RequestValidationError)
     async def _schema_error(request: Request, exc: RequestValidationError):

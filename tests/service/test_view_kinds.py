@@ -233,8 +233,8 @@ def _open(browser, srv, prefix, job_id, shot=None):
     # three.js is for a page with a 3D part only: these pages must not download it
     page.on("request", lambda r: problems.append(f"fetched {r.url}") if "/vendor/three/" in r.url else None)
     page.goto(srv.url + link["url"])
-    page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
-    page.wait_for_function("[...document.images].every(i => i.complete && i.naturalWidth > 0)", timeout=30_000)
+    page.wait_for_function("() => window.greybenchView && window.greybenchView.ready", timeout=60_000)
+    page.wait_for_function("() => [...document.images].every(i => i.complete && i.naturalWidth > 0)", timeout=30_000)
     if shot:
         # GREYBENCH_VIEW_SHOTS=<folder> keeps the screenshots to look at
         folder = os.environ.get("GREYBENCH_VIEW_SHOTS")
@@ -294,7 +294,7 @@ def test_key_entered_once_opens_the_circle_page(server, browser):
     assert page.locator("section.summary").count() == 0             # no data before a key
     page.fill("#login-key", KEY)
     page.click("#login-form button")
-    page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
+    page.wait_for_function("() => window.greybenchView && window.greybenchView.ready", timeout=60_000)
     assert "token=" in page.url and f"/circles/{job_id}/view" in page.url
     assert page.locator("table[data-id='spikes'] tbody tr").count() == len(SPIKES)
     page.close()
