@@ -430,6 +430,11 @@ def _warm_up() -> None:
         import mlflow  # noqa: F401
 
 
+def _operation_id(route) -> str:
+    """OpenAPI operationId of a route: its name (``submit_simulation``, ``simulation_view_link``)."""
+    return route.name
+
+
 # ---- app ------------------------------------------------------------------------------------
 def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     """The service app; settings from the environment when not given (validated here)."""
@@ -463,6 +468,9 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     # (validatorUrl None: Swagger UI would otherwise fetch a badge from its public validator)
     app = FastAPIOffline(title="greybench service", version=VERSION, lifespan=lifespan,
                          default_response_class=SafeJSONResponse,
+                         # readable operation ids for generated clients: the route's function name
+                         # (unique: the view routes of each kind carry the kind in theirs)
+                         generate_unique_id_function=_operation_id,
                          swagger_ui_parameters={"validatorUrl": None},
                          description="Pose ranking and feature deviation reports from the robotic machining "
                                      "simulation with the chosen friction models (paper 3.8). SI units unless a "

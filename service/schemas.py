@@ -266,9 +266,16 @@ class JobList(Strict):
 
 
 class RankingEntry(BaseModel):
+    """One pose of a ranking (``ranking.json`` of the job, written by :func:`service.pipeline.rank`)."""
+
     pose: str
-    score: float = Field(description="ranking score (lower is better) [-]")
+    score: float = Field(description="ranking score: sum over the Table-2 rows of |deviation| / tolerance "
+                                     "(lower is better) [-]")
     rank: int | None = Field(None, description="1 = best")
+    in_tolerance: int | None = Field(None, ge=0, description="Table-2 rows within their tolerance [-] (of 10); "
+                                                             "null in results stored before it was recorded")
+    worst_feature: str | None = Field(None, description="the Table-2 row with the largest |deviation| / tolerance; "
+                                                        "null in results stored before it was recorded")
 
     model_config = ConfigDict(extra="allow")
 

@@ -712,7 +712,7 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
             return Context(request, svc._job(request, job_id, kind), prefix, token, svc)
 
         @app.get(f"{prefix}/{{job_id}}/view", tags=[tag], responses=html_errors,
-                 summary=f"Planner's page of a {view.title} job (HTML)")
+                 name=f"{kind.value}_view", summary=f"Planner's page of a {view.title} job (HTML)")
         def page(request: Request, job_id: str = job_id_param, token: str | None = token_param,
                  key: str | None = Security(api_key_header)):
             if not allowed(request, job_id, key, token):
@@ -731,7 +731,7 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
             return HTMLResponse(index, headers={"Cache-Control": "no-store"})
 
         @app.post(f"{prefix}/{{job_id}}/view-link", dependencies=keyed, tags=[tag], responses=errors,
-                  summary="A short-lived signed link to the job's page")
+                  name=f"{kind.value}_view_link", summary="A short-lived signed link to the job's page")
         def view_link(request: Request, job_id: str = job_id_param,
                       expires_s: Annotated[StrictInt, Body(embed=True, ge=10, le=MAX_LINK_SECONDS,
                                                             description="lifetime of the link [s]")] = LINK_SECONDS
@@ -743,13 +743,14 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
                     "expires_s": int(expires_s)}
 
         @app.get(f"{prefix}/{{job_id}}/view/data", tags=[tag], responses=errors,
-                 summary="What the page shows (sections), JSON")
+                 name=f"{kind.value}_view_data", summary="What the page shows (sections), JSON")
         def data(ctx: Context = Depends(access)) -> dict:
             svc._succeeded(ctx.rec)
             return {"job": ctx.rec.id, "kind": ctx.rec.kind.value, "title": view.title,
                     "finished": ctx.rec.finished, "sections": view.sections(ctx)}
 
         @app.get(f"{prefix}/{{job_id}}/view/files/{{name:path}}", tags=[tag], responses=errors,
+                 name=f"{kind.value}_view_file",
                  response_class=FileResponse, summary="A result file of the job (download)")
         def file(ctx: Context = Depends(access), name: str = PathParam(max_length=300)):
             digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
@@ -777,12 +778,14 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
                                "description": "uint32 header length, JSON header, raw little-endian arrays"}}
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/mesh", tags=[tag], responses={**errors, **binary},
+                 name=f"{kind.value}_view_mesh",
                  summary="Surface mesh of a pose's virtual workpiece (binary: vertices [mm], triangles)")
         def mesh(ctx: Context = Depends(access), pose: str = pose_param):
             vw, key = workpiece(ctx, pose)
             return binary_response(ctx.request, mesh_bytes(mesh_of(vw, key)))
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/values", tags=[tag], responses={**errors, **binary},
+                 name=f"{kind.value}_view_values",
                  summary="Per-vertex values of a variable in its display unit (binary, float32)")
         def values(ctx: Context = Depends(access), pose: str = pose_param,
                    variable: str = Query("deflection", max_length=40, description="a variable the workpiece carries")):
@@ -790,6 +793,7 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
             return binary_response(ctx.request, values_bytes(vw, mesh_of(vw, key), variable))
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/click", tags=[tag], responses=errors,
+                 name=f"{kind.value}_view_click",
                  summary="Program lines, time stamps, reversing axes and error components at a point")
         def click_point(ctx: Context = Depends(access), pose: str = pose_param,
                         x_mm: float = Query(..., allow_inf_nan=False, description="point x [mm], workpiece frame"),
@@ -801,7 +805,7 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
             return click(vw, ctx.job_dir / "program.nc", (x_mm, y_mm, z_mm), radius_mm)
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/box", tags=[tag], responses=errors,
-                 summary="Program lines that cut the machined surface inside a box")
+                 name=f"{kind.value}_view_box", summary="Program lines that cut the machined surface inside a box")
         def box_select(ctx: Context = Depends(access), pose: str = pose_param,
                        min_mm: str = Query(..., max_length=100, description="corner x,y,z [mm]"),
                        max_mm: str = Query(..., max_length=100, description="opposite corner x,y,z [mm]")) -> dict:
