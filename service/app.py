@@ -22,7 +22,7 @@ import sys
 import threading
 from contextlib import asynccontextmanager, suppress
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import pandas as pd
 from fastapi import Depends, FastAPI, Query, Request
@@ -34,10 +34,11 @@ from starlette.routing import Match
 
 from identify.errors import InputError
 from service import registry
-from service.auth import require_key
+from service.auth import is_admin, may_see, require_key
 from service.jobs import DataDirLock, JobKind, JobManager, JobRecord, JobState, JobStore, QueueFull, owner_of
 from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside, named_file
 from service.schemas import (
+    MAX_PAGE,
     STATUS_BY_KIND,
     AnyJobStatus,
     DiagnoseJobStatus,
@@ -48,6 +49,7 @@ from service.schemas import (
     FrictionPredictRequest,
     FrictionPredictResponse,
     Health,
+    JobList,
     JobStatus,
     ModelList,
     QueueInfo,
@@ -200,13 +202,15 @@ class AnswerOptions:
 def _status(rec: JobRecord) -> JobStatus:
     return STATUS_BY_KIND[rec.kind](id=rec.id, kind=rec.kind, state=rec.state, progress=rec.progress,
                                     message=rec.message, created=rec.created, started=rec.started,
-                                    finished=rec.finished, error=rec.error, result=rec.result)
+                                    finished=rec.finished, error=None if rec.error is None else public_error(rec.error),
+                                    result=rec.result)
 
 
 def _job(request: Request, job_id: str, kind: JobKind | None = None) -> JobRecord:
     check_job_id(job_id)
     rec = request.app.state.store.get(job_id)
-    if rec is None or (kind is not None and rec.kind is not kind):
+    # another key's job answers exactly like an unknown one: ids are not confirmed to other keys
+    if rec is None or (kind is not None and rec.kind is not kind) or not may_see(request, job_id, rec.owner):
         raise NotFound(f"no {kind.value + ' ' if kind else ''}job '{job_id}'")
     return rec
 
@@ -257,9 +261,22 @@ def _submitted(request: Request, kind: JobKind, job: dict, prepare, location: st
                             headers={"Location": f"{location}/{rec.id}"})
 
 
-def _program(body, limits) -> tuple[str, str]:
-    """(text, source) of a named program or inline G-code, parsed once to give 422 naming the line
-    (its length checked first: parsing a huge program is itself the cost)."""
+def _ascii_digits(text: str, source: str, field: str) -> None:
+    """422 naming the line and column of the first digit outside 0-9 (Python reads Arabic-Indic and other
+    Unicode digits as numbers; no controller does)."""
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        for col, ch in enumerate(line, start=1):
+            if ch.isdigit() and not ch.isascii():
+                raise InputError(f"non-ASCII digit '{ch}' (U+{ord(ch):04X}): G-code numbers use the digits 0-9",
+                                 source=source, field=field, line=lineno, column=col)
+
+
+def _program(body, limits) -> tuple[str, str, str, str]:
+    """(text, source, stock text, stock source) of a named program or inline G-code and its stock. The
+    program is parsed once to give 422 naming the line (its length checked first: parsing a huge program
+    is itself the cost); a program without motion (empty, comments only) or that never switches the
+    spindle on is refused here, not a minute later in the job (every job kind takes the spindle speed
+    from the program)."""
     from simulate.costs import check_program_size
     from simulate.toolpath.gcode import parse_program
 
@@ -268,9 +285,59 @@ def _program(body, limits) -> tuple[str, str]:
         text, source = path.read_text(), path.name
     else:
         text, source = body.gcode, "gcode"
-    check_program_size(text, limits, source=source, field="program" if body.program is not None else "gcode")
-    parse_program(text, source=source)
-    return text, source
+    field = "program" if body.program is not None else "gcode"
+    check_program_size(text, limits, source=source, field=field)
+    _ascii_digits(text, source, field)
+    prog = parse_program(text, source=source)
+    stock_text, stock_source = _stock(body)
+    if not prog.segments:
+        raise InputError("the program has no motion (empty, or only comments and settings)", source=source,
+                         field=field)
+    if not any(getattr(seg, "spindle", 0) > 0 for seg in prog.segments):
+        raise InputError("the program never switches the spindle on (no S word with M3/M4 before a cut)",
+                         source=source, field=field)
+    return text, source, stock_text, stock_source
+
+
+def _material(name: str | None, field: str) -> None:
+    """422 naming ``field`` for a material not in data/materials.toml (checked before the job starts)."""
+    from simulate.machining.cutting import load_material
+
+    if name is None:
+        return
+    try:
+        load_material(name)
+    except InputError as exc:
+        raise InputError(exc.message, source="materials.toml", field=field) from None
+
+
+def _finite_columns(frame: pd.DataFrame, columns: tuple[str, ...], source: str) -> None:
+    """422 naming the column and row (1 = the first data row) of the first value that is not a finite number."""
+    for col in columns:
+        values = pd.to_numeric(frame[col], errors="coerce").to_numpy(dtype=float)
+        bad = [i for i, v in enumerate(values) if not math.isfinite(v)]
+        if bad:
+            raise InputError(f"'{frame[col].iloc[bad[0]]}' is not a finite number", source=source, field=col,
+                             row=bad[0] + 1)
+
+
+def public_error(detail: dict) -> dict:
+    """An error for a client: a ``source`` that is a server path becomes its file name, and the server's
+    folders are cut from the message (answers never name server paths)."""
+    import tempfile
+
+    out = dict(detail)
+    src = out.get("source")
+    if isinstance(src, str) and ("/" in src or "\\" in src):
+        out["source"] = Path(src).name
+    msg = out.get("message")
+    if isinstance(msg, str):
+        from service.paths import DATA_DIR
+
+        for root in sorted({str(DATA_DIR.parent), tempfile.gettempdir()}, key=len, reverse=True):
+            msg = msg.replace(root + "/", "").replace(root, "")
+        out["message"] = msg
+    return out
 
 
 def _cost(body, text: str, source: str, stock_text: str, stock_source: str, spacing_mm: float, spacing_field: str,
@@ -363,6 +430,11 @@ def _warm_up() -> None:
         import mlflow  # noqa: F401
 
 
+def _operation_id(route) -> str:
+    """OpenAPI operationId of a route: its name (``submit_simulation``, ``simulation_view_link``)."""
+    return route.name
+
+
 # ---- app ------------------------------------------------------------------------------------
 def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     """The service app; settings from the environment when not given (validated here)."""
@@ -396,6 +468,9 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     # (validatorUrl None: Swagger UI would otherwise fetch a badge from its public validator)
     app = FastAPIOffline(title="greybench service", version=VERSION, lifespan=lifespan,
                          default_response_class=SafeJSONResponse,
+                         # readable operation ids for generated clients: the route's function name
+                         # (unique: the view routes of each kind carry the kind in theirs)
+                         generate_unique_id_function=_operation_id,
                          swagger_ui_parameters={"validatorUrl": None},
                          description="Pose ranking and feature deviation reports from the robotic machining "
                                      "simulation with the chosen friction models (paper 3.8). SI units unless a "
@@ -409,6 +484,9 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
 
     app.add_middleware(AnswerOptions)
+    from service.headers import HtmlHeaders
+
+    app.add_middleware(HtmlHeaders)   # outermost: every HTML answer, error pages included
 
     @app.exception_handler(RequestValidationError)
     async def _schema_error(request: Request, exc: RequestValidationError):
@@ -416,7 +494,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
     @app.exception_handler(InputError)
     async def _input_error(request: Request, exc: InputError):
-        return SafeJSONResponse(status_code=422, content={"detail": _short(exc.to_dict())})
+        return SafeJSONResponse(status_code=422, content={"detail": _short(public_error(exc.to_dict()))})
 
     @app.exception_handler(sqlite3.DatabaseError)
     async def _store_error(request: Request, exc: sqlite3.DatabaseError):
@@ -460,10 +538,10 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
               tags=["simulations"], responses={**not_found, 429: {"model": ErrorBody}})
     def submit_simulation(body: SimulationRequest, request: Request) -> JSONResponse:
         limits = settings.cost_limits()
-        text, source = _program(body, limits)
-        stock_text, stock_source = _stock(body)
+        text, source, stock_text, stock_source = _program(body, limits)
         robot = _robot(body.robot)
         poses = _poses(body)
+        _material(body.options.material, "options.material")
         _cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
               len(poses) * (4 if body.options.shares else 1), limits)
         friction = _friction(body, robot, settings.mlflow_tracking_uri)
@@ -575,8 +653,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         from simulate.toolpath.placement import parse_poses
 
         limits = settings.cost_limits()
-        text, source = _program(body, limits)
-        stock_text, stock_source = _stock(body)
+        text, source, stock_text, stock_source = _program(body, limits)
         from simulate.explain.pipeline import simulations_needed
 
         _cost(body, text, source, stock_text, stock_source, body.spacing_mm, "spacing_mm",
@@ -586,6 +663,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         for col in ("feature", "x", "y", "z"):
             if col not in scan.columns:
                 raise InputError(f"missing required column '{col}'", source="scan.csv", field=col)
+        _finite_columns(scan, ("x", "y", "z"), "scan.csv")
         if isinstance(body.pose, str):
             assert body.pose_set is not None  # the request's validator: a pose by name needs pose_set
             path = named_file("poses", body.pose_set, ".json", "pose_set")
@@ -606,6 +684,18 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         job = {"program_source": source, "robot": robot, "pose": pose, "spacing_mm": body.spacing_mm,
                "max_sims": body.max_sims}
         return _submitted(request, JobKind.explain, job, prepare, "/jobs")
+
+    @app.get("/jobs", response_model=JobList, dependencies=keyed, tags=["jobs"])
+    def list_jobs(request: Request, kind: Annotated[JobKind | None, Query(description="only jobs of this kind")] = None,
+                  state: Annotated[JobState | None, Query(description="only jobs in this state")] = None,
+                  limit: int = Query(50, ge=1, le=MAX_PAGE, description="most jobs in the page [-]"),
+                  offset: int = Query(0, ge=0, le=10**9, description="jobs to skip, newest first [-]")) -> JobList:
+        key = getattr(request.state, "api_key", None)
+        owner = None if is_admin(key, settings) else owner_of(key)
+        recs, total = request.app.state.store.find(owner=owner, kind=kind, state=state, limit=limit, offset=offset)
+        more = offset + len(recs) < total
+        return JobList(jobs=[_status(r) for r in recs], total=total, limit=limit, offset=offset,
+                       next_offset=offset + len(recs) if more else None)
 
     @app.get("/jobs/{job_id}", response_model=AnyJobStatus, dependencies=keyed, tags=["jobs"], responses=not_found)
     def job_status(request: Request, job_id: str = job_id_param) -> JobStatus:

@@ -8,6 +8,7 @@ Routes (all need ``X-API-Key``):
   direction, friction / backlash switches, friction scale, friction feed-forward); 202 with the job
   status, 422 naming the field (a circle out of reach names ``options.radius_mm``), 404 for unknown
   names, 429 when the queue is full;
+- ``DELETE /circles/{id}`` — cancels (404 for another key's job);
 - ``GET /circles/{id}`` — the job status (its ``result``: roundness [µm], radius error [µm],
   reversal spikes, the friction model per axis);
 - ``GET /circles/{id}/files/{name}`` — ``circle.csv``, ``circle.png``, ``summary.json``.
@@ -29,7 +30,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field
 
 from identify.errors import InputError
-from service.schemas import ErrorBody, Finite, JobStatus, Responses, SinglePoseJob, Strict
+from service.schemas import CircleJobStatus, ErrorBody, Finite, JobStatus, Responses, SinglePoseJob, StrictRequest
 
 #: Files a finished job serves, with their media types.
 FILES = {"circle.csv": "text/csv", "circle.png": "image/png", "summary.json": "application/json"}
@@ -39,7 +40,7 @@ MAX_CYCLES = 600_000
 Coordinate = Annotated[float, Field(ge=-5000, le=5000, allow_inf_nan=False)]
 
 
-class CircleOptions(Strict):
+class CircleOptions(StrictRequest):
     radius_mm: Finite = Field(50.0, ge=1, le=2000, description="circle radius [mm]")
     feed_mm_min: Finite = Field(2000.0, ge=1, le=60000, description="feed along the circle [mm/min]")
     plane: Literal["xy", "yz", "zx"] = Field("xy", description="plane of the workpiece frame")
@@ -112,7 +113,7 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
     not_found: Responses = {404: {"model": ErrorBody}}
 
-    @app.post("/circles", status_code=202, response_model=JobStatus, dependencies=keyed, tags=["circles"],
+    @app.post("/circles", status_code=202, response_model=CircleJobStatus, dependencies=keyed, tags=["circles"],
               responses={**not_found, 429: {"model": ErrorBody}})
     def submit_circle(body: CircleRequest, request: Request) -> JSONResponse:
         robot = svc._robot(body.robot)
@@ -124,10 +125,16 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
                "tracking_uri": settings.mlflow_tracking_uri}
         return svc._submitted(request, JobKind.circle, job, None, "/circles")
 
-    @app.get("/circles/{job_id}", response_model=JobStatus, dependencies=keyed, tags=["circles"],
+    @app.get("/circles/{job_id}", response_model=CircleJobStatus, dependencies=keyed, tags=["circles"],
              responses=not_found)
     def circle_status(request: Request, job_id: str = job_id_param) -> JobStatus:
         return svc._status(svc._job(request, job_id, JobKind.circle))
+
+    @app.delete("/circles/{job_id}", response_model=CircleJobStatus, dependencies=keyed, tags=["circles"],
+                responses=not_found)
+    def cancel_circle(request: Request, job_id: str = job_id_param) -> JobStatus:
+        svc._job(request, job_id, JobKind.circle)
+        return svc._status(request.app.state.manager.cancel(job_id))
 
     @app.get("/circles/{job_id}/files/{name}", dependencies=keyed, tags=["circles"], response_class=FileResponse,
              responses={**not_found, 409: {"model": ErrorBody}})

@@ -7,6 +7,7 @@ Routes (all need ``X-API-Key``):
   pose (a name in a pose set, or inline), the per-axis friction choice of the simulation jobs and
   options (dexel spacing [mm], iterations, stiffness scales); 202 with the job status, 422 naming
   the program line / field, 404 for unknown names;
+- ``DELETE /compensations/{id}`` — cancels (404 for another key's job);
 - ``GET /compensations/{id}`` — the job status (its ``result``: Table-2 sums [mm] before/after and
   their ratio, the iterations, the contract figures);
 - ``GET /compensations/{id}/files/{name}`` — ``compensated.nc``, ``compensated.stock.json``,
@@ -29,7 +30,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from pydantic import Field, model_validator
 
 from identify.errors import InputError
-from service.schemas import ErrorBody, JobStatus, Name, Responses, SinglePoseJob, Strict
+from service.schemas import CompensationJobStatus, ErrorBody, JobStatus, Name, Responses, SinglePoseJob, StrictRequest
 from simulate.compensation.settings import CompensationSettings
 from simulate.defaults import RANKING_DEXEL_SPACING
 
@@ -39,7 +40,7 @@ FILES = {"compensated.nc": "text/plain", "compensated.stock.json": "application/
          "deviation.png": "image/png"}
 
 
-class CompensationOptions(Strict):
+class CompensationOptions(StrictRequest):
     spacing_mm: float = Field(RANKING_DEXEL_SPACING * 1e3, gt=0.05, le=5.0,
                               description="dexel spacing of the virtual workpiece [mm] (default: the ranking's)")
     iterations: int = Field(CompensationSettings.iterations, ge=1, le=8,
@@ -80,14 +81,13 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
     job_id_param = PathParam(pattern=JOB_ID_PATTERN, description="job id (32 hex digits)")
     not_found: Responses = {404: {"model": ErrorBody}}
 
-    @app.post("/compensations", status_code=202, response_model=JobStatus, dependencies=keyed,
+    @app.post("/compensations", status_code=202, response_model=CompensationJobStatus, dependencies=keyed,
               tags=["compensations"], responses={**not_found, 429: {"model": ErrorBody}})
     def submit_compensation(body: CompensationRequest, request: Request) -> JSONResponse:
         from service.circle import pose_of
 
         limits = settings.cost_limits()
-        text, source = svc._program(body, limits)
-        stock_text, stock_source = svc._stock(body)
+        text, source, stock_text, stock_source = svc._program(body, limits)
         robot = svc._robot(body.robot)
         pose = pose_of(body)
         # each iteration simulates once, each stiffness check twice (original and compensated program)
@@ -101,14 +101,18 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
             (d / "program.nc").write_text(text)
             (d / "stock.json").write_text(stock_text)
 
-        rec = request.app.state.manager.submit(JobKind.compensation, job, prepare=prepare)
-        return JSONResponse(status_code=202, content=svc._status(rec).model_dump(mode="json"),
-                            headers={"Location": f"/compensations/{rec.id}"})
+        return svc._submitted(request, JobKind.compensation, job, prepare, "/compensations")
 
-    @app.get("/compensations/{job_id}", response_model=JobStatus, dependencies=keyed, tags=["compensations"],
-             responses=not_found)
+    @app.get("/compensations/{job_id}", response_model=CompensationJobStatus, dependencies=keyed,
+             tags=["compensations"], responses=not_found)
     def compensation_status(request: Request, job_id: str = job_id_param) -> JobStatus:
         return svc._status(svc._job(request, job_id, JobKind.compensation))
+
+    @app.delete("/compensations/{job_id}", response_model=CompensationJobStatus, dependencies=keyed,
+                tags=["compensations"], responses=not_found)
+    def cancel_compensation(request: Request, job_id: str = job_id_param) -> JobStatus:
+        svc._job(request, job_id, JobKind.compensation)
+        return svc._status(request.app.state.manager.cancel(job_id))
 
     @app.get("/compensations/{job_id}/files/{name}", dependencies=keyed, tags=["compensations"],
              response_class=FileResponse, responses={**not_found, 409: {"model": ErrorBody}})

@@ -262,12 +262,31 @@ class JobStore:
         return n
 
     # ---- reads -----------------------------------------------------------------------
+    _COLUMNS = ("id, kind, state, created, started, finished, progress, message, request, result, error, boot, "
+                "owner")
+
     def get(self, job_id: str) -> JobRecord | None:
-        row = self._conn().execute(
-            "SELECT id, kind, state, created, started, finished, progress, message, request, result, error, boot, "
-            "owner FROM jobs WHERE id=?", (job_id,)).fetchone()
-        if row is None:
-            return None
+        row = self._conn().execute(f"SELECT {self._COLUMNS} FROM jobs WHERE id=?", (job_id,)).fetchone()
+        return None if row is None else self._record(row)
+
+    def find(self, *, owner: str | None = None, kind: JobKind | None = None, state: JobState | None = None,
+             limit: int = 50, offset: int = 0) -> tuple[list[JobRecord], int]:
+        """Jobs newest first (of one ``owner``, ``kind``, ``state`` when given): ``limit`` of them from
+        ``offset``, and how many match in all."""
+        where, args = [], []
+        for column, value in (("owner", owner), ("kind", kind and kind.value), ("state", state and state.value)):
+            if value is not None:
+                where.append(f"{column}=?")
+                args.append(value)
+        cond = f" WHERE {' AND '.join(where)}" if where else ""
+        conn = self._conn()
+        total = int(conn.execute(f"SELECT COUNT(*) FROM jobs{cond}", args).fetchone()[0])
+        rows = conn.execute(f"SELECT {self._COLUMNS} FROM jobs{cond} ORDER BY created DESC, id LIMIT ? OFFSET ?",
+                            [*args, int(limit), int(offset)]).fetchall()
+        return [self._record(r) for r in rows], total
+
+    @staticmethod
+    def _record(row) -> JobRecord:
         return JobRecord(id=row[0], kind=JobKind(row[1]), state=JobState(row[2]), created=row[3], started=row[4],
                          finished=row[5], progress=float(row[6] or 0.0), message=row[7], request=json.loads(row[8]),
                          result=None if row[9] is None else json.loads(row[9]),

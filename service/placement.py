@@ -31,7 +31,7 @@ from fastapi.responses import FileResponse
 from pydantic import Field, model_validator
 
 from identify.errors import InputError
-from service.schemas import ErrorBody, Name, PlacementSearchJobStatus, PoseIn, Responses, Strict
+from service.schemas import ErrorBody, Name, PlacementSearchJobStatus, PoseIn, Responses, StrictRequest
 from simulate.defaults import RANKING_DEXEL_SPACING
 
 #: Files a finished job serves, with their media types.
@@ -41,7 +41,7 @@ FILES = {"best.json": "application/json", "report.md": "text/markdown", "heatmap
 MAX_BUDGET_S = 24 * 3600.0
 
 
-class PlacementSearchOptions(Strict):
+class PlacementSearchOptions(StrictRequest):
     budget_s: float = Field(600.0, gt=0, le=MAX_BUDGET_S, description="wall time for all simulations, the given "
                                                                        "poses' included [s]")
     workers: int = Field(1, ge=1, le=8, description="simulations at once [-] (processes of the job, or Ray tasks)")
@@ -54,7 +54,7 @@ class PlacementSearchOptions(Strict):
                                                                            "candidates [-]")
 
 
-class PlacementSearchRequest(Strict):
+class PlacementSearchRequest(StrictRequest):
     program: Name | None = Field(None, description="named program in data/programs (e.g. iso160); or give gcode")
     gcode: str | None = Field(None, max_length=2_000_000, description="G-code text (mm, as in the program)")
     stock: Name | None = Field(None, description="stock description data/programs/<stock>.stock.json; default: the "
@@ -134,8 +134,7 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
               tags=["placement-searches"], responses={**not_found, 429: {"model": ErrorBody}})
     def submit_placement_search(body: PlacementSearchRequest, request: Request):
         limits = settings.cost_limits()
-        text, source = svc._program(body, limits)
-        stock_text, stock_source = svc._stock(body)
+        text, source, stock_text, stock_source = svc._program(body, limits)
         robot = svc._robot(body.robot)
         poses = svc._poses(body)
         opts = body.options.model_dump()

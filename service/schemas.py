@@ -54,6 +54,14 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
+class StrictRequest(Strict):
+    """A request body: on top of :class:`Strict`, no type coercion (pydantic strict mode): a number field
+    refuses a string (``"5"``) and a boolean (``true``), a switch refuses ``1`` and ``"yes"``, an integer field
+    refuses ``5.0``; each answers 422 naming the field. An integer is accepted for a float field."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
+
+
 # ---- health and models ------------------------------------------------------------------
 class QueueInfo(Strict):
     active: int = Field(description="unfinished jobs admitted by this server process [-]")
@@ -90,7 +98,7 @@ class ModelList(Strict):
 
 
 # ---- simulations ------------------------------------------------------------------------
-class PoseIn(Strict):
+class PoseIn(StrictRequest):
     name: Name = Field(description="pose name, used in URLs (letters, digits, _ - .)")
     xyz: list[Finite] = Field(min_length=3, max_length=3, description="workpiece origin in the robot base frame [m]")
     rpy: list[Finite] = Field(min_length=3, max_length=3,
@@ -98,7 +106,7 @@ class PoseIn(Strict):
     description: str = Field("", max_length=500)
 
 
-class AxisFriction(Strict):
+class AxisFriction(StrictRequest):
     axis: int = Field(ge=1, le=6, description="joint number 1..6")
     model: str = Field("champion", min_length=1, max_length=64,
                        description="registry alias (e.g. champion, challenger) or version number of "
@@ -106,7 +114,7 @@ class AxisFriction(Strict):
                                    "lugre-extended, greybox, residual, lstm); 'robot' keeps the robot file's friction")
 
 
-class SimulationOptions(Strict):
+class SimulationOptions(StrictRequest):
     spacing_mm: float = Field(RANKING_DEXEL_SPACING * 1e3, gt=0.05, le=5.0,
                               description="dexel spacing of the virtual workpiece [mm] (default: simulate.defaults)")
     deflection: bool = Field(True, description="robot deflection under the cutting forces in the loop")
@@ -117,8 +125,8 @@ class SimulationOptions(Strict):
                                             "turn (3 more simulations per pose) to report each component's share")
 
 
-class SimulationRequest(Strict):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"allOf": [
+class SimulationRequest(StrictRequest):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True, json_schema_extra={"allOf": [
         _exactly_one("program", "string", "gcode", "string"), _exactly_one("pose_set", "string", "poses", "array"),
         # inline G-code needs a stock description
         {"anyOf": [{"not": _given("gcode", "string")}, _given("stock", "string")]},
@@ -157,7 +165,7 @@ class SimulationRequest(Strict):
         return self
 
 
-class SinglePoseJob(Strict):
+class SinglePoseJob(StrictRequest):
     """The fields of a job at one pose (circle, compensation): robot, pose, friction model per axis."""
 
     robot: Name = Field("max100", description="robot name in data/robots")
@@ -243,10 +251,31 @@ STATUS_BY_KIND = {JobKind.simulation: SimulationJobStatus, JobKind.diagnose: Dia
                   JobKind.placement_search: PlacementSearchJobStatus, JobKind.circle: CircleJobStatus}
 
 
+#: Most jobs in one page of ``GET /jobs``.
+MAX_PAGE = 200
+
+
+class JobList(Strict):
+    """One page of ``GET /jobs``: the asking key's jobs (every key's for the admin key), newest first."""
+
+    jobs: list[AnyJobStatus] = Field(description="the jobs of this page, newest first")
+    total: int = Field(description="jobs matching the filters in all [-]")
+    limit: int = Field(description="most jobs per page, as asked [-]")
+    offset: int = Field(description="jobs skipped before this page [-]")
+    next_offset: int | None = Field(None, description="offset of the next page; null on the last page")
+
+
 class RankingEntry(BaseModel):
+    """One pose of a ranking (``ranking.json`` of the job, written by :func:`service.pipeline.rank`)."""
+
     pose: str
-    score: float = Field(description="ranking score (lower is better) [-]")
+    score: float = Field(description="ranking score: sum over the Table-2 rows of |deviation| / tolerance "
+                                     "(lower is better) [-]")
     rank: int | None = Field(None, description="1 = best")
+    in_tolerance: int | None = Field(None, ge=0, description="Table-2 rows within their tolerance [-] (of 10); "
+                                                             "null in results stored before it was recorded")
+    worst_feature: str | None = Field(None, description="the Table-2 row with the largest |deviation| / tolerance; "
+                                                        "null in results stored before it was recorded")
 
     model_config = ConfigDict(extra="allow")
 
@@ -315,13 +344,13 @@ def report_frame(doc: dict) -> pd.DataFrame:
 
 
 # ---- friction ---------------------------------------------------------------------------
-class ModelRef(Strict):
+class ModelRef(StrictRequest):
     robot: Name = Field("max100", description="robot name; the registered name is <robot>-axis<N>-friction")
     axis: int = Field(ge=1, le=6, description="joint number 1..6")
     ref: str = Field("champion", min_length=1, max_length=64, description="alias or version number")
 
 
-class FrictionPredictRequest(Strict):
+class FrictionPredictRequest(StrictRequest):
     model: ModelRef
     t: list[Finite] = Field(min_length=2, max_length=MAX_SERIES, description="time, regular sampling [s]")
     q: list[Finite] = Field(min_length=2, max_length=MAX_SERIES, description="joint position [rad]")
@@ -339,7 +368,7 @@ class FrictionPredictResponse(Strict):
 
 
 # ---- diagnose / explain -----------------------------------------------------------------
-class DiagnoseRequest(Strict):
+class DiagnoseRequest(StrictRequest):
     train_csv: str = Field(min_length=1, max_length=MAX_PROGRAM_CHARS * 8,
                            description="training axis record, CSV with t [s], q [rad], tau [Nm] (+ optional columns)")
     test_csv: str = Field(min_length=1, max_length=MAX_PROGRAM_CHARS * 8,
@@ -348,8 +377,8 @@ class DiagnoseRequest(Strict):
     generations: int = Field(30, ge=1, le=200, description="GA generations of the LuGre baseline [-]")
 
 
-class ExplainRequest(Strict):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"allOf": [
+class ExplainRequest(StrictRequest):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True, json_schema_extra={"allOf": [
         _exactly_one("program", "string", "gcode", "string"),
         {"anyOf": [{"not": _given("gcode", "string")}, _given("stock", "string")]},
         # a pose given by name needs 'pose_set'

@@ -8,6 +8,8 @@ variable                         meaning
 ===============================  ===========================================================
 ``GREYBENCH_API_KEYS``           comma-separated API keys accepted in ``X-API-Key``; required
                                  unless development mode is on
+``GREYBENCH_ADMIN_KEY``          optional key (also accepted in ``X-API-Key``) that sees, lists and
+                                 cancels every key's jobs; other keys see only their own
 ``GREYBENCH_DEV_MODE``           ``1`` = development mode: when no key is configured the key
                                  :data:`DEV_API_KEY` is accepted (never use it on a network)
 ``GREYBENCH_DATA_DIR``           folder of the job store (SQLite) and job results,
@@ -52,6 +54,8 @@ class ServiceSettings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="GREYBENCH_", extra="ignore", populate_by_name=True)
 
     api_keys: str = Field("", description="comma-separated API keys (X-API-Key)")
+    admin_key: str | None = Field(None, min_length=8, pattern=r"^\S+$",
+                                  description="key that sees, lists and cancels every key's jobs")
     dev_mode: bool = Field(False, description="development mode: accept the documented dev key if none configured")
     data_dir: Path = Field(Path("greybench-service"), description="job store and results folder")
     workers: int = Field(2, ge=1, le=64, description="worker processes [-]")
@@ -74,7 +78,7 @@ class ServiceSettings(BaseSettings):
 
     @model_validator(mode="after")
     def _check_keys(self) -> ServiceSettings:
-        keys = self.keys()
+        keys = self.keys() - {self.admin_key}
         if not keys and not self.dev_mode:
             raise ValueError("no API key configured: set GREYBENCH_API_KEYS (comma-separated) "
                              "or GREYBENCH_DEV_MODE=1 for local development")
@@ -86,11 +90,12 @@ class ServiceSettings(BaseSettings):
         return self
 
     def keys(self) -> frozenset[str]:
-        """Accepted API keys (the dev key only in development mode with none configured)."""
+        """Accepted API keys (the dev key only in development mode with none configured), the admin key
+        included."""
         keys = frozenset(k.strip() for k in self.api_keys.split(",") if k.strip())
         if not keys and self.dev_mode:
-            return frozenset({DEV_API_KEY})
-        return keys
+            keys = frozenset({DEV_API_KEY})
+        return keys | ({self.admin_key} if self.admin_key else set())
 
     @property
     def db_path(self) -> Path:

@@ -55,12 +55,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 from fastapi import Body, Depends, HTTPException, Query, Request, Security
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, HTMLResponse, Response
+from pydantic import StrictInt
 
 from identify.errors import InputError
 from identify.files import atomic_file
@@ -688,10 +689,14 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
     index = (STATIC / "view" / "index.html").read_text()
 
     def allowed(request: Request, job_id: str, key: str | None, token: str | None) -> bool:
+        # a valid link opens its job only; a valid key opens its own jobs (service.auth.may_see)
+        linked = verify(key_bytes, token, job_id)
+        if linked:
+            request.state.view_link = job_id
         if key_ok(key, request.app.state.settings.keys()):
             request.state.api_key = key
             return True
-        return verify(key_bytes, token, job_id)
+        return linked
 
     def for_kind(view: ViewKind):
         prefix, kind = view.prefix, view.kind
@@ -707,7 +712,7 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
             return Context(request, svc._job(request, job_id, kind), prefix, token, svc)
 
         @app.get(f"{prefix}/{{job_id}}/view", tags=[tag], responses=html_errors,
-                 summary=f"Planner's page of a {view.title} job (HTML)")
+                 name=f"{kind.value}_view", summary=f"Planner's page of a {view.title} job (HTML)")
         def page(request: Request, job_id: str = job_id_param, token: str | None = token_param,
                  key: str | None = Security(api_key_header)):
             if not allowed(request, job_id, key, token):
@@ -726,10 +731,11 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
             return HTMLResponse(index, headers={"Cache-Control": "no-store"})
 
         @app.post(f"{prefix}/{{job_id}}/view-link", dependencies=keyed, tags=[tag], responses=errors,
-                  summary="A short-lived signed link to the job's page")
+                  name=f"{kind.value}_view_link", summary="A short-lived signed link to the job's page")
         def view_link(request: Request, job_id: str = job_id_param,
-                      expires_s: int = Body(LINK_SECONDS, embed=True, ge=10, le=MAX_LINK_SECONDS,
-                                            description="lifetime of the link [s]")) -> dict:
+                      expires_s: Annotated[StrictInt, Body(embed=True, ge=10, le=MAX_LINK_SECONDS,
+                                                            description="lifetime of the link [s]")] = LINK_SECONDS
+                      ) -> dict:
             svc._job(request, job_id, kind)
             expires = int(time.time()) + int(expires_s)
             token = sign(key_bytes, job_id, expires)
@@ -737,13 +743,14 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
                     "expires_s": int(expires_s)}
 
         @app.get(f"{prefix}/{{job_id}}/view/data", tags=[tag], responses=errors,
-                 summary="What the page shows (sections), JSON")
+                 name=f"{kind.value}_view_data", summary="What the page shows (sections), JSON")
         def data(ctx: Context = Depends(access)) -> dict:
             svc._succeeded(ctx.rec)
             return {"job": ctx.rec.id, "kind": ctx.rec.kind.value, "title": view.title,
                     "finished": ctx.rec.finished, "sections": view.sections(ctx)}
 
         @app.get(f"{prefix}/{{job_id}}/view/files/{{name:path}}", tags=[tag], responses=errors,
+                 name=f"{kind.value}_view_file",
                  response_class=FileResponse, summary="A result file of the job (download)")
         def file(ctx: Context = Depends(access), name: str = PathParam(max_length=300)):
             digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
@@ -771,12 +778,14 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
                                "description": "uint32 header length, JSON header, raw little-endian arrays"}}
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/mesh", tags=[tag], responses={**errors, **binary},
+                 name=f"{kind.value}_view_mesh",
                  summary="Surface mesh of a pose's virtual workpiece (binary: vertices [mm], triangles)")
         def mesh(ctx: Context = Depends(access), pose: str = pose_param):
             vw, key = workpiece(ctx, pose)
             return binary_response(ctx.request, mesh_bytes(mesh_of(vw, key)))
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/values", tags=[tag], responses={**errors, **binary},
+                 name=f"{kind.value}_view_values",
                  summary="Per-vertex values of a variable in its display unit (binary, float32)")
         def values(ctx: Context = Depends(access), pose: str = pose_param,
                    variable: str = Query("deflection", max_length=40, description="a variable the workpiece carries")):
@@ -784,6 +793,7 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
             return binary_response(ctx.request, values_bytes(vw, mesh_of(vw, key), variable))
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/click", tags=[tag], responses=errors,
+                 name=f"{kind.value}_view_click",
                  summary="Program lines, time stamps, reversing axes and error components at a point")
         def click_point(ctx: Context = Depends(access), pose: str = pose_param,
                         x_mm: float = Query(..., allow_inf_nan=False, description="point x [mm], workpiece frame"),
@@ -795,7 +805,7 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
             return click(vw, ctx.job_dir / "program.nc", (x_mm, y_mm, z_mm), radius_mm)
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/box", tags=[tag], responses=errors,
-                 summary="Program lines that cut the machined surface inside a box")
+                 name=f"{kind.value}_view_box", summary="Program lines that cut the machined surface inside a box")
         def box_select(ctx: Context = Depends(access), pose: str = pose_param,
                        min_mm: str = Query(..., max_length=100, description="corner x,y,z [mm]"),
                        max_mm: str = Query(..., max_length=100, description="opposite corner x,y,z [mm]")) -> dict:

@@ -18,7 +18,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from service.jobs import RESTART_REASON, JobKind, JobState, JobStore, folder_digests, process_start
+from service.jobs import RESTART_REASON, JobKind, JobState, JobStore, folder_digests, owner_of, process_start
 
 from .conftest import (
     DATA,
@@ -110,7 +110,7 @@ def fabricate_finished_job(data_dir: Path) -> tuple[str, dict[str, bytes]]:
     """A succeeded simulation job written into a server's store and jobs folder by an earlier boot,
     as the worker writes it (files, then the row with their digests); returns (id, files)."""
     store = JobStore(data_dir / "jobs.sqlite")
-    rec = store.create(JobKind.simulation, {"robot": "max100"}, boot="earlier-boot")
+    rec = store.create(JobKind.simulation, {"robot": "max100"}, boot="earlier-boot", owner=owner_of(KEY))
     assert store.start(rec.id, "earlier-boot")
     ranking = [{"pose": "near", "score": 1.25, "rank": 1, "in_tolerance": 9, "worst_feature": "circle"}]
     glb_body = b"\x00" * 20

@@ -65,10 +65,10 @@ def test_unknown_job_is_a_clear_404_page(client):
 
 
 def test_unfinished_job_is_a_clear_409_page(client):
-    from service.jobs import JobKind
+    from service.jobs import JobKind, owner_of
 
     store = client.app.state.store
-    rec = store.create(JobKind.simulation, {"poses": []}, boot="test")   # queued, never started
+    rec = store.create(JobKind.simulation, {"poses": []}, boot="test", owner=owner_of(KEY))  # queued, never started
     r = client.get(f"/simulations/{rec.id}/view", headers=HEADERS)
     assert r.status_code == 409 and "queued" in r.text and "Traceback" not in r.text
     link = client.post(f"/simulations/{rec.id}/view-link", headers=HEADERS).json()
@@ -92,9 +92,9 @@ def _fake_compensation(store, jobs_dir) -> str:
     """A succeeded compensation job with a summary and a deviation plot (the view reads only these)."""
     from PIL import Image
 
-    from service.jobs import JobKind, JobState, folder_digests
+    from service.jobs import JobKind, JobState, folder_digests, owner_of
 
-    rec = store.create(JobKind.compensation, {}, boot="test")
+    rec = store.create(JobKind.compensation, {}, boot="test", owner=owner_of(KEY))
     out = jobs_dir / rec.id / "out"
     out.mkdir(parents=True)
     Image.new("RGB", (60, 40), (200, 30, 30)).save(out / "deviation.png")
@@ -344,10 +344,12 @@ def test_browser_tests_skip_with_a_reason_or_fail_when_required(monkeypatch):
         conftest.require_browser()
 
 
+# Predicates are functions ("() => ..."): playwright evaluates a function once, a bare expression on every
+# poll, which the page's CSP (no 'unsafe-eval') refuses.
 def _open(browser, url):
     page, problems = watched_page(browser)
     page.goto(url)
-    page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
+    page.wait_for_function("() => window.greybenchView && window.greybenchView.ready", timeout=60_000)
     return page, problems
 
 
@@ -419,7 +421,7 @@ def test_page_in_chromium(job, browser, tmp_path):
     assert [int(h[4:].split(",")[0]) for h in hues] == [40, 120, 80, 0]
     # another variable recolours the part; the legend names its unit
     page.select_option(".wp-variable", "force")
-    page.wait_for_function("window.greybenchView.ready")
+    page.wait_for_function("() => window.greybenchView.ready")
     assert page.locator(".wp-unit").inner_text() == "N"
     assert not problems, problems
     page.close()
@@ -440,7 +442,7 @@ def test_compensation_page_in_chromium(job, browser):
     gears = page.locator("table[data-id='gears'] tbody tr").all_inner_texts()
     assert [r.split("\t") for r in gears] == [["square: contour at z = 0 mm", "17: G1 X-55 Y-60 Z0", "A1", "4", "52",
                                                "3", "51"]]
-    page.wait_for_function("document.querySelector('section.image img').naturalWidth === 60")
+    page.wait_for_function("() => document.querySelector('section.image img').naturalWidth === 60")
     assert not problems, problems
     page.close()
 
@@ -453,14 +455,14 @@ def test_key_entered_once_opens_the_page(job, browser):
     assert page.locator("table.table2").count() == 0           # no data before a key
     page.fill("#login-key", "not-the-key-0000")
     page.click("#login-form button")
-    page.wait_for_function("document.querySelector('#login-error').textContent.includes('refused')")
+    page.wait_for_function("() => document.querySelector('#login-error').textContent.includes('refused')")
     assert "token=" not in page.url
     page.fill("#login-key", KEY)
     page.click("#login-form button")
-    page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
+    page.wait_for_function("() => window.greybenchView && window.greybenchView.ready", timeout=60_000)
     assert "token=" in page.url and page.locator("table.table2 tbody tr").count() == 10
     # the key stays for the tab's session: the bare page opens again without asking
     page.goto(f"{srv.url}/simulations/{job_id}/view")
-    page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
+    page.wait_for_function("() => window.greybenchView && window.greybenchView.ready", timeout=60_000)
     assert "token=" in page.url
     page.close()

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .conftest import HEADERS, ROBOT_FRICTION, Server, server_env, watched_page
+from .conftest import HEADERS, KEY, ROBOT_FRICTION, Server, server_env, watched_page
 
 #: The synthetic circle: 1 µm-per-degree free of spikes, two reversals with known heights.
 ROUNDNESS_UM, RADIUS_ERROR_UM = 12.5, -3.25
@@ -34,10 +34,10 @@ def _circle_job(store, jobs_dir, *, legacy: bool = False) -> str:
     """A succeeded circle job whose files :func:`write_outputs` wrote from a synthetic result; ``legacy``:
     its summary.json without ``largest_excursion_um`` (a job stored before that name, with only the
     deprecated ``largest_spike_um``)."""
-    from service.jobs import JobKind, JobState, folder_digests
+    from service.jobs import JobKind, JobState, folder_digests, owner_of
     from simulate.evaluation.circle import CircleResult, ReversalSpike, write_outputs
 
-    rec = store.create(JobKind.circle, {}, boot="test")
+    rec = store.create(JobKind.circle, {}, boot="test", owner=owner_of(KEY))
     ang = np.linspace(0.0, 360.0, 3601)[:-1]
     dev = ROUNDNESS_UM / 2 * np.cos(np.radians(2 * ang))        # an oval: peak-to-valley = roundness
     spikes = tuple(ReversalSpike(angle_deg=a, joint=j, height_um=h, peak_angle_deg=a + 1, spike_um=sp,
@@ -62,9 +62,9 @@ def _placement_job(store, jobs_dir, *, history: int = 6) -> str:
     from PIL import Image
 
     from identify.records import write_table
-    from service.jobs import JobKind, JobState, folder_digests
+    from service.jobs import JobKind, JobState, folder_digests, owner_of
 
-    rec = store.create(JobKind.placement_search, {}, boot="test")
+    rec = store.create(JobKind.placement_search, {}, boot="test", owner=owner_of(KEY))
     out = jobs_dir / rec.id / "out"
     out.mkdir(parents=True)
     given = [{"name": g["name"], "score": SCORES[g["name"]], "in_tolerance": 5} for g in GIVEN]
@@ -136,13 +136,13 @@ def test_circle_page_shows_the_circle_numbers(client, legacy):
 
 
 def test_circle_without_reversals_says_so(client, tmp_path):
-    from service.jobs import JobKind
+    from service.jobs import JobKind, owner_of
 
     store, jobs = client.app.state.store, client.app.state.manager.jobs_dir
     job_id = _circle_job(store, jobs)
     # rewrite the job as one without spikes (a new job: the recorded digests must match)
     summary = json.loads((jobs / job_id / "out" / "summary.json").read_text())
-    rec = store.create(JobKind.circle, {}, boot="test")
+    rec = store.create(JobKind.circle, {}, boot="test", owner=owner_of(KEY))
     (jobs / rec.id / "out").mkdir(parents=True)
     (jobs / rec.id / "out" / "summary.json").write_text(json.dumps({**summary, "reversal_spikes": []}))
     from service.jobs import JobState, folder_digests
@@ -203,10 +203,10 @@ def test_new_kinds_keep_the_access_rules(client):
 
 
 def test_unfinished_and_damaged_jobs(client):
-    from service.jobs import JobKind
+    from service.jobs import JobKind, owner_of
 
     store, jobs = client.app.state.store, client.app.state.manager.jobs_dir
-    rec = store.create(JobKind.circle, {}, boot="test")
+    rec = store.create(JobKind.circle, {}, boot="test", owner=owner_of(KEY))
     r = client.get(f"/circles/{rec.id}/view", headers=HEADERS)
     assert r.status_code == 409 and "queued" in r.text and "Traceback" not in r.text
     job_id = _placement_job(store, jobs)
@@ -233,8 +233,8 @@ def _open(browser, srv, prefix, job_id, shot=None):
     # three.js is for a page with a 3D part only: these pages must not download it
     page.on("request", lambda r: problems.append(f"fetched {r.url}") if "/vendor/three/" in r.url else None)
     page.goto(srv.url + link["url"])
-    page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
-    page.wait_for_function("[...document.images].every(i => i.complete && i.naturalWidth > 0)", timeout=30_000)
+    page.wait_for_function("() => window.greybenchView && window.greybenchView.ready", timeout=60_000)
+    page.wait_for_function("() => [...document.images].every(i => i.complete && i.naturalWidth > 0)", timeout=30_000)
     if shot:
         # GREYBENCH_VIEW_SHOTS=<folder> keeps the screenshots to look at
         folder = os.environ.get("GREYBENCH_VIEW_SHOTS")
@@ -294,7 +294,7 @@ def test_key_entered_once_opens_the_circle_page(server, browser):
     assert page.locator("section.summary").count() == 0             # no data before a key
     page.fill("#login-key", KEY)
     page.click("#login-form button")
-    page.wait_for_function("window.greybenchView && window.greybenchView.ready", timeout=60_000)
+    page.wait_for_function("() => window.greybenchView && window.greybenchView.ready", timeout=60_000)
     assert "token=" in page.url and f"/circles/{job_id}/view" in page.url
     assert page.locator("table[data-id='spikes'] tbody tr").count() == len(SPIKES)
     page.close()
