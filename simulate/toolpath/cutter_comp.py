@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from simulate.toolpath.gcode import Arc, Linear, Segment
+from simulate.toolpath.segments import Arc, Linear, Segment
 
 _EPS = 1e-12
 

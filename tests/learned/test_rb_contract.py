@@ -96,11 +96,16 @@ def test_fit_warns_when_a_gravity_loaded_axis_has_no_tau_rb(rb_records, tmp_path
     train.frame.drop(columns=["tau_rb"]).to_csv(path, index=False)
     runner = CliRunner()
     args = ["fit", "--model", "coulomb-viscous", "--train", str(path), "--no-track", "--json"]
-    doc = json.loads(runner.invoke(app, args + ["--axis", "2"]).stdout)
-    assert len(doc["warnings"]) == 1 and "tau_rb" in doc["warnings"][0] and "prepare" in doc["warnings"][0]
-    assert json.loads(runner.invoke(app, args + ["--axis", "1"]).stdout)["warnings"] == []
+
+    def rb_warnings(axis):   # the record's undeclared axis kind is warned about on its own
+        doc = json.loads(runner.invoke(app, args + ["--axis", axis]).stdout)
+        return [w for w in doc["warnings"] if "tau_rb" in w]
+
+    w2 = rb_warnings("2")
+    assert len(w2) == 1 and "prepare" in w2[0]
+    assert rb_warnings("1") == []
     with_rb = tmp_path / "rb.csv"
     train.frame.to_csv(with_rb, index=False)
     doc = json.loads(runner.invoke(app, ["fit", "--model", "coulomb-viscous", "--train", str(with_rb), "--no-track",
                                          "--json", "--axis", "2"]).stdout)
-    assert doc["warnings"] == []
+    assert [w for w in doc["warnings"] if "tau_rb" in w] == []
