@@ -89,7 +89,7 @@ _CENTRE_WORD = {0: "I", 1: "J", 2: "K"}
 
 
 _LETTERS = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZ")
-_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)")
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)", re.ASCII)   # ASCII digits only: "١٠" is no number
 
 
 
@@ -210,8 +210,8 @@ def _strip_comments(raw: str, source: str, lineno: int) -> list[tuple[int, str]]
 
 _O_KEYWORDS = ("endsub", "sub", "call", "endif", "elseif", "else", "if", "endwhile", "while", "do", "endrepeat",
                "repeat", "return", "break", "continue")
-_O_WORD_FLOW = re.compile(r"[oO](<[^>]*>|\d+)(" + "|".join(_O_KEYWORDS) + r")(?![a-zA-Z])", re.IGNORECASE)
-_PARAMETER = re.compile(r"#(<[^>]*>|\d+)?")
+_O_WORD_FLOW = re.compile(r"[oO](<[^>]*>|\d+)(" + "|".join(_O_KEYWORDS) + r")(?![a-zA-Z])", re.IGNORECASE | re.ASCII)
+_PARAMETER = re.compile(r"#(<[^>]*>|\d+)?", re.ASCII)
 
 
 def _words(raw: str, source: str, lineno: int) -> list[tuple[str, float, str, int]]:

@@ -85,3 +85,12 @@ def test_bom_before_latin1_bytes_is_dropped_too(tmp_path):
     f.write_bytes(b"\xef\xbb\xbfG21 G90 (Fr\xe4ser)\nG0 X1\n")
     prog = read_program(f)
     assert _ends(prog) == [(1, 0, 0)]
+
+
+# 10 in Arabic-Indic, Devanagari and full-width digits
+@pytest.mark.parametrize("digits", ["\u0661\u0660", "\u0967\u0966", "\uff11\uff10"])
+def test_digits_outside_ascii_are_no_number(digits):
+    """Python's float() reads these as 10; a G-code number is ASCII digits only."""
+    with pytest.raises(InputError) as ei:
+        parse_program(f"G21 G90\nS10000 M3\nG1 X{digits} F100\n", source="p.nc")
+    assert ei.value.line == 3 and "'X'" in str(ei.value)
