@@ -79,6 +79,29 @@ def test_irregular_time(tmp_path):
     assert e.value.field == "t" and e.value.row == 500 and "irregular" in str(e.value)
 
 
+@pytest.mark.parametrize("shift, refused", [(+0.1e-3, True), (-0.1e-3, True), (+0.04e-3, False),
+                                             (-0.04e-3, False)])
+def test_irregular_time_both_ways_at_the_tolerance(tmp_path, shift, refused):
+    """One interval 10 % longer or shorter than the 1 ms median is irregular; 4 % either way is not
+    (the tolerance is 5 %)."""
+    df = good_frame()
+    df.loc[500:, "t"] += shift
+    if refused:
+        with pytest.raises(InputError) as e:
+            load_record(write(tmp_path, df))
+        assert e.value.field == "t" and e.value.row == 500
+    else:
+        assert len(load_record(write(tmp_path, df)).frame) == len(df)
+
+
+def test_degrees_detected_when_every_position_is_negative(tmp_path):
+    df = good_frame()
+    df["q"] = -np.degrees(np.abs(df["q"])) * 4 - 10.0     # -10 .. -125 deg, never positive
+    with pytest.raises(InputError) as e:
+        load_record(write(tmp_path, df))
+    assert e.value.field == "q" and "degrees" in str(e.value)
+
+
 def test_too_few_samples(tmp_path):
     with pytest.raises(InputError) as e:
         load_record(write(tmp_path, good_frame(n=MIN_SAMPLES - 1)))
