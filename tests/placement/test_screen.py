@@ -70,3 +70,19 @@ def test_dominance():
     assert dominated_by(r(15, 4.5e-6), sims) is None
     assert dominated_by(r(25, 6e-6), sims, floor=55.0) == 60.0   # only dominators scoring at least the floor count
     assert dominated_by(r(10, 5e-6), sims, floor=55.0) is None
+
+
+@pytest.mark.parametrize("q5_deg, singular", [(-30.0, False), (-3.0, False), (-1.0, True), (30.0, False)])
+def test_wrist_distance_is_the_smallest_abs_q5_for_either_sign(robot, line_interp, q5_deg, singular):
+    """The tool points down (q2 + q3 + q5 = 180 deg, q4 = 0) with the wrist bent by q5 of either sign: the
+    screen's wrist distance is min |q5| along the path (q5 within 0.5 deg of each other here, far from
+    pi), singular below the 2 deg margin."""
+    q2 = 50.0 - q5_deg
+    T = fk(robot, np.radians([0.0, q2, 180.0 - q2 - q5_deg, 0.0, q5_deg, 90.0]))
+    assert np.allclose(T[:3, :3], R_WCS_TCP, atol=1e-9)
+    pl = _at(T[:3, 3])
+    q5 = joint_trajectory(robot, line_interp, pl).q[:, 4]
+    assert np.sign(q5).min() == np.sign(q5).max() == np.sign(q5_deg)   # the branch keeps the sign
+    res = screen(robot, line_interp, pl)
+    assert res.wrist_angle == pytest.approx(np.abs(q5).min(), abs=1e-12)
+    assert (res.status is ScreenStatus.WRIST_SINGULAR) == singular
