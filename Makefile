@@ -14,7 +14,7 @@ LOCK := requirements.lock
 UV_VERSION := 0.13.9
 UV := $(or $(shell command -v uv 2>/dev/null),$(VENV)/uv/bin/uv)
 
-.PHONY: demo test test-all lint bench mutation lock clean
+.PHONY: demo test test-all lint bench mutation mutation-hand lock clean
 
 $(VENV)/uv/bin/uv:
 	$(PY) -m pip install --quiet --disable-pip-version-check --root-user-action=ignore --target $(VENV)/uv "uv==$(UV_VERSION)"
@@ -67,6 +67,10 @@ MUTANTS ?=
 mutation: $(STAMP)
 	nice -n 10 $(BIN)/python scripts/mutmut_kernels.py run --max-children $(MUTATION_JOBS) $(MUTANTS)
 	$(BIN)/python scripts/mutation_report.py
+
+# Hand-written realistic mutants (scripts/hand_mutants.py): every one must be killed (about 1.5 min).
+mutation-hand: $(STAMP)
+	$(BIN)/python scripts/hand_mutants.py
 
 clean:
 	rm -rf $(VENV) demo-output mlruns.db mlflow.db mlartifacts greybench-service
