@@ -140,6 +140,9 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
         opts = body.options.model_dump()
         svc._cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
                   len(poses) + 1, limits)
+        # the per-key and queue limits before the planning: a refused search costs no planning
+        request.app.state.manager.check_admission(svc.owner_of(getattr(request.state, "api_key", None)))
+        svc._reach(text, source, robot, poses, svc._pose_fields(body.poses, body.select, poses))
         scratch = Path(tempfile.mkdtemp(prefix="greybench-plan-"))
         try:
             _plan(scratch, text, source, stock_text, stock_source, robot, poses, opts)  # 422 before admission
