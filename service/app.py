@@ -52,6 +52,7 @@ from service.schemas import (
     JobList,
     JobStatus,
     ModelList,
+    PoseIn,
     QueueInfo,
     Ranking,
     Report,
@@ -391,6 +392,34 @@ def _poses(body: SimulationRequest) -> list[dict]:
              "description": by_name[n].description} for n in dict.fromkeys(names)]
 
 
+def _reach(text: str, source: str, robot: str, poses: list[dict], fields: list[str]) -> None:
+    """422 naming ``fields[i]`` when pose ``i`` puts a point of the program out of reach, beyond a joint
+    limit or above a joint speed limit: the pipeline's own check
+    (:func:`simulate.toolpath.placement.joint_trajectory`), run here so the job is never queued (tens of
+    ms for a 160 mm test piece, against a job that fails a minute later)."""
+    from simulate.robot.model import load_robot
+    from simulate.toolpath.gcode import parse_program
+    from simulate.toolpath.interpolation import PathLimits, interpolate
+    from simulate.toolpath.placement import joint_trajectory, parse_poses
+
+    interp = interpolate(parse_program(text, source=source), PathLimits())   # as simulate.pipeline.load_program
+    rob = load_robot(named_file("robots", robot, ".toml", "robot"))
+    for placement, field in zip(parse_poses({"poses": poses}, source="poses"), fields, strict=True):
+        try:
+            joint_trajectory(rob, interp, placement, source=source)
+        except InputError as exc:
+            raise InputError(exc.message, source=source, field=field, line=exc.line) from None
+
+
+def _pose_fields(inline: list[PoseIn] | None, select: list[str] | None, poses: list[dict]) -> list[str]:
+    """The request field each of :func:`_poses`' poses came from: ``poses.<i>`` inline, else ``select``
+    or ``pose_set``."""
+    if inline is not None:
+        index = {p.name: i for i, p in enumerate(inline)}
+        return [f"poses.{index[p['name']]}" for p in poses]
+    return ["select" if select is not None else "pose_set"] * len(poses)
+
+
 def _friction(body: SimulationRequest, robot: str, tracking_uri: str | None) -> list[dict]:
     explicit = {f.axis: f.model for f in body.friction}
     out = []
@@ -542,6 +571,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         robot = _robot(body.robot)
         poses = _poses(body)
         _material(body.options.material, "options.material")
+        _reach(text, source, robot, poses, _pose_fields(body.poses, body.select, poses))
         _cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
               len(poses) * (4 if body.options.shares else 1), limits)
         friction = _friction(body, robot, settings.mlflow_tracking_uri)
@@ -675,6 +705,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         else:
             parse_poses({"poses": [body.pose.model_dump()]}, source="pose")  # same checks as pose files
             pose = body.pose.model_dump()
+        _reach(text, source, robot, [pose], ["pose"])
 
         def prepare(d: Path) -> None:
             (d / "program.nc").write_text(text)

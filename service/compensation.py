@@ -27,10 +27,21 @@ from types import ModuleType
 from fastapi import FastAPI, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse, JSONResponse
-from pydantic import Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
 
 from identify.errors import InputError
-from service.schemas import CompensationJobStatus, ErrorBody, JobStatus, Name, Responses, SinglePoseJob, StrictRequest
+from service.schemas import (
+    GCODE_NEEDS_STOCK,
+    POSE_NAME_NEEDS_SET,
+    CompensationJobStatus,
+    ErrorBody,
+    JobStatus,
+    Name,
+    Responses,
+    SinglePoseJob,
+    StrictRequest,
+    exactly_one,
+)
 from simulate.compensation.settings import CompensationSettings
 from simulate.defaults import RANKING_DEXEL_SPACING
 
@@ -57,6 +68,9 @@ class CompensationOptions(StrictRequest):
 
 
 class CompensationRequest(SinglePoseJob):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True, json_schema_extra={"allOf": [
+        exactly_one("program", "string", "gcode", "string"), GCODE_NEEDS_STOCK, POSE_NAME_NEEDS_SET]})
+
     program: Name | None = Field(None, description="named program in data/programs (e.g. iso160); or give gcode")
     gcode: str | None = Field(None, max_length=2_000_000, description="G-code text (mm, as in the program)")
     stock: Name | None = Field(None, description="stock description data/programs/<stock>.stock.json; default: the "
@@ -90,6 +104,7 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
         text, source, stock_text, stock_source = svc._program(body, limits)
         robot = svc._robot(body.robot)
         pose = pose_of(body)
+        svc._reach(text, source, robot, [pose], ["pose"])
         # each iteration simulates once, each stiffness check twice (original and compensated program)
         svc._cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
                   body.options.iterations + 1 + 2 * len(body.options.check_scales), limits)

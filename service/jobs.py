@@ -505,6 +505,23 @@ class JobManager:
     def job_dir(self, job_id: str) -> Path:
         return self.jobs_dir / job_id
 
+    def check_admission(self, owner: str = "") -> None:
+        """Raise :class:`QueueFull` when a job of ``owner`` would be refused now: a route whose checks are
+        expensive (a placement search's planning) asks first, so a refused request costs nothing.
+        :meth:`submit` checks again (another job may be admitted in between)."""
+        with self._lock:
+            self._admissible(owner)
+
+    def _admissible(self, owner: str) -> None:
+        # under self._lock
+        if self.store.count() >= self.capacity:
+            raise QueueFull(self.retry_after)
+        mine = self.store.count(owner=owner)
+        if mine >= self.per_key:
+            raise QueueFull(self.retry_after, f"this API key has {mine} unfinished jobs, the limit per key "
+                                              f"(GREYBENCH_JOBS_PER_KEY) is {self.per_key}; retry after "
+                                              f"{self.retry_after} s")
+
     def submit(self, kind: JobKind, request: dict, prepare: Callable[[Path], None] | None = None,
                owner: str = "") -> JobRecord:
         """Admit and queue a job; raises :class:`QueueFull` when the queue or the owner's share is full.
@@ -512,13 +529,7 @@ class JobManager:
         ``prepare(job_dir)`` may write inputs (e.g. the program text) before the job is queued.
         """
         with self._lock:
-            if self.store.count() >= self.capacity:
-                raise QueueFull(self.retry_after)
-            mine = self.store.count(owner=owner)
-            if mine >= self.per_key:
-                raise QueueFull(self.retry_after, f"this API key has {mine} unfinished jobs, the limit per key "
-                                                  f"(GREYBENCH_JOBS_PER_KEY) is {self.per_key}; retry after "
-                                                  f"{self.retry_after} s")
+            self._admissible(owner)
             rec = self.store.create(kind, request, self.boot, owner)
             d = self.job_dir(rec.id)
             try:

@@ -28,10 +28,20 @@ from types import ModuleType
 from fastapi import FastAPI, Request
 from fastapi import Path as PathParam
 from fastapi.responses import FileResponse
-from pydantic import Field, model_validator
+from pydantic import ConfigDict, Field, model_validator
 
 from identify.errors import InputError
-from service.schemas import ErrorBody, Name, PlacementSearchJobStatus, PoseIn, Responses, StrictRequest
+from service.schemas import (
+    GCODE_NEEDS_STOCK,
+    SELECT_NEEDS_SET,
+    ErrorBody,
+    Name,
+    PlacementSearchJobStatus,
+    PoseIn,
+    Responses,
+    StrictRequest,
+    exactly_one,
+)
 from simulate.defaults import RANKING_DEXEL_SPACING
 
 #: Files a finished job serves, with their media types.
@@ -55,6 +65,10 @@ class PlacementSearchOptions(StrictRequest):
 
 
 class PlacementSearchRequest(StrictRequest):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True, json_schema_extra={"allOf": [
+        exactly_one("program", "string", "gcode", "string"), exactly_one("pose_set", "string", "poses", "array"),
+        GCODE_NEEDS_STOCK, SELECT_NEEDS_SET]})
+
     program: Name | None = Field(None, description="named program in data/programs (e.g. iso160); or give gcode")
     gcode: str | None = Field(None, max_length=2_000_000, description="G-code text (mm, as in the program)")
     stock: Name | None = Field(None, description="stock description data/programs/<stock>.stock.json; default: the "
@@ -140,6 +154,9 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
         opts = body.options.model_dump()
         svc._cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
                   len(poses) + 1, limits)
+        # the per-key and queue limits before the planning: a refused search costs no planning
+        request.app.state.manager.check_admission(svc.owner_of(getattr(request.state, "api_key", None)))
+        svc._reach(text, source, robot, poses, svc._pose_fields(body.poses, body.select, poses))
         scratch = Path(tempfile.mkdtemp(prefix="greybench-plan-"))
         try:
             _plan(scratch, text, source, stock_text, stock_source, robot, poses, opts)  # 422 before admission

@@ -44,9 +44,18 @@ def _given(name: str, type_: str) -> dict:
     return {"required": [name], "properties": {name: {"type": type_}}}
 
 
-def _exactly_one(a: str, a_type: str, b: str, b_type: str) -> dict:
+def exactly_one(a: str, a_type: str, b: str, b_type: str) -> dict:
     """JSON Schema ``oneOf``: exactly one of two fields given (what the model validator enforces)."""
     return {"oneOf": [_given(a, a_type), _given(b, b_type)]}
+
+
+#: JSON Schema of "a pose given by name needs 'pose_set'" (what :class:`SinglePoseJob`'s validator enforces).
+POSE_NAME_NEEDS_SET: dict = {"anyOf": [{"not": {"properties": {"pose": {"type": "string"}}}},
+                                       _given("pose_set", "string")]}
+#: JSON Schema of "inline G-code needs a stock description".
+GCODE_NEEDS_STOCK: dict = {"anyOf": [{"not": _given("gcode", "string")}, _given("stock", "string")]}
+#: JSON Schema of "'select' picks poses of 'pose_set'".
+SELECT_NEEDS_SET: dict = {"anyOf": [{"not": _given("select", "array")}, _given("pose_set", "string")]}
 
 
 class Strict(BaseModel):
@@ -127,11 +136,8 @@ class SimulationOptions(StrictRequest):
 
 class SimulationRequest(StrictRequest):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True, json_schema_extra={"allOf": [
-        _exactly_one("program", "string", "gcode", "string"), _exactly_one("pose_set", "string", "poses", "array"),
-        # inline G-code needs a stock description
-        {"anyOf": [{"not": _given("gcode", "string")}, _given("stock", "string")]},
-        # 'select' picks poses of 'pose_set'
-        {"anyOf": [{"not": _given("select", "array")}, _given("pose_set", "string")]}]})
+        exactly_one("program", "string", "gcode", "string"), exactly_one("pose_set", "string", "poses", "array"),
+        GCODE_NEEDS_STOCK, SELECT_NEEDS_SET]})
 
     program: Name | None = Field(None, description="named program in data/programs (e.g. iso160); or give gcode")
     gcode: str | None = Field(None, max_length=MAX_PROGRAM_CHARS, description="G-code text (mm, as in the program)")
@@ -167,6 +173,9 @@ class SimulationRequest(StrictRequest):
 
 class SinglePoseJob(StrictRequest):
     """The fields of a job at one pose (circle, compensation): robot, pose, friction model per axis."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True,
+                              json_schema_extra={"allOf": [POSE_NAME_NEEDS_SET]})
 
     robot: Name = Field("max100", description="robot name in data/robots")
     pose_set: Name | None = Field(None, description="named pose file in data/poses (with 'pose' a name)")
@@ -379,10 +388,7 @@ class DiagnoseRequest(StrictRequest):
 
 class ExplainRequest(StrictRequest):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True, json_schema_extra={"allOf": [
-        _exactly_one("program", "string", "gcode", "string"),
-        {"anyOf": [{"not": _given("gcode", "string")}, _given("stock", "string")]},
-        # a pose given by name needs 'pose_set'
-        {"anyOf": [{"not": {"properties": {"pose": {"type": "string"}}}}, _given("pose_set", "string")]}]})
+        exactly_one("program", "string", "gcode", "string"), GCODE_NEEDS_STOCK, POSE_NAME_NEEDS_SET]})
 
     scan_csv: str = Field(min_length=1, max_length=MAX_PROGRAM_CHARS * 8,
                           description="measured CMM points, CSV feature,x,y,z (workpiece frame) [m]")

@@ -53,6 +53,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Annotated, Any
@@ -220,6 +221,21 @@ def mesh_of(vw, key):
 #: Derived per-step variable of the page: the tool's deviation from the commanded path, the vector sum of
 #: the deflection and the servo tracking error (both in the workpiece frame) [m]; shown in µm.
 TOOL_DEVIATION = "tool_deviation"
+
+
+class ViewVariable(str, Enum):
+    """The values route's ``variable``: :data:`TOOL_DEVIATION` and the per-step variables of the virtual
+    workpiece (``simulate.machining.virtual_workpiece.VARIABLES``, named here because importing that
+    module loads the machining kernels; a test holds the two equal)."""
+
+    tool_deviation = TOOL_DEVIATION
+    deflection = "deflection"
+    force = "force"
+    tracking_error = "tracking_error"
+    time = "time"
+    line = "line"
+    switch = "switch"
+    peak_force = "peak_force"
 
 
 def variables() -> list[dict]:
@@ -788,9 +804,10 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
                  name=f"{kind.value}_view_values",
                  summary="Per-vertex values of a variable in its display unit (binary, float32)")
         def values(ctx: Context = Depends(access), pose: str = pose_param,
-                   variable: str = Query("deflection", max_length=40, description="a variable the workpiece carries")):
+                   variable: Annotated[ViewVariable, Query(description="the variable to colour by")] =
+                   ViewVariable.deflection):
             vw, key = workpiece(ctx, pose)
-            return binary_response(ctx.request, values_bytes(vw, mesh_of(vw, key), variable))
+            return binary_response(ctx.request, values_bytes(vw, mesh_of(vw, key), variable.value))
 
         @app.get(f"{prefix}/{{job_id}}/view/workpiece/{{pose}}/click", tags=[tag], responses=errors,
                  name=f"{kind.value}_view_click",

@@ -449,9 +449,13 @@ def test_soak_with_three_keys_cancels_and_a_crash_loses_nothing(make_server, tmp
             h = {"X-API-Key": key}
             action = rng.random()
             if action < 0.5:
-                r = c.post("/simulations", json=good if rng.random() < 0.5 else UNREACHABLE, headers=h)
+                body = good if rng.random() < 0.5 else UNREACHABLE
+                r = c.post("/simulations", json=body, headers=h)
                 if r.status_code == 202:
+                    assert body is good, r.text
                     submitted[r.json()["id"]] = key
+                elif body is UNREACHABLE:   # refused at submission, never queued
+                    assert r.status_code == 422 and r.json()["detail"]["field"] == "poses.0", r.text
                 else:
                     assert r.status_code == 429 and "Retry-After" in r.headers, r.text
             elif action < 0.65 and submitted:

@@ -11,7 +11,7 @@ from service.jobs import RESTART_REASON
 
 from .conftest import DATA, ROBOT_FRICTION, short_program, wait_for
 
-#: Placed 9 m from the robot: the job's inverse kinematics fails and names the program line.
+#: Placed 9 m from the robot: refused at submission, naming the pose and the program line.
 UNREACHABLE = {"program": "iso160", "poses": [{"name": "far", "xyz": [9.0, 0.0, 0.0], "rpy": [0.0, 0.0, 0.0]}],
                "friction": ROBOT_FRICTION}
 TWO_POSES = {"program": "iso160", "pose_set": "iso160", "options": {"spacing_mm": 2.0}, "friction": ROBOT_FRICTION}
@@ -20,14 +20,13 @@ TWO_POSES = {"program": "iso160", "pose_set": "iso160", "options": {"spacing_mm"
 def test_restart_during_a_job_keeps_the_records(make_server, tmp_path):
     srv = make_server()
     with srv.client() as c:
-        failed = c.post("/simulations", json=UNREACHABLE).json()["id"]
-        failed_before = wait_for(c, failed, ("failed",))
-        # a job that fails names the program line and the pose
-        assert failed_before["error"]["source"] == "iso160.nc" and failed_before["error"]["line"] >= 1
-        assert "far" in failed_before["error"]["message"]
-        cancelled = c.post("/simulations", json=UNREACHABLE).json()["id"]
+        # a pose out of reach is refused before a job exists, naming the program line and the pose
+        r = c.post("/simulations", json=UNREACHABLE)
+        d = r.json()["detail"]
+        assert r.status_code == 422 and d["source"] == "iso160.nc" and d["line"] >= 1 and "far" in d["message"]
+        cancelled = c.post("/simulations", json=TWO_POSES).json()["id"]
         c.delete(f"/simulations/{cancelled}")
-        wait_for(c, cancelled, ("cancelled",))
+        cancelled_before = wait_for(c, cancelled, ("cancelled",))
         job = c.post("/simulations", json=TWO_POSES).json()["id"]
         running = wait_for(c, job, ("running",), timeout=60)
     srv.kill()  # SIGKILL the server in the middle of the job
@@ -38,8 +37,7 @@ def test_restart_during_a_job_keeps_the_records(make_server, tmp_path):
         assert st["state"] == "failed"
         assert st["error"]["message"] == RESTART_REASON.format(state="running")
         assert st["created"] == running["created"] and st["started"] == running["started"]
-        assert c.get(f"/simulations/{failed}").json() == failed_before
-        assert c.get(f"/simulations/{cancelled}").json()["state"] == "cancelled"
+        assert c.get(f"/simulations/{cancelled}").json() == cancelled_before
         assert c.get(f"/simulations/{job}/ranking").status_code == 409
         # the worker of the killed server ended with it and did not revive the job
         time.sleep(2.0)
@@ -47,18 +45,21 @@ def test_restart_during_a_job_keeps_the_records(make_server, tmp_path):
         with pytest.raises(ProcessLookupError):  # nothing of the killed server's process group is left
             os.killpg(srv.proc.pid, 0)
         # and the restarted service takes new work
-        again = c.post("/simulations", json=UNREACHABLE).json()["id"]
-        assert wait_for(c, again, ("failed",))["error"]["line"] >= 1
+        again = c.post("/simulations", json=TWO_POSES).json()["id"]
+        assert wait_for(c, again, ("running",), timeout=60)["started"]
+        c.delete(f"/simulations/{again}")
+        wait_for(c, again, ("cancelled",))
 
 
 def test_bounded_load_on_status_and_ranking_has_no_errors(shared_server):
     from service.loadtest import load
 
     with shared_server.client() as c:
-        job = c.post("/simulations", json=UNREACHABLE).json()["id"]
-        wait_for(c, job, ("failed",))
+        job = c.post("/simulations", json=TWO_POSES).json()["id"]
+        c.delete(f"/simulations/{job}")
+        wait_for(c, job, ("cancelled",))
     paths = [f"/simulations/{job}", f"/simulations/{job}/ranking"]
-    # the job failed, so its ranking is a 409 every time: anything else is an error
+    # the job was cancelled, so its ranking is a 409 every time: anything else is an error
     res = load(shared_server.url, {"X-API-Key": "test-key-0123456789"}, paths, clients=50, duration=2.0,
                expect={paths[1]: 409})
     assert res["errors"] == 0, res
