@@ -26,6 +26,7 @@ import numpy as np
 
 from identify.errors import InputError, read_json
 from simulate import defaults
+from simulate.toolpath.setup import MachineSetup, setup_tables
 
 if TYPE_CHECKING:  # the stages' types only: their modules load numba kernels, imported when a job runs
     from simulate.evaluation.cmm import Scan
@@ -174,8 +175,12 @@ class ProgramSetup:
 
 
 def load_program(program: str | Path, *, stock: str | Path | None = None, spindle_rpm: float | None = None,
-                 require_spindle: bool = False, source: str | None = None) -> ProgramSetup:
+                 require_spindle: bool = False, source: str | None = None,
+                 setup: MachineSetup | None = None) -> ProgramSetup:
     """Read and interpolate a program; find its stock (``<program stem>.stock.json`` unless given).
+
+    ``setup``: work offsets and tool table [m] (:func:`simulate.toolpath.setup.read_setup`); default
+    none, where only ``G54`` with zero offset and ``G43`` of the loaded tool are accepted.
 
     Raises ``InputError`` naming the program line, the stock file or the spindle.
     """
@@ -183,7 +188,7 @@ def load_program(program: str | Path, *, stock: str | Path | None = None, spindl
     from simulate.toolpath.interpolation import PathLimits, interpolate
 
     program = Path(program)
-    prog = read_program(program)
+    prog = read_program(program, **setup_tables(setup))
     stock = Path(stock) if stock is not None else program.with_name(program.stem + ".stock.json")
     doc = read_json(stock, missing="stock description not found (give --stock)")
     rpm = spindle_rpm

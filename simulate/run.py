@@ -439,22 +439,25 @@ def trajectory_frame(jt: JointTrajectory) -> pd.DataFrame:
 
 
 def interpolate_program(program: Path, robot: Path, pose: Path, name: str | None, limits: PathLimits,
-                        out_file: Path, progress: Progress = quiet) -> Interpolated:
+                        out_file: Path, progress: Progress = quiet, setup: Path | None = None) -> Interpolated:
     """Interpolate a program at the NC cycle (jerk-limited, look-ahead), transform it to the robot's
     joint angles and velocities for one placement, mark axis stops and reversals, and write the table
-    of :func:`trajectory_frame` (.csv or .parquet). Progress in 4 stages."""
+    of :func:`trajectory_frame` (.csv or .parquet). Progress in 4 stages. ``setup``: a setup file
+    (work offsets, tool table; :mod:`simulate.toolpath.setup`)."""
     from identify.records import write_table
     from simulate.robot.model import load_robot
     from simulate.toolpath.gcode import read_program
     from simulate.toolpath.interpolation import interpolate
     from simulate.toolpath.placement import joint_trajectory, load_poses, select_pose
+    from simulate.toolpath.setup import read_setup, setup_tables
 
     if out_file.suffix.lower() not in (".csv", ".parquet"):
         raise InputError("output must end in .csv or .parquet", source=str(out_file))
     limits.validate()
     with progress("interpolate", 4) as advance:
         advance.describe("reading the program")
-        prog = read_program(program)
+        tables = setup_tables(None if setup is None else read_setup(setup))
+        prog = read_program(program, **tables)
         placement = select_pose(load_poses(pose), name, source=str(pose))
         rob = load_robot(robot)
         advance(1)
