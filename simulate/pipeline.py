@@ -229,6 +229,9 @@ class MachiningJob:
     offset : ndarray (N, 3), optional
         Tool offset added to the path like a tracking error [m, workpiece frame] (``explain``'s
         thermal drift candidate).
+    setup : MachineSetup, optional
+        Work offsets and tool table [m] for reading ``program`` when it is a path
+        (:func:`simulate.toolpath.setup.read_setup`).
     """
 
     program: ProgramSetup | str | Path
@@ -239,6 +242,7 @@ class MachiningJob:
     settings: MachiningSettings = field(default_factory=MachiningSettings)
     stock: str | Path | None = None
     offset: np.ndarray | None = None
+    setup: MachineSetup | None = None
 
 
 @dataclass
@@ -371,7 +375,7 @@ def prepare(job: MachiningJob, *, trajectory: JointTrajectory | None = None) -> 
     s.validate()
     c0 = time.perf_counter()
     prog = job.program if isinstance(job.program, ProgramSetup) else load_program(
-        job.program, stock=job.stock, spindle_rpm=s.spindle_rpm, require_spindle=s.require_spindle)
+        job.program, stock=job.stock, spindle_rpm=s.spindle_rpm, require_spindle=s.require_spindle, setup=job.setup)
     size = piece_size(prog, s.size)
     robot = _robot(job.robot)
     jt = trajectory if trajectory is not None else joint_trajectory(robot, prog.interp, job.placement,

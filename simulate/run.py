@@ -21,6 +21,7 @@ from identify.errors import InputError, read_json
 from identify.progress import Advance, Progress, quiet
 from simulate import defaults
 from simulate.compensation.settings import CompensationSettings
+from simulate.toolpath.setup import MachineSetup
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -70,7 +71,8 @@ def _program(program: Path) -> None:
         raise InputError("program not found", source=str(program))
 
 
-def check_cost(program: Path, stock: Path | None, spacing_mm: float, simulations: int = 1) -> None:
+def check_cost(program: Path, stock: Path | None, spacing_mm: float, simulations: int = 1,
+               setup: MachineSetup | None = None) -> None:
     """Refuse a machining run before any work when its estimated cut time or memory exceeds the limits
     of :class:`simulate.costs.CostLimits` (the service's defaults): ``InputError`` naming ``--program``
     (and its line), ``--spacing`` [mm] or ``--stock``. Missing files are left to the workflow's own checks."""
@@ -81,7 +83,7 @@ def check_cost(program: Path, stock: Path | None, spacing_mm: float, simulations
         return
     check_machining_cost(program.read_text(errors="replace"), stock.read_text(errors="replace"), spacing_mm * MM,
                          simulations=simulations, source=str(program), stock_source=str(stock),
-                         fields=CostFields(program="--program", spacing="--spacing", stock="--stock"))
+                         fields=CostFields(program="--program", spacing="--spacing", stock="--stock"), setup=setup)
 
 
 # ---- one part: greybench machine --------------------------------------------------------------
@@ -102,18 +104,21 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
                   spacing_mm: float | None = None, no_deflection: bool = False, no_friction: bool = False,
                   no_switching: bool = False, no_tracking: bool = False, material: str | None = None,
                   stock: Path | None = None, spindle_rpm: float | None = None, stiffness_scale: float = 1.0,
-                  size: int | None = None, probe_spacing_mm: float | None = None) -> MachiningJob:
+                  size: int | None = None, probe_spacing_mm: float | None = None,
+                  setup: Path | None = None) -> MachiningJob:
     """The :class:`simulate.pipeline.MachiningJob` of ``greybench machine``'s options (mm -> m).
 
     ``ideal`` switches off deflection, tracking error and backlash; ``no_friction`` runs the servo
     without joint friction (its tracking error stays); ``no_tracking`` drops the tracking error
     altogether; ``no_switching`` drops the gear backlash (the switching-point effect) and its bits.
     Defaults: :mod:`simulate.defaults`. A job whose cut time or memory exceeds the limits is refused
-    (:func:`check_cost`).
+    (:func:`check_cost`). ``setup``: a setup file (work offsets, tool table;
+    :mod:`simulate.toolpath.setup`).
     """
     from simulate.pipeline import Components, MachiningJob, MachiningSettings
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import load_poses, select_pose
+    from simulate.toolpath.setup import read_setup
 
     spacing_mm = defaults.DEXEL_SPACING / MM if spacing_mm is None else spacing_mm
     probe_spacing_mm = defaults.PROBE_SPACING / MM if probe_spacing_mm is None else probe_spacing_mm
@@ -121,7 +126,8 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
         raise InputError(f"dexel spacing must be > 0 mm, got {spacing_mm}", field="spacing")
     if not (probe_spacing_mm > 0 and math.isfinite(probe_spacing_mm)):
         raise InputError(f"probe spacing must be > 0 mm, got {probe_spacing_mm}", field="probe-spacing")
-    check_cost(program, stock, spacing_mm)
+    tables = None if setup is None else read_setup(setup)
+    check_cost(program, stock, spacing_mm, setup=tables)
     placement = select_pose(load_poses(pose), name, source=str(pose))
     rob = load_robot(robot)
     cutter_from_robot(rob)  # tool errors name the robot file's key
@@ -131,7 +137,7 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
                                  material=material or defaults.MATERIAL, spindle_rpm=spindle_rpm,
                                  stiffness_scale=stiffness_scale, size=size)
     return MachiningJob(program=program, robot=rob, placement=placement, components=comp, settings=settings,
-                        stock=stock)
+                        stock=stock, setup=tables)
 
 
 #: Files :func:`write_machining_outputs` writes besides the optional scan (its progress total).
