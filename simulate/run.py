@@ -252,16 +252,19 @@ def machining_summary(res: MachiningResult) -> MachiningSummary:
 # ---- placements: greybench rank-poses, optimize-pose ---------------------------------------------
 def rank_program(program: Path, robot: Path, poses: Path, *, settings: RankSettings,
                  components: RankComponents, shares: bool = False, out_dir: Path | None = None, workers: int = 2,
-                 friction: dict[int, str] | None = None, progress: Progress = quiet) -> Ranking:
+                 friction: dict[int, str] | None = None, progress: Progress = quiet,
+                 setup: Path | None = None) -> Ranking:
     """Simulate the program in every pose of the pose file, measure and rank the virtual parts
     (:func:`simulate.evaluation.ranking.rank_poses`); with ``out_dir`` also the report
     (:func:`simulate.evaluation.report.write_report`). ``friction``: joint -> model reference in place
     of the robot file's (errors name ``--friction``). Ray tasks instead of processes when
-    ``RAY_ADDRESS`` is set. Progress in simulations ("simulating poses")."""
+    ``RAY_ADDRESS`` is set. Progress in simulations ("simulating poses"). ``setup``: a setup file
+    (work offsets, tool table; :mod:`simulate.toolpath.setup`)."""
     from simulate.evaluation.ranking import COMPONENTS, rank_poses
     from simulate.robot.friction import joint_rows
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import load_poses
+    from simulate.toolpath.setup import read_setup
 
     _program(program)
     rob = load_robot(robot)  # validate before any worker starts
@@ -271,16 +274,17 @@ def rank_program(program: Path, robot: Path, poses: Path, *, settings: RankSetti
         field = "--friction" if friction and exc.field and exc.field.startswith("friction[") else exc.field
         raise InputError(exc.message, source=exc.source, field=field) from None
     placements = load_poses(poses)
+    tables = None if setup is None else read_setup(setup)
     # refused before anything is written: the poses, and with shares the component re-runs, run in turn
     n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
-    check_cost(program, None, settings.spacing / MM, simulations=n_jobs)
+    check_cost(program, None, settings.spacing / MM, simulations=n_jobs, setup=tables)
     _folder(out_dir)
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
     with progress("simulating poses", n_jobs) as advance:
         r = rank_poses(program, robot, placements, settings=settings, components=components, shares=shares,
                        out_dir=out_dir, workers=workers, advance=advance, friction=friction,
-                       ray_address=os.environ.get("RAY_ADDRESS"))
+                       ray_address=os.environ.get("RAY_ADDRESS"), setup=tables)
     if out_dir is not None:
         from simulate.evaluation.report import write_report
 

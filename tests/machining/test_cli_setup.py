@@ -52,3 +52,48 @@ def test_machine_with_setup_matches_the_placement_frame_program(small_job, tmp_p
     r2 = runner.invoke(app, ["machine", "--program", str(shifted), "--out", str(tmp_path / "c"), *common])
     assert r2.exit_code == 2 and "shifted.nc" in r2.output and "G28" in r2.output
     assert not (tmp_path / "c").exists()
+
+
+def test_rank_poses_reads_the_program_with_the_setup(tmp_path):
+    """``rank-poses --setup``: the program is read with the file's tables before any simulation (a
+    G55 the file lacks is refused naming it, after the G28 the file does give); without the file the
+    G28 is refused; a bad file is refused naming its field. Nothing is written."""
+    from greybench.support import DATA_DIR
+
+    prog = tmp_path / "iso160_g55.nc"
+    text = (DATA_DIR / "programs" / "iso160.nc").read_text()
+    prog.write_text(text.replace("G21 G90 G17 G94\n", "G21 G90 G17 G94\nG28 G91 Z0.\nG90 G55\n", 1))
+    line = prog.read_text().splitlines().index("G90 G55") + 1
+    prog.with_name("iso160_g55.stock.json").write_text((DATA_DIR / "programs" / "iso160.stock.json").read_text())
+    args = ["rank-poses", "--program", str(prog), "--poses", str(DATA_DIR / "poses" / "iso160.json"), "--size", "160",
+            "--out", str(tmp_path / "out")]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2 and "G28" in r.output and f"line {line - 1}" in r.output
+    home = tmp_path / "home.json"
+    home.write_text(json.dumps({"units": "mm", "home": [0, 0, 100]}))
+    r = runner.invoke(app, args + ["--setup", str(home)])
+    assert r.exit_code == 2 and "G55" in r.output and f"line {line}" in r.output
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"units": "mm", "tools": {"1": {"length": 0, "diameter": 10}}}))
+    r = runner.invoke(app, args + ["--setup", str(bad)])
+    assert r.exit_code == 2 and "bad.json" in r.output and "tools.1" in r.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_rank_poses_passes_the_setup_to_the_reader(tmp_path):
+    """:func:`simulate.evaluation.ranking.rank_poses` reads the program with ``setup`` (no poses: the
+    reading alone) and refuses the G28 without it."""
+    from greybench.support import DATA_DIR
+    from identify.errors import InputError
+    from simulate.evaluation.ranking import rank_poses
+    from simulate.toolpath.setup import MachineSetup
+
+    prog = tmp_path / "iso160_g55.nc"
+    prog.write_text((DATA_DIR / "programs" / "iso160.nc").read_text().replace(
+        "G21 G90 G17 G94\n", "G21 G90 G17 G94\nG28 G91 Z0.\nG90 G55\n", 1))
+    prog.with_name("iso160_g55.stock.json").write_text((DATA_DIR / "programs" / "iso160.stock.json").read_text())
+    robot = DATA_DIR / "robots" / "max100.toml"
+    with pytest.raises(InputError, match="G28"):
+        rank_poses(prog, robot, [])
+    setup = MachineSetup(work_offsets={"G28": (0.0, 0.0, 0.1), "G55": (0.0, 0.0, 0.0)})
+    assert rank_poses(prog, robot, [], setup=setup).entries == []
