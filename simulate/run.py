@@ -317,16 +317,18 @@ def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *
                        seed: int = 0, spacing_mm: float = defaults.RANKING_DEXEL_SPACING / MM,
                        size: int | None = None, xy_margin_mm: float = 400.0, z_margin_mm: float = 100.0,
                        max_simulations: int | None = None, robot_name: str = "",
-                       progress: Progress = quiet) -> PlacementOutcome:
+                       progress: Progress = quiet, setup: Path | None = None) -> PlacementOutcome:
     """Search x, y, z and yaw of the workpiece for the lowest ranking score within ``budget_s`` [s]
     (:mod:`simulate.placement.search`) and write best.json, report.md, heatmap.png, history.csv and
     summary.json into ``out_dir`` (:func:`simulate.placement.report.write_outputs`). ``size`` [mm]
-    defaults to the stock's ``size_mm``. Progress in seconds of the budget."""
+    defaults to the stock's ``size_mm``. Progress in seconds of the budget. ``setup``: a setup file
+    (work offsets, tool table; :mod:`simulate.toolpath.setup`)."""
     from simulate.evaluation.ranking import RankSettings
     from simulate.placement.report import write_outputs
     from simulate.placement.search import SearchSettings, plan_search, run_search
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import parse_poses
+    from simulate.toolpath.setup import read_setup
 
     _program(program)
     _folder(out_dir)
@@ -344,8 +346,10 @@ def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *
                               rank=RankSettings(spacing=spacing_mm * MM, size=int(size)),
                               max_simulations=max_simulations, xy_margin=xy_margin_mm * MM,
                               z_margin=z_margin_mm * MM)
-    check_cost(program, None, spacing_mm, simulations=1)
-    plan = plan_search(program, robot, placements, settings, poses_source=str(poses))  # every check first
+    tables = None if setup is None else read_setup(setup)
+    check_cost(program, None, spacing_mm, simulations=1, setup=tables)
+    plan = plan_search(program, robot, placements, settings, poses_source=str(poses),
+                       setup=tables)  # every check first
     with progress("placement search", round(budget_s)) as advance:
         done = [0]
 

@@ -97,3 +97,43 @@ def test_rank_poses_passes_the_setup_to_the_reader(tmp_path):
         rank_poses(prog, robot, [])
     setup = MachineSetup(work_offsets={"G28": (0.0, 0.0, 0.1), "G55": (0.0, 0.0, 0.0)})
     assert rank_poses(prog, robot, [], setup=setup).entries == []
+
+
+def _iso160_g55(tmp_path):
+    from greybench.support import DATA_DIR
+
+    prog = tmp_path / "iso160_g55.nc"
+    prog.write_text((DATA_DIR / "programs" / "iso160.nc").read_text().replace(
+        "G21 G90 G17 G94\n", "G21 G90 G17 G94\nG28 G91 Z0.\nG90 G55\n", 1))
+    prog.with_name("iso160_g55.stock.json").write_text((DATA_DIR / "programs" / "iso160.stock.json").read_text())
+    return prog
+
+
+def test_optimize_pose_reads_the_program_with_the_setup(tmp_path):
+    """``optimize-pose --setup``: refusals before any simulation name G28 (no file) and G55 (a file
+    with only the home); :func:`simulate.placement.search.plan_search` reads the program with the
+    tables (its path then starts at home, 100 mm up)."""
+    from greybench.support import DATA_DIR
+    from identify.errors import InputError
+    from simulate.evaluation.ranking import RankSettings
+    from simulate.placement.search import SearchSettings, plan_search
+    from simulate.toolpath.placement import load_poses
+    from simulate.toolpath.setup import MachineSetup
+
+    prog = _iso160_g55(tmp_path)
+    poses = DATA_DIR / "poses" / "iso160.json"
+    args = ["optimize-pose", "--program", str(prog), "--poses", str(poses), "--out", str(tmp_path / "out"),
+            "--budget-s", "600"]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2 and "G28" in r.output
+    home = tmp_path / "home.json"
+    home.write_text(json.dumps({"units": "mm", "home": [0, 0, 100]}))
+    r = runner.invoke(app, args + ["--setup", str(home)])
+    assert r.exit_code == 2 and "G55" in r.output and not (tmp_path / "out").exists()
+    settings = SearchSettings(budget_s=3600.0, rank=RankSettings(size=160))
+    placements = load_poses(poses)[:1]
+    with pytest.raises(InputError, match="G28"):
+        plan_search(prog, DATA_DIR / "robots" / "max100.toml", placements, settings)
+    setup = MachineSetup(work_offsets={"G28": (0.0, 0.0, 0.1), "G55": (0.0, 0.0, 0.0)})
+    plan = plan_search(prog, DATA_DIR / "robots" / "max100.toml", placements, settings, setup=setup)
+    assert plan.program.parsed.segments[0].end[2] == pytest.approx(0.1)
