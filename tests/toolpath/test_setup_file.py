@@ -138,3 +138,12 @@ def test_cli_without_setup_names_the_missing_offset(tmp_path):
     bad = _write(tmp_path, {"units": "furlong"}, "bad.json")
     r = runner.invoke(app, args + ["--setup", str(bad)])
     assert r.exit_code == 2 and "bad.json" in r.output and "units" in r.output and not out.exists()
+
+
+def test_tool_diameter_gives_the_cutter_compensation_radius(tmp_path):
+    # ccw circle R10 mm with G42 D3: the tool (diameter 10, radius 5) runs outside on radius 15
+    nc = tmp_path / "c.nc"
+    nc.write_text("G21 G90 G17\nG0 X10 Y-10\nG1 F100\nG42 D3 X10 Y0\nG3 X10 Y0 I-10 J0\nG40 G1 X10 Y10\n")
+    s = read_setup(_write(tmp_path, SETUP))
+    arc = [seg for seg in read_program(nc, tools=s.tools).segments if hasattr(seg, "sweep")][0]
+    assert arc.radius * 1e3 == pytest.approx(15.0)
