@@ -16,6 +16,10 @@ MM_PER_M = 1e3
 Robot = Annotated[str, typer.Option("--robot", help="Robot name in data/robots or a robot TOML path.")]
 Program = Annotated[Path, typer.Option("--program", help="G-code program (mm or inch as programmed); its stock "
                                                          "<stem>.stock.json [m or mm] sits next to it.")]
+Setup = Annotated[Path | None, typer.Option("--setup", help="Setup file (JSON, lengths in its 'units'): work "
+                                                          "offsets G54-G59 / G54.1 P, G28 home [placement frame], "
+                                                          "tool table (length, diameter) for G43 H / G41 D "
+                                                          "(docs/gcode.md).")]
 Pose = Annotated[Path, typer.Option("--pose", help="Pose file (JSON): workpiece frame in the robot base frame "
                                                    "[m, rad].")]
 Poses = Annotated[Path, typer.Option("--poses", help="Pose file (JSON): workpiece frames in the robot base frame "

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from identify.errors import InputError
+from simulate.toolpath.setup import MachineSetup
 
 #: Interval capacity per ray family (x, y, z), as in :data:`simulate.machining.dexel.DEFAULT_CAPACITY`.
 DEXEL_CAPACITY = (8, 8, 4)
@@ -195,7 +196,7 @@ def _human(seconds: float) -> str:
 def check_machining_cost(program_text: str, stock_text: str, spacing: float, limits: CostLimits | None = None, *,
                          simulations: int = 1, source: str = "<program>", stock_source: str = "stock",
                          fields: CostFields = CostFields(), cycle: float = 0.002, max_speed: float = 1.0,
-                         rapid_speed: float = 0.25) -> CostEstimate:
+                         rapid_speed: float = 0.25, setup: MachineSetup | None = None) -> CostEstimate:
     """Estimate a machining job's cost and refuse it when beyond ``limits``.
 
     Parameters
@@ -216,6 +217,8 @@ def check_machining_cost(program_text: str, stock_text: str, spacing: float, lim
     cycle, max_speed, rapid_speed : float
         Interpolation cycle [s], feed cap [m/s] and rapid speed [m/s]
         (:class:`simulate.toolpath.interpolation.PathLimits`).
+    setup : MachineSetup, optional
+        Work offsets and tool table [m] for reading the program (:mod:`simulate.toolpath.setup`).
 
     Raises
     ------
@@ -223,12 +226,13 @@ def check_machining_cost(program_text: str, stock_text: str, spacing: float, lim
         Naming the program line (too slow a feed, too many lines), the spacing or the stock.
     """
     from simulate.toolpath.gcode import parse_program
+    from simulate.toolpath.setup import setup_tables
 
     limits = limits or CostLimits()
     if not (isinstance(spacing, (int, float)) and math.isfinite(spacing) and spacing > 0):
         raise InputError(f"dexel spacing must be a positive length, got {spacing!r}", field=fields.spacing)
     lines = check_program_size(program_text, limits, source=source, field=fields.program)
-    program = parse_program(program_text, source=source)
+    program = parse_program(program_text, source=source, **setup_tables(setup))
     total, slowest, slowest_line = cut_time(program, max_speed, rapid_speed)
     if total > limits.max_cut_seconds:
         raise InputError(f"the program's cut takes {_human(total)} at its programmed feeds, more than the limit of "

@@ -26,6 +26,7 @@ import numpy as np
 
 from identify.errors import InputError, read_json
 from simulate import defaults
+from simulate.toolpath.setup import MachineSetup, setup_tables
 
 if TYPE_CHECKING:  # the stages' types only: their modules load numba kernels, imported when a job runs
     from simulate.evaluation.cmm import Scan
@@ -174,8 +175,12 @@ class ProgramSetup:
 
 
 def load_program(program: str | Path, *, stock: str | Path | None = None, spindle_rpm: float | None = None,
-                 require_spindle: bool = False, source: str | None = None) -> ProgramSetup:
+                 require_spindle: bool = False, source: str | None = None,
+                 setup: MachineSetup | None = None) -> ProgramSetup:
     """Read and interpolate a program; find its stock (``<program stem>.stock.json`` unless given).
+
+    ``setup``: work offsets and tool table [m] (:func:`simulate.toolpath.setup.read_setup`); default
+    none, where only ``G54`` with zero offset and ``G43`` of the loaded tool are accepted.
 
     Raises ``InputError`` naming the program line, the stock file or the spindle.
     """
@@ -183,7 +188,7 @@ def load_program(program: str | Path, *, stock: str | Path | None = None, spindl
     from simulate.toolpath.interpolation import PathLimits, interpolate
 
     program = Path(program)
-    prog = read_program(program)
+    prog = read_program(program, **setup_tables(setup))
     stock = Path(stock) if stock is not None else program.with_name(program.stem + ".stock.json")
     doc = read_json(stock, missing="stock description not found (give --stock)")
     rpm = spindle_rpm
@@ -224,6 +229,9 @@ class MachiningJob:
     offset : ndarray (N, 3), optional
         Tool offset added to the path like a tracking error [m, workpiece frame] (``explain``'s
         thermal drift candidate).
+    setup : MachineSetup, optional
+        Work offsets and tool table [m] for reading ``program`` when it is a path
+        (:func:`simulate.toolpath.setup.read_setup`).
     """
 
     program: ProgramSetup | str | Path
@@ -234,6 +242,7 @@ class MachiningJob:
     settings: MachiningSettings = field(default_factory=MachiningSettings)
     stock: str | Path | None = None
     offset: np.ndarray | None = None
+    setup: MachineSetup | None = None
 
 
 @dataclass
@@ -366,7 +375,7 @@ def prepare(job: MachiningJob, *, trajectory: JointTrajectory | None = None) -> 
     s.validate()
     c0 = time.perf_counter()
     prog = job.program if isinstance(job.program, ProgramSetup) else load_program(
-        job.program, stock=job.stock, spindle_rpm=s.spindle_rpm, require_spindle=s.require_spindle)
+        job.program, stock=job.stock, spindle_rpm=s.spindle_rpm, require_spindle=s.require_spindle, setup=job.setup)
     size = piece_size(prog, s.size)
     robot = _robot(job.robot)
     jt = trajectory if trajectory is not None else joint_trajectory(robot, prog.interp, job.placement,

@@ -21,6 +21,7 @@ from identify.errors import InputError, read_json
 from identify.progress import Advance, Progress, quiet
 from simulate import defaults
 from simulate.compensation.settings import CompensationSettings
+from simulate.toolpath.setup import MachineSetup
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -70,7 +71,8 @@ def _program(program: Path) -> None:
         raise InputError("program not found", source=str(program))
 
 
-def check_cost(program: Path, stock: Path | None, spacing_mm: float, simulations: int = 1) -> None:
+def check_cost(program: Path, stock: Path | None, spacing_mm: float, simulations: int = 1,
+               setup: MachineSetup | None = None) -> None:
     """Refuse a machining run before any work when its estimated cut time or memory exceeds the limits
     of :class:`simulate.costs.CostLimits` (the service's defaults): ``InputError`` naming ``--program``
     (and its line), ``--spacing`` [mm] or ``--stock``. Missing files are left to the workflow's own checks."""
@@ -81,7 +83,7 @@ def check_cost(program: Path, stock: Path | None, spacing_mm: float, simulations
         return
     check_machining_cost(program.read_text(errors="replace"), stock.read_text(errors="replace"), spacing_mm * MM,
                          simulations=simulations, source=str(program), stock_source=str(stock),
-                         fields=CostFields(program="--program", spacing="--spacing", stock="--stock"))
+                         fields=CostFields(program="--program", spacing="--spacing", stock="--stock"), setup=setup)
 
 
 # ---- one part: greybench machine --------------------------------------------------------------
@@ -102,18 +104,21 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
                   spacing_mm: float | None = None, no_deflection: bool = False, no_friction: bool = False,
                   no_switching: bool = False, no_tracking: bool = False, material: str | None = None,
                   stock: Path | None = None, spindle_rpm: float | None = None, stiffness_scale: float = 1.0,
-                  size: int | None = None, probe_spacing_mm: float | None = None) -> MachiningJob:
+                  size: int | None = None, probe_spacing_mm: float | None = None,
+                  setup: Path | None = None) -> MachiningJob:
     """The :class:`simulate.pipeline.MachiningJob` of ``greybench machine``'s options (mm -> m).
 
     ``ideal`` switches off deflection, tracking error and backlash; ``no_friction`` runs the servo
     without joint friction (its tracking error stays); ``no_tracking`` drops the tracking error
     altogether; ``no_switching`` drops the gear backlash (the switching-point effect) and its bits.
     Defaults: :mod:`simulate.defaults`. A job whose cut time or memory exceeds the limits is refused
-    (:func:`check_cost`).
+    (:func:`check_cost`). ``setup``: a setup file (work offsets, tool table;
+    :mod:`simulate.toolpath.setup`).
     """
     from simulate.pipeline import Components, MachiningJob, MachiningSettings
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import load_poses, select_pose
+    from simulate.toolpath.setup import read_setup
 
     spacing_mm = defaults.DEXEL_SPACING / MM if spacing_mm is None else spacing_mm
     probe_spacing_mm = defaults.PROBE_SPACING / MM if probe_spacing_mm is None else probe_spacing_mm
@@ -121,7 +126,8 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
         raise InputError(f"dexel spacing must be > 0 mm, got {spacing_mm}", field="spacing")
     if not (probe_spacing_mm > 0 and math.isfinite(probe_spacing_mm)):
         raise InputError(f"probe spacing must be > 0 mm, got {probe_spacing_mm}", field="probe-spacing")
-    check_cost(program, stock, spacing_mm)
+    tables = None if setup is None else read_setup(setup)
+    check_cost(program, stock, spacing_mm, setup=tables)
     placement = select_pose(load_poses(pose), name, source=str(pose))
     rob = load_robot(robot)
     cutter_from_robot(rob)  # tool errors name the robot file's key
@@ -131,7 +137,7 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
                                  material=material or defaults.MATERIAL, spindle_rpm=spindle_rpm,
                                  stiffness_scale=stiffness_scale, size=size)
     return MachiningJob(program=program, robot=rob, placement=placement, components=comp, settings=settings,
-                        stock=stock)
+                        stock=stock, setup=tables)
 
 
 #: Files :func:`write_machining_outputs` writes besides the optional scan (its progress total).
@@ -246,16 +252,19 @@ def machining_summary(res: MachiningResult) -> MachiningSummary:
 # ---- placements: greybench rank-poses, optimize-pose ---------------------------------------------
 def rank_program(program: Path, robot: Path, poses: Path, *, settings: RankSettings,
                  components: RankComponents, shares: bool = False, out_dir: Path | None = None, workers: int = 2,
-                 friction: dict[int, str] | None = None, progress: Progress = quiet) -> Ranking:
+                 friction: dict[int, str] | None = None, progress: Progress = quiet,
+                 setup: Path | None = None) -> Ranking:
     """Simulate the program in every pose of the pose file, measure and rank the virtual parts
     (:func:`simulate.evaluation.ranking.rank_poses`); with ``out_dir`` also the report
     (:func:`simulate.evaluation.report.write_report`). ``friction``: joint -> model reference in place
     of the robot file's (errors name ``--friction``). Ray tasks instead of processes when
-    ``RAY_ADDRESS`` is set. Progress in simulations ("simulating poses")."""
+    ``RAY_ADDRESS`` is set. Progress in simulations ("simulating poses"). ``setup``: a setup file
+    (work offsets, tool table; :mod:`simulate.toolpath.setup`)."""
     from simulate.evaluation.ranking import COMPONENTS, rank_poses
     from simulate.robot.friction import joint_rows
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import load_poses
+    from simulate.toolpath.setup import read_setup
 
     _program(program)
     rob = load_robot(robot)  # validate before any worker starts
@@ -265,16 +274,17 @@ def rank_program(program: Path, robot: Path, poses: Path, *, settings: RankSetti
         field = "--friction" if friction and exc.field and exc.field.startswith("friction[") else exc.field
         raise InputError(exc.message, source=exc.source, field=field) from None
     placements = load_poses(poses)
+    tables = None if setup is None else read_setup(setup)
     # refused before anything is written: the poses, and with shares the component re-runs, run in turn
     n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
-    check_cost(program, None, settings.spacing / MM, simulations=n_jobs)
+    check_cost(program, None, settings.spacing / MM, simulations=n_jobs, setup=tables)
     _folder(out_dir)
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
     with progress("simulating poses", n_jobs) as advance:
         r = rank_poses(program, robot, placements, settings=settings, components=components, shares=shares,
                        out_dir=out_dir, workers=workers, advance=advance, friction=friction,
-                       ray_address=os.environ.get("RAY_ADDRESS"))
+                       ray_address=os.environ.get("RAY_ADDRESS"), setup=tables)
     if out_dir is not None:
         from simulate.evaluation.report import write_report
 
@@ -307,16 +317,18 @@ def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *
                        seed: int = 0, spacing_mm: float = defaults.RANKING_DEXEL_SPACING / MM,
                        size: int | None = None, xy_margin_mm: float = 400.0, z_margin_mm: float = 100.0,
                        max_simulations: int | None = None, robot_name: str = "",
-                       progress: Progress = quiet) -> PlacementOutcome:
+                       progress: Progress = quiet, setup: Path | None = None) -> PlacementOutcome:
     """Search x, y, z and yaw of the workpiece for the lowest ranking score within ``budget_s`` [s]
     (:mod:`simulate.placement.search`) and write best.json, report.md, heatmap.png, history.csv and
     summary.json into ``out_dir`` (:func:`simulate.placement.report.write_outputs`). ``size`` [mm]
-    defaults to the stock's ``size_mm``. Progress in seconds of the budget."""
+    defaults to the stock's ``size_mm``. Progress in seconds of the budget. ``setup``: a setup file
+    (work offsets, tool table; :mod:`simulate.toolpath.setup`)."""
     from simulate.evaluation.ranking import RankSettings
     from simulate.placement.report import write_outputs
     from simulate.placement.search import SearchSettings, plan_search, run_search
     from simulate.robot.model import load_robot
     from simulate.toolpath.placement import parse_poses
+    from simulate.toolpath.setup import read_setup
 
     _program(program)
     _folder(out_dir)
@@ -334,8 +346,10 @@ def optimize_placement(program: Path, robot: Path, poses: Path, out_dir: Path, *
                               rank=RankSettings(spacing=spacing_mm * MM, size=int(size)),
                               max_simulations=max_simulations, xy_margin=xy_margin_mm * MM,
                               z_margin=z_margin_mm * MM)
-    check_cost(program, None, spacing_mm, simulations=1)
-    plan = plan_search(program, robot, placements, settings, poses_source=str(poses))  # every check first
+    tables = None if setup is None else read_setup(setup)
+    check_cost(program, None, spacing_mm, simulations=1, setup=tables)
+    plan = plan_search(program, robot, placements, settings, poses_source=str(poses),
+                       setup=tables)  # every check first
     with progress("placement search", round(budget_s)) as advance:
         done = [0]
 
@@ -439,22 +453,25 @@ def trajectory_frame(jt: JointTrajectory) -> pd.DataFrame:
 
 
 def interpolate_program(program: Path, robot: Path, pose: Path, name: str | None, limits: PathLimits,
-                        out_file: Path, progress: Progress = quiet) -> Interpolated:
+                        out_file: Path, progress: Progress = quiet, setup: Path | None = None) -> Interpolated:
     """Interpolate a program at the NC cycle (jerk-limited, look-ahead), transform it to the robot's
     joint angles and velocities for one placement, mark axis stops and reversals, and write the table
-    of :func:`trajectory_frame` (.csv or .parquet). Progress in 4 stages."""
+    of :func:`trajectory_frame` (.csv or .parquet). Progress in 4 stages. ``setup``: a setup file
+    (work offsets, tool table; :mod:`simulate.toolpath.setup`)."""
     from identify.records import write_table
     from simulate.robot.model import load_robot
     from simulate.toolpath.gcode import read_program
     from simulate.toolpath.interpolation import interpolate
     from simulate.toolpath.placement import joint_trajectory, load_poses, select_pose
+    from simulate.toolpath.setup import read_setup, setup_tables
 
     if out_file.suffix.lower() not in (".csv", ".parquet"):
         raise InputError("output must end in .csv or .parquet", source=str(out_file))
     limits.validate()
     with progress("interpolate", 4) as advance:
         advance.describe("reading the program")
-        prog = read_program(program)
+        tables = setup_tables(None if setup is None else read_setup(setup))
+        prog = read_program(program, **tables)
         placement = select_pose(load_poses(pose), name, source=str(pose))
         rob = load_robot(robot)
         advance(1)

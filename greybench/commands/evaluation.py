@@ -41,6 +41,7 @@ def rank_poses_cmd(
     friction: o.Friction = None,
     ff_friction: o.FfFriction = False,
     backlash_comp: o.BacklashComp = False,
+    setup: o.Setup = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object: ranking (score [-]) and feature "
                                                          "rows (nominal_mm, tolerance_mm, deviation_mm per "
                                                          "pose).")] = False,
@@ -53,7 +54,8 @@ def rank_poses_cmd(
                             backlash_comp=backlash_comp)
     comps = Components(deflection=False, servo=False) if ideal else Components()
     r = rank_program(program, resolve_robot(robot), poses, settings=settings, components=comps, shares=shares,
-                     out_dir=out_dir, workers=workers, friction=o.friction_refs(friction), progress=progress)
+                     out_dir=out_dir, workers=workers, friction=o.friction_refs(friction), progress=progress,
+                     setup=setup)
     show(as_json, ranking_json(r), lambda: print_ranking(r, out_dir))
 
 

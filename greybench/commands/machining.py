@@ -42,6 +42,7 @@ def machine(
                                                             "scan.csv (default: the stock JSON's size_mm; neither: no "
                                                             "scan).")] = None,
     probe_spacing: o.ProbeSpacing = o.PROBE_SPACING_MM,
+    setup: o.Setup = None,
     as_json: o.Json = False,
 ) -> None:
     """Simulate machining with robot deflection and tracking error in the loop (paper Figure 4).
@@ -53,7 +54,7 @@ def machine(
     job = machining_job(program, resolve_robot(robot), pose, name, ideal=ideal, spacing_mm=spacing,
                         no_deflection=no_deflection, no_friction=no_friction, no_switching=no_switching,
                         no_tracking=no_tracking, material=material, stock=stock, spindle_rpm=spindle_rpm, size=size,
-                        probe_spacing_mm=probe_spacing)
+                        probe_spacing_mm=probe_spacing, setup=setup)
     # progress on stderr also with --json (stdout carries only the JSON object)
     info = machine_part(job, out_dir, variable, progress=progress)
     units = MACHINING_UNITS

@@ -30,16 +30,19 @@ def optimize_pose_cmd(
                                                                   "[mm].")] = 100.0,
     max_simulations: Annotated[int | None, typer.Option("--max-simulations", help="Stop after this many simulated "
                                                                                   "candidates [-].")] = None,
+    setup: o.Setup = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object: best pose [m, rad], its score, every "
                                                          "given pose's score, the improvement [-].")] = False,
 ) -> None:
     """Search x, y, z and yaw of the workpiece for the lowest rank-poses score, within a time budget."""
     res = optimize_placement(program, resolve_robot(robot), poses, out_dir, budget_s=budget_s, workers=workers,
                              seed=seed, spacing_mm=spacing, size=size, xy_margin_mm=xy_margin, z_margin_mm=z_margin,
-                             max_simulations=max_simulations, robot_name=robot, progress=progress)
+                             max_simulations=max_simulations, robot_name=robot, progress=progress,
+                             setup=setup)
     show(as_json, res.info, lambda: print_summary("placement search", res.summary()), lambda: out.print(
               f"report: {out_dir / 'report.md'}; check: greybench rank-poses --program {program} --robot {robot} "
-              f"--poses {out_dir / 'best.json'} --size {res.size} --spacing {spacing:g}"))
+              f"--poses {out_dir / 'best.json'} --size {res.size} --spacing {spacing:g}"
+              + (f" --setup {setup}" if setup is not None else "")))
 
 
 COMMANDS = {"optimize-pose": optimize_pose_cmd}

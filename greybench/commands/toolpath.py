@@ -40,6 +40,7 @@ def interpolate_cmd(
     jerk: Annotated[float, typer.Option("--jerk", help="Path jerk limit J [m/s^3].")] = 50.0,
     rapid_speed: Annotated[float, typer.Option("--rapid-speed", help="Speed of G0 moves [m/s].")] = 0.25,
     cycle: Annotated[float, typer.Option("--cycle", help="Interpolation cycle [ms].")] = 2.0,
+    setup: o.Setup = None,
     as_json: o.Json = False,
 ) -> None:
     """Interpolate a program at the NC cycle (jerk-limited, look-ahead), transform to joint angles and
@@ -48,7 +49,8 @@ def interpolate_cmd(
     from simulate.toolpath.interpolation import PathLimits
 
     limits = PathLimits(acceleration=acceleration, jerk=jerk, rapid_speed=rapid_speed, cycle=cycle / o.MM_PER_M)
-    res = interpolate_program(program, resolve_robot(robot), pose, name, limits, out_file, progress=progress)
+    res = interpolate_program(program, resolve_robot(robot), pose, name, limits, out_file, progress=progress,
+                              setup=setup)
     show(as_json, res.summary, lambda: print_summary(f"{program.name} on {res.robot}, pose {res.placement.name}",
                                                      res.summary))
 

@@ -44,6 +44,7 @@ from simulate.toolpath.placement import Placement
 
 if TYPE_CHECKING:
     from simulate.machining.simulation import StepTable
+    from simulate.toolpath.setup import MachineSetup
 
 #: The three component names whose share the report shows.
 COMPONENTS = ("deflection", "friction", "switching")
@@ -256,7 +257,8 @@ def _run_job(job: _Job) -> PoseResult:
 def rank_poses(program: str | Path, robot: str | Path, placements: list[Placement], *,
                settings: RankSettings | None = None, components: Components | None = None,
                shares: bool = False, out_dir: str | Path | None = None, workers: int = 2,
-               advance=None, friction: dict | None = None, ray_address: str | None = None) -> Ranking:
+               advance=None, friction: dict | None = None, ray_address: str | None = None,
+               setup: MachineSetup | None = None) -> Ranking:
     """Simulate, measure and rank every placement (module docstring).
 
     Parameters
@@ -282,6 +284,8 @@ def rank_poses(program: str | Path, robot: str | Path, placements: list[Placemen
         robot file's (:class:`simulate.pipeline.MachiningJob`).
     ray_address : str, optional
         Run the simulations as Ray tasks on this cluster (``RAY_ADDRESS``) instead of ``workers`` processes.
+    setup : MachineSetup, optional
+        Work offsets and tool table [m] for reading the program (:mod:`simulate.toolpath.setup`).
     """
     from simulate.pipeline import load_program
 
@@ -293,7 +297,7 @@ def rank_poses(program: str | Path, robot: str | Path, placements: list[Placemen
     if not stock.exists():
         raise InputError("no stock description next to the program (expected <program>.stock.json)",
                          source=str(program))
-    prog = load_program(program, stock=stock, spindle_rpm=settings.spindle_rpm, require_spindle=True)
+    prog = load_program(program, stock=stock, spindle_rpm=settings.spindle_rpm, require_spindle=True, setup=setup)
     fr = tuple(sorted((int(j), str(m)) for j, m in (friction or {}).items()))
     t0 = time.perf_counter()
     out = None if out_dir is None else str(out_dir)

@@ -52,6 +52,7 @@ from simulate.toolpath.placement import Placement
 
 if TYPE_CHECKING:
     from simulate.pipeline import ProgramSetup
+    from simulate.toolpath.setup import MachineSetup
 
 #: Lower bound of the wall time of one simulation per 2 ms sample of the program [s]: about a third
 #: of what one iso160 simulation at 0.5 mm took on an idle core (50 s for 30 287 samples), so a
@@ -383,11 +384,12 @@ class SearchPlan:
 
 
 def plan_search(program: str | Path, robot: str | Path, placements: list[Placement], settings: SearchSettings, *,
-                poses_source: str = "--poses") -> SearchPlan:
+                poses_source: str = "--poses", setup: MachineSetup | None = None) -> SearchPlan:
     """Check everything before any simulation (raises ``InputError``): the settings, the program and its
     stock, the given poses (each must machine the program, as ``rank-poses`` will simulate it again beside
     the best), that some placement is reachable at all, and that the budget fits the given poses plus one
-    candidate."""
+    candidate. ``setup``: work offsets and tool table [m] for reading the program
+    (:mod:`simulate.toolpath.setup`)."""
     from simulate.pipeline import load_program
     from simulate.robot.model import load_robot
 
@@ -399,7 +401,8 @@ def plan_search(program: str | Path, robot: str | Path, placements: list[Placeme
     if not stock.exists():
         raise InputError("no stock description next to the program (expected <program>.stock.json)",
                          source=str(program))
-    prog = load_program(program, stock=stock, spindle_rpm=settings.rank.spindle_rpm, require_spindle=True)
+    prog = load_program(program, stock=stock, spindle_rpm=settings.rank.spindle_rpm, require_spindle=True,
+                        setup=setup)
     rob = load_robot(robot)
     src = str(program)
     space = SearchSpace.around(placements, settings.xy_margin, settings.z_margin)
