@@ -571,9 +571,10 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         robot = _robot(body.robot)
         poses = _poses(body)
         _material(body.options.material, "options.material")
-        _reach(text, source, robot, poses, _pose_fields(body.poses, body.select, poses))
+        # the cost first: the reach check interpolates the program, which a costly one must not reach
         _cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
               len(poses) * (4 if body.options.shares else 1), limits)
+        _reach(text, source, robot, poses, _pose_fields(body.poses, body.select, poses))
         friction = _friction(body, robot, settings.mlflow_tracking_uri)
         job = {"program_source": source, "stock_source": stock_source, "robot": robot, "poses": poses,
                "friction": friction, "options": body.options.model_dump(),

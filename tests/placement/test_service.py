@@ -50,8 +50,9 @@ def test_bad_requests_are_4xx_naming_the_field(client):
     assert r.status_code == 422 and "budget_s" in r.json()["detail"][0]["field"]
     far = {**_body(), "poses": [{"name": "moon", "xyz": [30.0, 0.0, 0.0], "rpy": [0, 0, 0]}]}
     r = client.post("/placement-searches", headers=HEADERS, json=far)
-    assert r.status_code == 422 and r.json()["detail"]["field"] == "poses"
-    assert "no reachable candidate" in r.json()["detail"]["message"]
+    # the given pose itself is out of reach: refused at submission naming it, before any planning
+    assert r.status_code == 422 and r.json()["detail"]["field"] == "poses.0", r.text
+    assert "moon" in r.json()["detail"]["message"] and "reachable" in r.json()["detail"]["message"]
     r = client.post("/placement-searches", headers=HEADERS, json={"program": "nope", "pose_set": "iso160"})
     assert r.status_code == 404
     r = client.post("/placement-searches", headers=HEADERS, json={"program": "iso160", "pose_set": "iso160",
