@@ -137,3 +137,10 @@ JOINT_FRICTION_ROBOT = Path(__file__).resolve().parent / "data" / "max100_joint_
 @pytest.fixture(scope="session")
 def joint_friction_robot_path():
     return JOINT_FRICTION_ROBOT
+
+
+@pytest.fixture(scope="session")
+def joint_friction_robot(joint_friction_robot_path):
+    from simulate.robot.model import load_robot
+
+    return load_robot(joint_friction_robot_path)

@@ -21,9 +21,9 @@ JL = np.array([650.0, 480.0, 137.0, 1.25, 4.0, 0.065])   # kg m^2, link inertias
 
 
 @pytest.fixture(scope="module")
-def robot(joint_friction_robot_path):
+def robot(joint_friction_robot):
     """The test robot whose friction acts on the joint side (so it passes the gear)."""
-    return load_robot(joint_friction_robot_path)
+    return joint_friction_robot
 
 
 @pytest.fixture(scope="module")

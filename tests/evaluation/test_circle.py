@@ -262,12 +262,10 @@ def test_bad_spec_names_the_option(kw, field):
 
 
 @pytest.fixture(scope="module")
-def robot(joint_friction_robot_path):
+def robot(joint_friction_robot):
     """The closed forms below (A1's lag flips by b + 2 g / c, gravity holding A2/A3 on a flank) are
     written for friction on the joint side and a linear gear: the test robot with that physics."""
-    from simulate.robot.model import load_robot
-
-    return load_robot(joint_friction_robot_path)
+    return joint_friction_robot
 
 
 @pytest.fixture(scope="module")

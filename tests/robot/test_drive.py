@@ -37,10 +37,8 @@ def robot_path(joint_friction_robot_path):
 
 
 @pytest.fixture(scope="module")
-def robot(robot_path):
-    from simulate.robot.model import load_robot
-
-    return load_robot(robot_path)
+def robot(joint_friction_robot):
+    return joint_friction_robot
 
 
 def coulomb(p: DriveParams, fc, side=FrictionSide.JOINT, s0=1e7, jl=JL, vs=1e-4):

@@ -23,15 +23,8 @@ T = 0.002
 
 # The loop against the drive model alone: the test robot with joint-side friction and a linear gear.
 @pytest.fixture(scope="module")
-def robot_path(joint_friction_robot_path):
-    return joint_friction_robot_path
-
-
-@pytest.fixture(scope="module")
-def robot(robot_path):
-    from simulate.robot.model import load_robot
-
-    return load_robot(robot_path)
+def robot(joint_friction_robot):
+    return joint_friction_robot
 
 
 def _run_loop(robot, t, q, flags):

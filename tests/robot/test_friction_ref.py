@@ -15,15 +15,8 @@ models = pytest.importorskip("identify.models")
 
 # The friction references on the test robot whose friction acts on the joint side.
 @pytest.fixture(scope="module")
-def robot_path(joint_friction_robot_path):
-    return joint_friction_robot_path
-
-
-@pytest.fixture(scope="module")
-def robot(robot_path):
-    from simulate.robot.model import load_robot
-
-    return load_robot(robot_path)
+def robot(joint_friction_robot):
+    return joint_friction_robot
 
 
 def _saved(cls, params, directory):
