@@ -515,7 +515,7 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
         res = simulate_machining(wp, cutter, jt.t, jt.line, jt.xyz, mat, passes.spindles[0], compliance=C,
                                  tracking_error=offset, switch=jt.switch if comp.switching else None,
                                  forces=prog.stock is not None, advance=advance, profile=profile, drive=drive,
-                                 passes=passes, check_limits=True)
+                                 passes=passes, check_limits=True, feeding=_feeding(prog, n))
     except InputError as exc:   # a limit of the physically possible: the line is the program's
         if exc.source is None:
             raise type(exc)(exc.message, source=prog.source, line=exc.line, field=exc.field) from None
@@ -619,3 +619,13 @@ def program_passes(prog: ProgramSetup, base: Cutter, jt: JointTrajectory, spindl
     entries = list(keys)
     return ToolPasses(tuple(cutters.get(t, base) for t, _ in entries),
                       tuple(Spindle.from_rpm(r) for _, r in entries), tuple(t for t, _ in entries), index)
+
+
+def _feeding(prog: ProgramSetup, n: int) -> np.ndarray | None:
+    """(n,) bool: the steps of feed moves (not rapids) of the program's interpolation (None when
+    the rows are not the interpolation's)."""
+    seg = np.asarray(prog.interp.segment, np.int64)
+    if len(seg) != n or not prog.parsed.segments:
+        return None
+    rapid = np.array([bool(getattr(s, "rapid", False)) for s in prog.parsed.segments])
+    return ~rapid[np.clip(seg, 0, len(rapid) - 1)]

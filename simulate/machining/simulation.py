@@ -517,7 +517,7 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
                        advance=None, time_constant: float = DEFLECTION_TIME_CONSTANT,
                        parallel_work: int = PARALLEL_WORK, profile: bool = False, drive=None,
                        external_force=None, passes: ToolPasses | None = None,
-                       check_limits: bool = False) -> MachiningResult:
+                       check_limits: bool = False, feeding=None) -> MachiningResult:
     """Run the coupled loop over a commanded cutter path (modifies ``workpiece``).
 
     Parameters
@@ -561,6 +561,10 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
         Stop at the first stretch of steps that leaves the physically possible
         (:func:`check_process_limits`). Default False (kernel-level callers drive synthetic paths);
         the machining pipeline (:func:`simulate.pipeline.run_job`) always checks.
+    feeding : (N,) bool, optional
+        Steps of feed moves (not rapids): their chip load counts as cutting when their stretch of
+        steps removed material, also where the force model gives no force (a flat end mill's plunge
+        loads its bottom edges, which the side-edge force model does not see).
 
     Raises
     ------
@@ -639,7 +643,8 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
                                  sv)
         volume[entry] += state[6] - v0
         if check_limits and k > k_from:
-            check_process_limits(st, xyz, err, passes, k_from, k)
+            check_process_limits(st, xyz, err, passes, k_from, k,
+                                 feeding=None if feeding is None or state[6] <= v0 else feeding)
         if status == StepStatus.OVERFLOW:
             raise RuntimeError(f"dexel ray capacity exceeded at step {k}; use a larger capacity")
         if status == StepStatus.LAYERS:
@@ -688,7 +693,8 @@ def tool_uses(steps: StepTable, passes: ToolPasses, volume) -> list[ToolUse]:
     return list(uses.values())
 
 
-def check_process_limits(steps: StepTable, xyz, err, passes: ToolPasses, k_from: int, k_to: int) -> None:
+def check_process_limits(steps: StepTable, xyz, err, passes: ToolPasses, k_from: int, k_to: int,
+                         feeding=None) -> None:
     """Raise :class:`ProcessLimitError` at the first step of ``k_from .. k_to - 1`` that leaves the
     physically possible (docs/process-limits.md):
 
@@ -696,7 +702,8 @@ def check_process_limits(steps: StepTable, xyz, err, passes: ToolPasses, k_from:
     - a peak force above the cutter's breakage load (:func:`simulate.machining.tools.breakage_force`);
     - a deflection larger than the cutter's diameter (the tool would have left the cut);
     - a chip load per tooth above :func:`simulate.machining.tools.max_chip_load` while the tool cuts
-      (force above zero): the drive-driven feed per tooth, ``|v| / (N n)``.
+      (force above zero, or a step of ``feeding`` (N,) bool: the caller passes it for a stretch
+      that removed material): the drive-driven feed per tooth, ``|v| / (N n)``.
 
     The message names the quantity, its value and the bound; ``line`` is the step's program line.
     """
@@ -716,6 +723,7 @@ def check_process_limits(steps: StepTable, xyz, err, passes: ToolPasses, k_from:
     per_rev_teeth = np.array([c.flutes * sp.omega / (2.0 * math.pi) for c, sp in
                               zip(passes.cutters, passes.spindles, strict=True)])[index]
     chip = speed / per_rev_teeth
+    cuts = np.zeros(k_to - k_from, bool) if feeding is None else np.asarray(feeding, bool)[rows]
     defl = np.linalg.norm(d, axis=1)
     finite = np.isfinite(f) & np.isfinite(fv).all(axis=1) & np.isfinite(d).all(axis=1) & np.isfinite(e).all(axis=1)
     checks = (
@@ -723,7 +731,7 @@ def check_process_limits(steps: StepTable, xyz, err, passes: ToolPasses, k_from:
          lambda i: "is not a number (the coupled loop diverged)"),
         (finite & (f > f_break), "peak cutting force", "peak_force",
          lambda i: f"{f[i] / 1e3:.4g} kN is above the tool's breakage load of {f_break[i] / 1e3:.4g} kN"),
-        (finite & (chip > h_max) & (f > 0.0), "chip load", "chip_load",
+        (finite & (chip > h_max) & ((f > 0.0) | cuts), "chip load", "chip_load",
          lambda i: f"{chip[i] * 1e3:.4g} mm per tooth is above the {h_max[i] * 1e3:.4g} mm the tool survives"),
         (finite & (defl > diam), "deflection", "deflection",
          lambda i: f"{defl[i] * 1e3:.4g} mm is larger than the tool's diameter of {diam[i] * 1e3:.4g} mm"),
