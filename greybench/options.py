@@ -20,6 +20,9 @@ Setup = Annotated[Path | None, typer.Option("--setup", help="Setup file (JSON, l
                                                           "offsets G54-G59 / G54.1 P, G28 home [placement frame], "
                                                           "tool table (length, diameter) for G43 H / G41 D "
                                                           "(docs/gcode.md).")]
+RequireUnits = Annotated[bool, typer.Option("--require-units", help="Refuse a program whose first move comes before "
+                                                                   "any G20/G21 (default: read as mm, with a "
+                                                                   "warning).")]
 Pose = Annotated[Path, typer.Option("--pose", help="Pose file (JSON): workpiece frame in the robot base frame "
                                                    "[m, rad].")]
 Poses = Annotated[Path, typer.Option("--poses", help="Pose file (JSON): workpiece frames in the robot base frame "

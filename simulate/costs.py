@@ -12,6 +12,10 @@ how many simulations the job runs; it is an upper-bound style estimate, not a pr
   acceleration limits only make the real time longer, so this is a lower bound on the 2 ms
   samples the interpolator produces (``cut_time / cycle``). A feed of ``F0.0001`` mm/min makes one
   move take years: refused naming its line.
+- **Chip load** [m per tooth]: a feed move whose feed per revolution ``F / S`` would load each
+  tooth of the tool with the most flutes the job may hold (the setup file's ``flutes`` for its
+  tool, else :data:`MOST_FLUTES`) beyond :data:`simulate.machining.tools.MAX_CHIP_LOAD`: no tool
+  survives it (docs/process-limits.md). Refused naming its line.
 - **Memory** [bytes]: the tri-dexel grid over the stock's bounding box (the layout of
   :class:`simulate.machining.dexel.TriDexel`: rays along x, y, z with (8, 8, 4) intervals of two
   float64 ends and two int32 step ids, plus an int32 count), times :data:`DEXEL_COPIES`; plus
@@ -47,6 +51,9 @@ BYTES_PER_SAMPLE = 2048
 #: of the measured peak (ru_maxrss) of one pose of the test pieces: iso160 at 2 mm 514 MiB measured,
 #: 520 MiB estimated; iso320 at 0.5 mm 621 MiB measured, 790 MiB estimated.
 BASELINE_BYTES = 480 * 1024 ** 2
+#: Flutes of the tool with the most teeth assumed when the setup file does not give a tool's [-]
+#: (more than the catalogue end mills have: docs/process-limits.md).
+MOST_FLUTES = 8
 
 
 @dataclass(frozen=True)
@@ -184,6 +191,28 @@ def cut_time(program, max_speed: float = 1.0, rapid_speed: float = 0.25) -> tupl
     return total, slowest, slowest_line
 
 
+def check_chip_load(program, setup: MachineSetup | None = None, *, source: str = "<program>",
+                    field: str = "program") -> None:
+    """Refuse the first feed move whose chip load no tool survives: ``F / (S N)`` above
+    :data:`simulate.machining.tools.MAX_CHIP_LOAD` [m] with ``N`` the tool's flutes from ``setup``
+    (else :data:`MOST_FLUTES`). Moves with the spindle stopped are left to the simulation's check."""
+    from simulate.machining.tools import MAX_CHIP_LOAD
+
+    cutting = setup.cutting if setup is not None else {}
+    for seg in program.segments:
+        spindle = float(getattr(seg, "spindle", 0.0))   # rev/s
+        if getattr(seg, "rapid", False) or spindle <= 0:
+            continue
+        edge = cutting.get(int(seg.tool))
+        flutes = edge.flutes if edge is not None and edge.flutes else MOST_FLUTES
+        chip = seg.feed / spindle / flutes
+        if chip > MAX_CHIP_LOAD:
+            raise InputError(f"feed {seg.feed * 60e3:.6g} mm/min at {spindle * 60:.6g} rev/min loads each of "
+                             f"{flutes} teeth with {chip * 1e3:.4g} mm, above the {MAX_CHIP_LOAD * 1e3:g} mm per "
+                             f"tooth no tool survives (docs/process-limits.md)", source=source, line=seg.line,
+                             field=field)
+
+
 def _human(seconds: float) -> str:
     if not math.isfinite(seconds):
         return "forever"
@@ -233,6 +262,7 @@ def check_machining_cost(program_text: str, stock_text: str, spacing: float, lim
         raise InputError(f"dexel spacing must be a positive length, got {spacing!r}", field=fields.spacing)
     lines = check_program_size(program_text, limits, source=source, field=fields.program)
     program = parse_program(program_text, source=source, **setup_tables(setup))
+    check_chip_load(program, setup, source=source, field=fields.program)
     total, slowest, slowest_line = cut_time(program, max_speed, rapid_speed)
     if total > limits.max_cut_seconds:
         raise InputError(f"the program's cut takes {_human(total)} at its programmed feeds, more than the limit of "

@@ -83,10 +83,14 @@ class MachiningSettings:
     material : str
         Name in ``data/materials.toml``.
     spindle_rpm : float or None
-        [rev/min]; None: the program's S word (:data:`simulate.defaults.SPINDLE_RPM` when it has none
-        and ``require_spindle`` is False).
+        [rev/min], every move; None: each move at the program's S in force (a program with no S at all
+        at :data:`simulate.defaults.SPINDLE_RPM`, stated in ``ProgramSetup.warnings``, when
+        ``require_spindle`` is False; a cutting move with the spindle stopped is refused).
     require_spindle : bool
         Refuse a program that never sets the spindle speed (the ranking: forces would rest on a guess).
+    require_units : bool
+        Refuse a program whose first move comes before any ``G20``/``G21`` (False: read as mm, stated
+        in ``ProgramSetup.warnings``).
     stiffness_scale : float
         Multiplies every joint stiffness, gears and links [-].
     substeps : int or None
@@ -115,6 +119,7 @@ class MachiningSettings:
     material: str = defaults.MATERIAL
     spindle_rpm: float | None = None
     require_spindle: bool = False
+    require_units: bool = False
     stiffness_scale: float = 1.0
     substeps: int | None = None
     friction_scale: float = 1.0
@@ -162,7 +167,16 @@ class ProgramSetup:
     stock_doc : dict
         The stock JSON as read.
     spindle_rpm : float
-        [rev/min].
+        [rev/min], the highest speed the program cuts at.
+    step_rpm : ndarray (N,)
+        [rev/min] per step of ``interp``: the S in force (rapids with the spindle stopped take the
+        speed of the cut before them, else after them: they cut nothing).
+    step_tool : ndarray (N,) int
+        Tool in the spindle per step of ``interp`` (``T`` of the last ``M6``; 0: none named).
+    setup : MachineSetup or None
+        The setup file's tables the program was read with (its tool table gives the cutters).
+    warnings : list of str
+        Assumptions the reading made (no units word, the default spindle speed), one line each.
     """
 
     program: Path
@@ -172,15 +186,22 @@ class ProgramSetup:
     stock: Path | None
     stock_doc: dict
     spindle_rpm: float
+    step_rpm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    step_tool: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    setup: MachineSetup | None = None
+    warnings: list[str] = field(default_factory=list)
 
 
 def load_program(program: str | Path, *, stock: str | Path | None = None, spindle_rpm: float | None = None,
                  require_spindle: bool = False, source: str | None = None,
-                 setup: MachineSetup | None = None) -> ProgramSetup:
+                 setup: MachineSetup | None = None, require_units: bool = False) -> ProgramSetup:
     """Read and interpolate a program; find its stock (``<program stem>.stock.json`` unless given).
 
     ``setup``: work offsets and tool table [m] (:func:`simulate.toolpath.setup.read_setup`); default
     none, where only ``G54`` with zero offset and ``G43`` of the loaded tool are accepted.
+    ``spindle_rpm`` [rev/min]: every move at this speed; None: the program's S per move
+    (:func:`segment_speeds`). ``require_units``: refuse a program without ``G20``/``G21`` before
+    its first move (otherwise read as mm with a warning).
 
     Raises ``InputError`` naming the program line, the stock file or the spindle.
     """
@@ -188,22 +209,61 @@ def load_program(program: str | Path, *, stock: str | Path | None = None, spindl
     from simulate.toolpath.interpolation import PathLimits, interpolate
 
     program = Path(program)
-    prog = read_program(program, **setup_tables(setup))
+    name = source or str(program)
+    prog = read_program(program, require_units=require_units, **setup_tables(setup))
     stock = Path(stock) if stock is not None else program.with_name(program.stem + ".stock.json")
     doc = read_json(stock, missing="stock description not found (give --stock)")
-    rpm = spindle_rpm
-    if rpm is None:
-        # segments carry the S word in rev/s (simulate.toolpath.gcode)
-        speeds = [seg.spindle for seg in prog.segments if getattr(seg, "spindle", 0) > 0]
-        rpm = float(max(speeds)) * 60.0 if speeds else 0.0
-    if not rpm > 0:
+    warnings = []
+    if prog.units_assumed:
+        warnings.append(f"{name}: line {prog.units_assumed}: no units word (G20/G21) before the first move: "
+                        f"read as mm (--require-units refuses such a program)")
+    seg_rpm, note = segment_speeds(prog, spindle_rpm, require_spindle=require_spindle, source=name)
+    if note:
+        warnings.append(note)
+    interp = interpolate(prog, PathLimits())
+    seg = np.clip(np.asarray(interp.segment, np.int64), 0, max(len(prog.segments) - 1, 0))
+    step_rpm = seg_rpm[seg] if len(prog.segments) else np.full(len(interp.t), defaults.SPINDLE_RPM)
+    tools = np.array([s.tool for s in prog.segments], np.int64)
+    step_tool = tools[seg] if len(prog.segments) else np.zeros(len(interp.t), np.int64)
+    cutting = [r for r, s in zip(seg_rpm, prog.segments, strict=True) if not getattr(s, "rapid", False)]
+    top = float(max(cutting)) if cutting else float(seg_rpm.max()) if seg_rpm.size else defaults.SPINDLE_RPM
+    return ProgramSetup(program=program, source=name, parsed=prog, interp=interp, stock=stock,
+                        stock_doc=doc if isinstance(doc, dict) else {}, spindle_rpm=top, step_rpm=step_rpm,
+                        step_tool=step_tool, setup=setup, warnings=warnings)
+
+
+def segment_speeds(prog: Program, spindle_rpm: float | None = None, *, require_spindle: bool = False,
+                   source: str = "<program>") -> tuple[np.ndarray, str]:
+    """Spindle speed [rev/min] per segment of ``prog`` and the assumption made (or "").
+
+    ``spindle_rpm`` given: every segment at it. Otherwise the S in force with ``M3``/``M4`` (the
+    reader's ``spindle``); a program with no S at all runs at :data:`simulate.defaults.SPINDLE_RPM`
+    (stated in the returned line; refused with ``require_spindle``); a program that does set a
+    speed but feeds with the spindle stopped (no S yet, ``S0``, after ``M5``) is refused naming the
+    line. Rapids with the spindle stopped take the speed of the cut before them (else after them).
+    """
+    n = len(prog.segments)
+    if spindle_rpm is not None:
+        return np.full(n, float(spindle_rpm)), ""
+    rpm = np.array([float(getattr(s, "spindle", 0.0)) * 60.0 for s in prog.segments])  # rev/s -> rev/min
+    if not (rpm > 0).any():
         if require_spindle:
             raise InputError("the program never switches the spindle on (no S word with M3/M4); give --spindle",
-                             source=source or str(program))
-        rpm = defaults.SPINDLE_RPM
-    return ProgramSetup(program=program, source=source or str(program), parsed=prog,
-                        interp=interpolate(prog, PathLimits()), stock=stock,
-                        stock_doc=doc if isinstance(doc, dict) else {}, spindle_rpm=float(rpm))
+                             source=source)
+        return (np.full(n, defaults.SPINDLE_RPM),
+                f"{source}: no spindle speed (S with M3/M4) in the program: cut at the default "
+                f"{defaults.SPINDLE_RPM:g} rev/min (--spindle sets it)" if n else "")
+    for s, r in zip(prog.segments, rpm, strict=True):
+        if r <= 0 and not getattr(s, "rapid", False):
+            raise InputError("a cutting move with the spindle stopped (no S yet, S0 or after M5): give S with "
+                             "M3/M4 before it, or --spindle", source=source, line=s.line)
+    # rapids at a stopped spindle: forward fill, then back fill (the first speed)
+    last = 0.0
+    for i in range(n):
+        last = rpm[i] if rpm[i] > 0 else last
+        rpm[i] = last
+    rpm[rpm <= 0] = rpm[rpm > 0][0]
+    return rpm, ""
 
 
 @dataclass
@@ -261,7 +321,8 @@ class MachiningOutcome:
         Per-step process values (force [N], deflection and tracking error [m], switching bits),
         removed volume, loop timing.
     cutter : simulate.machining.tools.Cutter
-        The robot file's tool.
+        The robot file's tool (the cutter of moves whose tool the setup's tool table does not
+        describe; ``result.tools`` lists the tools each pass was cut with).
     tracking_error : ndarray (N, 3)
         Tracking error used [m, workpiece frame] (servo error plus ``offset``).
     scan : simulate.evaluation.cmm.Scan or None
@@ -375,7 +436,8 @@ def prepare(job: MachiningJob, *, trajectory: JointTrajectory | None = None) -> 
     s.validate()
     c0 = time.perf_counter()
     prog = job.program if isinstance(job.program, ProgramSetup) else load_program(
-        job.program, stock=job.stock, spindle_rpm=s.spindle_rpm, require_spindle=s.require_spindle, setup=job.setup)
+        job.program, stock=job.stock, spindle_rpm=s.spindle_rpm, require_spindle=s.require_spindle, setup=job.setup,
+        require_units=s.require_units)
     size = piece_size(prog, s.size)
     robot = _robot(job.robot)
     jt = trajectory if trajectory is not None else joint_trajectory(robot, prog.interp, job.placement,
@@ -403,7 +465,7 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
         Naming the file, line, key or setting at fault.
     """
     from simulate.evaluation.cutter import robot_cutter
-    from simulate.machining.cutting import Spindle, load_material
+    from simulate.machining.cutting import load_material
     from simulate.machining.simulation import simulate_machining, workpiece_compliance
     from simulate.robot.stiffness import Compliance
 
@@ -413,8 +475,8 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
     prog, robot, jt, size = pj.program, pj.robot, pj.trajectory, pj.size
     timings = dict(pj.timings)
     cutter = robot_cutter(robot)
+    passes = program_passes(prog, cutter, jt, s.spindle_rpm)
     mat = load_material(s.material)
-    rpm = s.spindle_rpm or prog.spindle_rpm
     c0 = time.perf_counter()
     R = job.placement.T[:3, :3]
     # each compliance once: the drives wind the gears up under the process torque, so the static
@@ -449,9 +511,15 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
     c0 = time.perf_counter()
     wp = stock_workpiece(prog, s)
     timings["stock"] = time.perf_counter() - c0
-    res = simulate_machining(wp, cutter, jt.t, jt.line, jt.xyz, mat, Spindle.from_rpm(rpm), compliance=C,
-                             tracking_error=offset, switch=jt.switch if comp.switching else None,
-                             forces=prog.stock is not None, advance=advance, profile=profile, drive=drive)
+    try:
+        res = simulate_machining(wp, cutter, jt.t, jt.line, jt.xyz, mat, passes.spindles[0], compliance=C,
+                                 tracking_error=offset, switch=jt.switch if comp.switching else None,
+                                 forces=prog.stock is not None, advance=advance, profile=profile, drive=drive,
+                                 passes=passes, check_limits=True, feeding=_feeding(prog, n))
+    except InputError as exc:   # a limit of the physically possible: the line is the program's
+        if exc.source is None:
+            raise type(exc)(exc.message, source=prog.source, line=exc.line, field=exc.field) from None
+        raise
     err = res.steps.tracking_error
     timings["coupled loop"] = res.wall_time
     scan = table = None
@@ -474,3 +542,90 @@ def run_job(job: MachiningJob, *, prepared: PreparedJob | None = None, advance=N
         timings["cmm + features"] = time.perf_counter() - c0
     return MachiningOutcome(program=prog, robot=robot, trajectory=jt, workpiece=wp, result=res, cutter=cutter,
                             tracking_error=err, scan=scan, table=table, friction=fr or [], timings=timings)
+
+
+def program_cutters(prog: ProgramSetup, base: Cutter) -> dict[int, Cutter]:
+    """The cutter of each tool number the program cuts with (docs/gcode.md, "Tools from the program").
+
+    A tool the setup file's tool table lists is built from its diameter and cutting-edge fields,
+    the robot file's tool (``base``) filling the fields it leaves out. With no tool table, a
+    program that cuts with one tool (or none named) cuts with ``base``; one that cuts with several
+    is refused (each pass would silently be cut with the robot's tool). A tool the table lacks is
+    refused naming the first line it cuts on.
+    """
+    import math
+
+    from simulate.machining.tools import make_cutter
+
+    table = prog.setup.tools if prog.setup is not None else {}
+    edges = prog.setup.cutting if prog.setup is not None else {}
+    first: dict[int, int] = {}   # tool -> first line it cuts on
+    used: set[int] = set()
+    for seg in prog.parsed.segments:
+        used.add(int(seg.tool))
+        if not getattr(seg, "rapid", False):
+            first.setdefault(int(seg.tool), int(seg.line))
+    if not table:
+        named = sorted(n for n in first if n)
+        if len(named) > 1:
+            raise InputError(f"the program cuts with tools {', '.join(f'T{n}' for n in named)} but no tool table "
+                             f"describes them: give --setup with 'tools' (docs/gcode.md)", source=prog.source,
+                             line=first[named[1]])
+        return {}
+    cutters: dict[int, Cutter] = {}
+    for n in sorted(used):
+        if n not in table:
+            if n == 0 or n not in first:
+                continue   # moves before any T, or rapids only: the robot's tool
+            line = first[n]
+            raise InputError(f"tool T{n} is not in the setup file's tool table (known: "
+                             f"{', '.join(f'T{k}' for k in sorted(table))})", source=prog.source, line=line)
+        e = edges.get(n)
+        kind = (e.kind if e is not None and e.kind else None) or base.kind.value
+        radius = table[n][1]
+        rc = e.corner_radius if e is not None and e.corner_radius is not None else (
+            base.corner_radius if kind == base.kind.value == "bull" and base.corner_radius < radius else None)
+        try:
+            cutters[n] = make_cutter(kind, 2.0 * radius, corner_radius=rc,
+                                     flutes=e.flutes if e is not None and e.flutes else base.flutes,
+                                     helix_deg=e.helix_deg if e is not None and e.helix_deg is not None
+                                     else math.degrees(base.helix),
+                                     length=e.flute_length if e is not None and e.flute_length else base.length)
+        except InputError as exc:
+            key = {"kind": "type", "length": "flute_length"}.get(exc.field or "", exc.field)
+            raise InputError(exc.message, source="setup", field=f"tools.{n}.{key}") from None
+    return cutters
+
+
+def program_passes(prog: ProgramSetup, base: Cutter, jt: JointTrajectory, spindle_rpm: float | None = None):
+    """The :class:`simulate.machining.simulation.ToolPasses` of a job: per 2 ms step of ``jt`` the
+    cutter (:func:`program_cutters`) and spindle speed (``spindle_rpm`` [rev/min] when given, else
+    ``prog.step_rpm``)."""
+    from simulate.machining.cutting import Spindle
+    from simulate.machining.simulation import ToolPasses
+
+    n = len(jt.t)
+    cutters = program_cutters(prog, base)
+    if spindle_rpm is not None or len(prog.step_rpm) != n:
+        rpm = np.full(n, float(spindle_rpm or prog.spindle_rpm))
+    else:
+        rpm = np.asarray(prog.step_rpm, float)
+    tool = np.asarray(prog.step_tool, np.int64) if len(prog.step_tool) == n else np.zeros(n, np.int64)
+    tool = np.where(np.isin(tool, list(cutters)), tool, 0) if cutters else np.zeros(n, np.int64)
+    keys: dict[tuple[int, float], int] = {}
+    index = np.empty(n, np.int64)
+    for k, key in enumerate(zip(tool.tolist(), rpm.tolist(), strict=True)):
+        index[k] = keys.setdefault(key, len(keys))
+    entries = list(keys)
+    return ToolPasses(tuple(cutters.get(t, base) for t, _ in entries),
+                      tuple(Spindle.from_rpm(r) for _, r in entries), tuple(t for t, _ in entries), index)
+
+
+def _feeding(prog: ProgramSetup, n: int) -> np.ndarray | None:
+    """(n,) bool: the steps of feed moves (not rapids) of the program's interpolation (None when
+    the rows are not the interpolation's)."""
+    seg = np.asarray(prog.interp.segment, np.int64)
+    if len(seg) != n or not prog.parsed.segments:
+        return None
+    rapid = np.array([bool(getattr(s, "rapid", False)) for s in prog.parsed.segments])
+    return ~rapid[np.clip(seg, 0, len(rapid) - 1)]

@@ -105,7 +105,7 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
                   no_switching: bool = False, no_tracking: bool = False, material: str | None = None,
                   stock: Path | None = None, spindle_rpm: float | None = None, stiffness_scale: float = 1.0,
                   size: int | None = None, probe_spacing_mm: float | None = None,
-                  setup: Path | None = None) -> MachiningJob:
+                  setup: Path | None = None, require_units: bool = False) -> MachiningJob:
     """The :class:`simulate.pipeline.MachiningJob` of ``greybench machine``'s options (mm -> m).
 
     ``ideal`` switches off deflection, tracking error and backlash; ``no_friction`` runs the servo
@@ -113,7 +113,7 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
     altogether; ``no_switching`` drops the gear backlash (the switching-point effect) and its bits.
     Defaults: :mod:`simulate.defaults`. A job whose cut time or memory exceeds the limits is refused
     (:func:`check_cost`). ``setup``: a setup file (work offsets, tool table;
-    :mod:`simulate.toolpath.setup`).
+    :mod:`simulate.toolpath.setup`). ``require_units``: refuse a program without ``G20``/``G21``.
     """
     from simulate.pipeline import Components, MachiningJob, MachiningSettings
     from simulate.robot.model import load_robot
@@ -135,7 +135,7 @@ def machining_job(program: Path, robot: Path, pose: Path, name: str | None, *, i
                       switching=not (ideal or no_switching), servo=not (ideal or no_tracking))
     settings = MachiningSettings(spacing=spacing_mm * MM, probe_spacing=probe_spacing_mm * MM,
                                  material=material or defaults.MATERIAL, spindle_rpm=spindle_rpm,
-                                 stiffness_scale=stiffness_scale, size=size)
+                                 stiffness_scale=stiffness_scale, size=size, require_units=require_units)
     return MachiningJob(program=program, robot=rob, placement=placement, components=comp, settings=settings,
                         stock=stock, setup=tables)
 
@@ -154,6 +154,8 @@ class MachiningSummary(TypedDict):
     removed_volume: float   # [m^3]
     peak_force: float       # [N]
     peak_deflection: float  # [m]
+    tools: list[dict[str, Any]]   # per tool: tool (T), diameter [m], flutes, spindle_rpm [rev/min],
+    #                               steps, removed_volume [m^3], peak_force [N]
 
 
 #: The unit of each :class:`MachiningSummary` number, for labels.
@@ -161,13 +163,14 @@ MACHINING_UNITS = {"simulated_time": "s", "wall_time": "s", "removed_volume": "m
                    "peak_deflection": "m"}
 
 
-def machine_part(job: MachiningJob, out_dir: Path, variable: str = "deflection",
-                 progress: Progress = quiet) -> MachiningSummary:
+def machine_part(job: MachiningJob, out_dir: Path, variable: str = "deflection", progress: Progress = quiet,
+                 on_warnings: Callable[[list[str]], None] | None = None) -> MachiningSummary:
     """Simulate one part and write its outputs (:func:`write_machining_outputs`) into ``out_dir``.
 
     ``variable`` colours the surface (one of :data:`simulate.machining.virtual_workpiece.VARIABLES`).
     Colour variable and output folder are checked before any work. Progress: the coupled loop in
-    2 ms steps ("machining"), then the files ("writing outputs").
+    2 ms steps ("machining"), then the files ("writing outputs"). ``on_warnings`` gets the
+    assumptions the program's reading made (no units word, the default spindle speed) before the loop.
     """
     from simulate.machining.virtual_workpiece import VARIABLES
     from simulate.pipeline import prepare, run_job
@@ -176,6 +179,8 @@ def machine_part(job: MachiningJob, out_dir: Path, variable: str = "deflection",
         raise InputError(f"unknown variable '{variable}' (one of {', '.join(VARIABLES)})", field="color")
     _folder(out_dir)
     pj = prepare(job)
+    if on_warnings is not None and pj.program.warnings:
+        on_warnings(pj.program.warnings)
     with progress("machining", pj.steps) as adv:
         mo = run_job(job, prepared=pj, advance=adv)
     with progress("writing outputs", len(OUTPUT_STAGES) + (mo.scan is not None)) as adv:
@@ -246,7 +251,10 @@ def machining_summary(res: MachiningResult) -> MachiningSummary:
     return {"steps": int(n), "simulated_time": float(res.simulated_time), "wall_time": float(res.wall_time),
             "removed_volume": float(res.removed_volume),
             "peak_force": float(res.steps.peak_force.max()) if n else 0.0,
-            "peak_deflection": float(np.linalg.norm(res.steps.deflection, axis=1).max()) if n else 0.0}
+            "peak_deflection": float(np.linalg.norm(res.steps.deflection, axis=1).max()) if n else 0.0,
+            "tools": [{"tool": u.tool, "diameter": u.diameter, "flutes": u.flutes, "spindle_rpm": list(u.spindle_rpm),
+                       "steps": u.steps, "removed_volume": u.removed_volume, "peak_force": u.peak_force}
+                      for u in res.tools]}
 
 
 # ---- placements: greybench rank-poses, optimize-pose ---------------------------------------------

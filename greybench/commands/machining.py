@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import print_summary, progress, resolve_robot, show
+from greybench.support import print_summary, progress, resolve_robot, show, warn
 from simulate import defaults
 from simulate.run import MACHINING_UNITS, cutter_from_robot, machine_part, machining_job
 
@@ -43,23 +43,34 @@ def machine(
                                                             "scan).")] = None,
     probe_spacing: o.ProbeSpacing = o.PROBE_SPACING_MM,
     setup: o.Setup = None,
+    require_units: o.RequireUnits = False,
     as_json: o.Json = False,
 ) -> None:
     """Simulate machining with robot deflection and tracking error in the loop (paper Figure 4).
 
-    The cutter is the robot file's [tool] (the robot carries spindle and tool). When the stock is an
-    ISO 10791-7 test piece (its JSON names size_mm, or --size), the virtual CMM probes the result
-    and OUT gets scan.csv (feature,x,y,z; workpiece frame, m).
+    The cutter is the robot file's [tool] (the robot carries spindle and tool); with --setup, each
+    tool the program loads (T, M6) is cut with the tool table's entry (docs/gcode.md), at the S in
+    force. When the stock is an ISO 10791-7 test piece (its JSON names size_mm, or --size), the
+    virtual CMM probes the result and OUT gets scan.csv (feature,x,y,z; workpiece frame, m).
     """
     job = machining_job(program, resolve_robot(robot), pose, name, ideal=ideal, spacing_mm=spacing,
                         no_deflection=no_deflection, no_friction=no_friction, no_switching=no_switching,
                         no_tracking=no_tracking, material=material, stock=stock, spindle_rpm=spindle_rpm, size=size,
-                        probe_spacing_mm=probe_spacing, setup=setup)
-    # progress on stderr also with --json (stdout carries only the JSON object)
-    info = machine_part(job, out_dir, variable, progress=progress)
+                        probe_spacing_mm=probe_spacing, setup=setup, require_units=require_units)
+    # progress and warnings on stderr also with --json (stdout carries only the JSON object)
+    info = machine_part(job, out_dir, variable, progress=progress, on_warnings=warn)
     units = MACHINING_UNITS
-    show(as_json, info, lambda: print_summary(f"machining {program.name}",
-                                              {f"{k} ({units[k]})" if k in units else k: v for k, v in info.items()}))
+
+    def rows() -> dict:
+        table = {f"{k} ({units[k]})" if k in units else k: v for k, v in info.items() if k != "tools"}
+        for u in info["tools"]:
+            name = f"T{u['tool']}" if u["tool"] else "robot's tool"
+            rpm = ", ".join(f"{r:g}" for r in u["spindle_rpm"])
+            table[f"{name}: {u['diameter'] * 1e3:g} mm, {u['flutes']} flutes, {rpm} rev/min"] = (
+                f"removed {u['removed_volume'] * 1e9:.6g} mm^3, peak force {u['peak_force']:.6g} N")
+        return table
+
+    show(as_json, info, lambda: print_summary(f"machining {program.name}", rows()))
 
 
 COMMANDS = {"machine": machine}

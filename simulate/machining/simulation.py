@@ -44,6 +44,7 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
+from identify.errors import InputError
 from simulate.robot.drive import CycleInput, drive_step, load_torque_step
 
 from .cutting import ForceScratch, Material, Spindle, force_model, step_forces_sorted, substeps
@@ -71,7 +72,7 @@ from .removal import (
     sample_layer,
     sample_layer_full,
 )
-from .tools import Cutter
+from .tools import Cutter, breakage_force, max_chip_load
 
 
 @dataclass
@@ -110,6 +111,50 @@ class StepTable:
         return carried + np.asarray(self.tracking_error, float)
 
 
+class ToolPasses(NamedTuple):
+    """Which cutter and spindle speed cut each step (``M6`` and ``S`` of the program).
+
+    ``cutters[i]`` turning at ``spindles[i]`` is tool ``numbers[i]`` (``T``; 0: none named);
+    ``entry`` (N,) int picks the entry of each step. Entries may share a tool number (one tool at
+    two speeds).
+    """
+
+    cutters: tuple
+    spindles: tuple
+    numbers: tuple
+    entry: np.ndarray
+
+
+@dataclass(frozen=True)
+class ToolUse:
+    """One tool's share of a simulation (SI).
+
+    Attributes
+    ----------
+    tool : int  ``T`` number (0: the robot file's tool, no ``T``)
+    diameter : float  m
+    flutes : int  -
+    spindle_rpm : tuple of float  rev/min, the speeds it ran at
+    steps : int  2 ms steps it was in the spindle
+    removed_volume : float  m^3, removed while it was in the spindle
+    peak_force : float  N
+    """
+
+    tool: int
+    diameter: float
+    flutes: int
+    spindle_rpm: tuple
+    steps: int
+    removed_volume: float
+    peak_force: float
+
+
+class ProcessLimitError(InputError):
+    """The simulation left the physically possible (module :func:`check_process_limits`): a chip
+    load, force or deflection the tool cannot survive, or a value that is not a number. Carries the
+    program line of the first such step (``line``) and the quantity (``field``)."""
+
+
 @dataclass
 class MachiningResult:
     """Outcome of :func:`simulate_machining`.
@@ -127,6 +172,7 @@ class MachiningResult:
     joint_friction : (N, 6) Nm or None, each joint's friction torque at the end of each step
     joint_contact : (N, 6) int8 or None, each gear's flank at the end of each step
         (:class:`simulate.robot.drive.Contact`: +1 / -1, 0 in the play)
+    tools : list of ToolUse, per tool number in order of first use
     """
 
     steps: StepTable
@@ -137,6 +183,7 @@ class MachiningResult:
     joint_error: np.ndarray | None = None
     joint_friction: np.ndarray | None = None
     joint_contact: np.ndarray | None = None
+    tools: list = field(default_factory=list)
 
     @property
     def simulated_time(self) -> float:
@@ -469,7 +516,8 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
                        compliance=None, tracking_error=None, switch=None, forces: bool = True,
                        advance=None, time_constant: float = DEFLECTION_TIME_CONSTANT,
                        parallel_work: int = PARALLEL_WORK, profile: bool = False, drive=None,
-                       external_force=None) -> MachiningResult:
+                       external_force=None, passes: ToolPasses | None = None,
+                       check_limits: bool = False, feeding=None) -> MachiningResult:
     """Run the coupled loop over a commanded cutter path (modifies ``workpiece``).
 
     Parameters
@@ -506,11 +554,24 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     external_force : (N, 3) N, optional
         A given force on the tool per step (workpiece frame), added to the cutting force: it loads
         the drives and the static compliance as a cutting force would (a held-pose load test).
+    passes : ToolPasses, optional
+        The cutter and spindle speed of each step (a program's tool changes); None: ``cutter`` at
+        ``spindle`` throughout. The loop runs each stretch of steps with its own cutter.
+    check_limits : bool
+        Stop at the first stretch of steps that leaves the physically possible
+        (:func:`check_process_limits`). Default False (kernel-level callers drive synthetic paths);
+        the machining pipeline (:func:`simulate.pipeline.run_job`) always checks.
+    feeding : (N,) bool, optional
+        Steps of feed moves (not rapids): their chip load counts as cutting when their stretch of
+        steps removed material, also where the force model gives no force (a flat end mill's plunge
+        loads its bottom edges, which the side-edge force model does not see).
 
     Raises
     ------
     RuntimeError
         A ray's interval capacity is exceeded (rebuild the workpiece with a larger capacity).
+    ProcessLimitError
+        (an ``InputError``) naming the program line and the quantity that left the possible.
     """
     if not (time_constant >= 0.0 and math.isfinite(time_constant)):
         raise ValueError(f"time_constant must be a finite number >= 0 s, got {time_constant}")
@@ -526,10 +587,19 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     st.tracking_error[:] = err
     if n < 2:
         return MachiningResult(st, 0.0, 0.0)
+    if passes is None:
+        passes = ToolPasses((cutter,), (spindle,), (0,), np.zeros(n, np.int64))
+    index = np.asarray(passes.entry, np.int64)
+    if index.shape != (n,) or index.min() < 0 or index.max() >= len(passes.cutters):
+        raise ValueError("passes.entry must name an entry of passes for every step")
     max_move = float(np.max(np.linalg.norm(np.diff(xyz + err, axis=0), axis=1))) + 1e-3
-    buf = RemovalBuffers.sized(workpiece, cutter.radius, max_move)
-    nsub = substeps(float(np.median(np.diff(t))), spindle.omega, cutter.flutes, per_tooth=4)
-    model = force_model(cutter, material, spindle, nsub)
+    buf = RemovalBuffers.sized(workpiece, max(c.radius for c in passes.cutters), max_move)
+    dt_med = float(np.median(np.diff(t)))
+    models = [force_model(c, material, sp, substeps(dt_med, sp.omega, c.flutes, per_tooth=4))
+              for c, sp in zip(passes.cutters, passes.spindles, strict=True)]
+    # the first step of each stretch of one entry: a chunk never spans two cutters
+    change = np.flatnonzero(np.diff(index)) + 1
+    volume = np.zeros(len(models))
     use_ext = external_force is not None
     use_c = compliance is not None and (forces or use_ext)
     # a writable copy: a read-only broadcast view is another array type, which would compile the loop twice
@@ -563,8 +633,18 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     k_from = 1
     while k_from < n:
         k_to = min(n, k_from + chunk)
+        later = change[change > k_from]
+        if later.size:
+            k_to = min(k_to, int(later[0]))
+        entry = int(index[k_from])
+        v0 = state[6]
         # the arrays are replaced when a family grows: a fresh view per call
-        status, k, full = kernel(k_from, k_to, workpiece.rays, workpiece.grid, path, model, opts, buf, out, sv)
+        status, k, full = kernel(k_from, k_to, workpiece.rays, workpiece.grid, path, models[entry], opts, buf, out,
+                                 sv)
+        volume[entry] += state[6] - v0
+        if check_limits and k > k_from:
+            check_process_limits(st, xyz, err, passes, k_from, k,
+                                 feeding=None if feeding is None or state[6] <= v0 else feeding)
         if status == StepStatus.OVERFLOW:
             raise RuntimeError(f"dexel ray capacity exceeded at step {k}; use a larger capacity")
         if status == StepStatus.LAYERS:
@@ -591,7 +671,83 @@ def simulate_machining(workpiece, cutter: Cutter, t, line, xyz_cmd, material: Ma
     if on and sv.process:
         attribute_gear_windup(st, sv, time_constant)
     return MachiningResult(st, float(state[6]), wall, timings, cpu, sv.dq if on else None, sv.tf if on else None,
-                           sv.contact if on else None)
+                           sv.contact if on else None, tool_uses(st, passes, volume))
+
+
+def tool_uses(steps: StepTable, passes: ToolPasses, volume) -> list[ToolUse]:
+    """Per tool number (in order of first use): its steps, spindle speeds, removed volume [m^3] (the
+    loop's z-ray volume while it was in the spindle, ``volume`` per entry of ``passes``) and peak force [N]."""
+    index = np.asarray(passes.entry)
+    uses: dict[int, ToolUse] = {}
+    for e in dict.fromkeys(int(i) for i in index):
+        num, c = int(passes.numbers[e]), passes.cutters[e]
+        rows = index == e
+        rpm = float(passes.spindles[e].omega * 60.0 / (2.0 * math.pi))
+        peak = float(steps.peak_force[rows].max()) if rows.any() else 0.0
+        u = uses.get(num)
+        if u is None:
+            uses[num] = ToolUse(num, float(c.diameter), int(c.flutes), (rpm,), int(rows.sum()), float(volume[e]), peak)
+        else:
+            uses[num] = ToolUse(num, u.diameter, u.flutes, tuple(dict.fromkeys((*u.spindle_rpm, rpm))),
+                                u.steps + int(rows.sum()), u.removed_volume + float(volume[e]), max(u.peak_force, peak))
+    return list(uses.values())
+
+
+def check_process_limits(steps: StepTable, xyz, err, passes: ToolPasses, k_from: int, k_to: int,
+                         feeding=None) -> None:
+    """Raise :class:`ProcessLimitError` at the first step of ``k_from .. k_to - 1`` that leaves the
+    physically possible (docs/process-limits.md):
+
+    - a force, deflection or tracking error that is not a finite number;
+    - a peak force above the cutter's breakage load (:func:`simulate.machining.tools.breakage_force`);
+    - a deflection larger than the cutter's diameter (the tool would have left the cut);
+    - a chip load per tooth above :func:`simulate.machining.tools.max_chip_load` while the tool cuts
+      (force above zero, or a step of ``feeding`` (N,) bool: the caller passes it for a stretch
+      that removed material): the drive-driven feed per tooth, ``|v| / (N n)``.
+
+    The message names the quantity, its value and the bound; ``line`` is the step's program line.
+    """
+    rows = slice(k_from, k_to)
+    index = np.asarray(passes.entry)[rows]
+    f = np.asarray(steps.peak_force[rows])
+    fv = np.asarray(steps.force[rows])
+    d = np.asarray(steps.deflection[rows])
+    e = np.asarray(err[rows])
+    dt = np.asarray(steps.t[k_from:k_to]) - np.asarray(steps.t[k_from - 1:k_to - 1])
+    prev = slice(k_from - 1, k_to - 1)
+    motion = np.asarray(xyz[rows]) + e - np.asarray(xyz[prev]) - np.asarray(err[prev])
+    speed = np.linalg.norm(motion, axis=1) / np.where(dt > 0, dt, np.inf)
+    diam = np.array([c.diameter for c in passes.cutters])[index]
+    f_break = np.array([breakage_force(c) for c in passes.cutters])[index]
+    h_max = np.array([max_chip_load(c) for c in passes.cutters])[index]
+    per_rev_teeth = np.array([c.flutes * sp.omega / (2.0 * math.pi) for c, sp in
+                              zip(passes.cutters, passes.spindles, strict=True)])[index]
+    chip = speed / per_rev_teeth
+    cuts = np.zeros(k_to - k_from, bool) if feeding is None else np.asarray(feeding, bool)[rows]
+    defl = np.linalg.norm(d, axis=1)
+    finite = np.isfinite(f) & np.isfinite(fv).all(axis=1) & np.isfinite(d).all(axis=1) & np.isfinite(e).all(axis=1)
+    checks = (
+        (~finite, "force, deflection or tracking error", "not_finite",
+         lambda i: "is not a number (the coupled loop diverged)"),
+        (finite & (f > f_break), "peak cutting force", "peak_force",
+         lambda i: f"{f[i] / 1e3:.4g} kN is above the tool's breakage load of {f_break[i] / 1e3:.4g} kN"),
+        (finite & (chip > h_max) & ((f > 0.0) | cuts), "chip load", "chip_load",
+         lambda i: f"{chip[i] * 1e3:.4g} mm per tooth is above the {h_max[i] * 1e3:.4g} mm the tool survives"),
+        (finite & (defl > diam), "deflection", "deflection",
+         lambda i: f"{defl[i] * 1e3:.4g} mm is larger than the tool's diameter of {diam[i] * 1e3:.4g} mm"),
+    )
+    hits = [(int(np.argmax(mask)), name, key, text) for mask, name, key, text in checks if mask.any()]
+    if not hits:
+        return
+    i, name, key, text = min(hits, key=lambda h: h[0])
+    k = k_from + i
+    e_i = int(index[i])
+    c, sp = passes.cutters[e_i], passes.spindles[e_i]
+    tool = f"T{passes.numbers[e_i]}, " if passes.numbers[e_i] else ""
+    raise ProcessLimitError(f"{name} {text(i)} at t = {steps.t[k]:.4g} s ({tool}{c.diameter * 1e3:.4g} mm, "
+                            f"{c.flutes} flutes, {sp.omega * 60.0 / (2.0 * math.pi):.6g} rev/min); simulation "
+                            f"stopped (docs/process-limits.md)", line=int(steps.line[k]) or None,
+                            field=key)
 
 
 @njit(cache=False)   # the intrinsic cannot be cached

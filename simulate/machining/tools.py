@@ -182,3 +182,32 @@ def make_cutter(kind: str = "flat", diameter: float = 10e-3, corner_radius: floa
     if not (length > corner_radius and math.isfinite(length)):
         raise InputError(f"fluted length must exceed the corner radius, got {length} m", field="length")
     return Cutter(k, float(diameter), float(corner_radius), int(flutes), math.radians(helix_deg), float(length))
+
+
+# ---- what a cutter survives (docs/process-limits.md) -------------------------------------------
+#: Transverse rupture strength [Pa] taken for the cutter's body: above the datasheet values of the
+#: cemented carbide grades end mills are made of (about 2 to 4.5 GPa, measured after ISO 3327), so
+#: a force beyond :func:`breakage_force` breaks any such tool (docs/process-limits.md).
+RUPTURE_STRENGTH = 5.0e9
+
+#: Largest chip load per tooth [m] per metre of cutter diameter (docs/process-limits.md): 0.02 D,
+#: 2.7 times a tool maker's starting value for aluminium (0.075 mm for 10 mm) and above every
+#: catalogue maximum found (0.41 mm per tooth for aluminium on face mills up to 125 mm).
+CHIP_LOAD_PER_DIAMETER = 0.02
+
+#: Largest chip load per tooth [m] of any tool: above the catalogue maximum (0.41 mm).
+MAX_CHIP_LOAD = 0.5e-3
+
+
+def breakage_force(cutter: Cutter) -> float:
+    """Force [N] at the tip above which the cutter breaks: the bending of a solid carbide cylinder of
+    the cutting diameter ``D`` cantilevered over its fluted length ``L``,
+    ``F = sigma pi D^3 / (32 L)`` with ``sigma`` = :data:`RUPTURE_STRENGTH` (an upper bound: the fluted
+    core is thinner than D and the holder sits beyond L)."""
+    return RUPTURE_STRENGTH * math.pi * cutter.diameter ** 3 / (32.0 * cutter.length)
+
+
+def max_chip_load(cutter: Cutter) -> float:
+    """Largest chip load per tooth [m] the cutter survives: :data:`CHIP_LOAD_PER_DIAMETER` times its
+    diameter, at most :data:`MAX_CHIP_LOAD`."""
+    return min(CHIP_LOAD_PER_DIAMETER * cutter.diameter, MAX_CHIP_LOAD)

@@ -106,11 +106,15 @@ class Program:
         The file (or name) the program came from, for messages.
     start : numpy.ndarray, shape (3,)
         Position before the first move, m (the origin unless the program says otherwise).
+    units_assumed : int
+        The line of the first move when it came before any ``G20``/``G21`` (its lengths were read
+        as mm, the reader's default); 0 when a units word came first (or there is no move).
     """
 
     segments: list[Segment] = field(default_factory=list)
     source: str = "<program>"
     start: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    units_assumed: int = 0
 
     @property
     def length(self) -> float:
@@ -120,7 +124,7 @@ class Program:
 
 def read_program(path: str | Path, *, arc_tolerance: float | None = None,
                  work_offsets: Mapping[str, Sequence[float]] | None = None,
-                 tools: Mapping[int, Sequence[float]] | None = None) -> Program:
+                 tools: Mapping[int, Sequence[float]] | None = None, require_units: bool = False) -> Program:
     """Read a G-code file. See :func:`parse_program` (same keyword arguments).
 
     Encodings: UTF-8 with or without a byte order mark; a file that is not valid UTF-8 is read as
@@ -135,7 +139,7 @@ def read_program(path: str | Path, *, arc_tolerance: float | None = None,
     except IsADirectoryError:
         raise InputError("program path is a directory, not a file", source=str(p)) from None
     return parse_program(decode_program(data, source=str(p)), source=str(p), arc_tolerance=arc_tolerance,
-                         work_offsets=work_offsets, tools=tools)
+                         work_offsets=work_offsets, tools=tools, require_units=require_units)
 
 
 _UTF8_BOM = b"\xef\xbb\xbf"
@@ -348,7 +352,7 @@ class _State:
 
 def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float | None = None,
                   work_offsets: Mapping[str, Sequence[float]] | None = None,
-                  tools: Mapping[int, Sequence[float]] | None = None) -> Program:
+                  tools: Mapping[int, Sequence[float]] | None = None, require_units: bool = False) -> Program:
     """Parse G-code text into a :class:`Program` (paper 3.1).
 
     Parameters
@@ -376,6 +380,9 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         z: zero when ``H`` names the loaded tool, since the robot's TCP is that tool's tip
         (docs/gcode.md); ``G49`` cancels. Default empty: only ``G43`` naming the loaded tool (or
         without ``H``) is accepted.
+    require_units : bool
+        Refuse a program whose first move comes before any ``G20``/``G21`` (naming that line);
+        default False: such a program is read as mm and ``Program.units_assumed`` names the line.
 
     Returns
     -------
@@ -392,6 +399,8 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
     st.work_offset = _work_offset("G54", work_table, 1, None)
     segments: list[Segment] = []
     ended_at: int | None = None
+    units_line: int | None = None   # first G20/G21
+    units_assumed = 0
 
     if text.startswith("\ufeff"):
         text = text[1:]  # a byte order mark left in by a decoder (the service receives text)
@@ -461,6 +470,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
             groups[group] = col
             if code in (200, 210):
                 st.unit = _UNIT_M[code // 10]
+                units_line = units_line or lineno
             elif code in (900, 910):
                 st.absolute = code == 900
             elif code in (901, 911):
@@ -585,6 +595,11 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
                                       blend_tolerance=st.blend_tolerance if st.blend else 0.0,
                                       spindle_ccw=st.spindle_on and st.spindle_ccw)
         pos = st.pos
+        if axis and units_line is None and not units_assumed:
+            if require_units:
+                raise err("a move before any units word: give G21 (mm) or G20 (inch) before it (units are "
+                          "required)", min(seen[k] for k in axis))
+            units_assumed = lineno
 
         def rapid_to(target: np.ndarray, retract: bool = False, common: dict[str, Any] = common) -> None:
             if np.linalg.norm(target - st.pos) > 0.0:
@@ -667,7 +682,7 @@ def parse_program(text: str, *, source: str = "<program>", arc_tolerance: float 
         st.pos = target
     if st.comp_start is not None:
         _end_compensation(st, segments, source)
-    return Program(segments=segments, source=source)
+    return Program(segments=segments, source=source, units_assumed=units_assumed)
 
 
 def _end_compensation(st: _State, segments: list[Segment], source: str) -> None:

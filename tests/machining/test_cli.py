@@ -12,7 +12,7 @@ from greybench.support import DATA_DIR
 from simulate.machining.virtual_workpiece import VirtualWorkpiece
 
 runner = CliRunner()
-KEYS = {"steps", "simulated_time", "wall_time", "removed_volume", "peak_force", "peak_deflection"}
+KEYS = {"steps", "simulated_time", "wall_time", "removed_volume", "peak_force", "peak_deflection", "tools"}
 
 
 def _machine(prog, pose, out, *extra):
