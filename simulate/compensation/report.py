@@ -230,7 +230,7 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
     lines += markdown_table(
         ("iteration", "sum of abs. deviation [µm]", "score", "rows worse", "path RMS [µm]", "path max [µm]",
          "max offset [µm]", "time ratio", "peak speed ratio", "pieces", "wall [s]"),
-        [(f"{it['index']}{_composed_label(it['composed'])}"
+        [(f"{it['index']}{_composed_label(it.get('composed'))}"
           f"{' (chosen)' if it['index'] == info['best_iteration'] else ''}",
           "-" if it["table_sum_mm"] is None else f"{it['table_sum_mm'] * 1e3:.1f}",
           "-" if it["score"] is None else f"{it['score']:.2f}",
