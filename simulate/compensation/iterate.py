@@ -11,6 +11,20 @@
   (feasible first, then the objective, as a constrained search ranks its candidates). The
   iteration's outcome swings between iterations (a gear whose flank the corrected cut decides), so
   one worse step does not end it.
+- **Per feature.** A Table-2 row is computed from surfaces that some feed runs cut (measured: the
+  step that made each probed dexel end, :func:`simulate.compensation.measure.row_lines`); runs that
+  share a row form a *feature group* (:func:`feature_groups`; on iso160 the square, circle and angle
+  runs, tied by the heights' reference floors and the angles' datum wall, and the slope passes with
+  the inner wall, whose floor is the slope height's reference). The runs are separated by rapids to
+  the clearance height, so a run's correction changes only what it cuts. After the iteration, each
+  group takes the correction of the iteration that is best for *its* rows by the same rule as the
+  whole (no row of the group worse, then the group's lowest sum, among those that lower the group's
+  sum below the original's), and no correction where none lowers it (:func:`choose_per_group`): the
+  correction is left out where the model says it does not improve the feature. The composed program
+  is written and simulated once more and is chosen only if it beats the best iteration by the rule
+  above (the separation is checked, not assumed). Why: one iteration's correction may suit the square
+  and ruin the slope (with the sourced robot the corrected slope passes move A1's and A5's gears into
+  their play: ``docs/compensation.md``), and the whole-program choice can only take both or neither.
 """
 from __future__ import annotations
 
@@ -63,6 +77,9 @@ class Iteration:
         [s] of the simulation.
     rows_worse : int or None
         Table-2 rows worse than the original's (:func:`worse_rows`); None without a table.
+    composed : dict of int to int or None
+        For the program composed per feature group (:func:`choose_per_group`): feed run -> the
+        iteration whose correction it carries (0: none); None for the iterations themselves.
     """
 
     index: int
@@ -76,6 +93,7 @@ class Iteration:
     pieces: int
     wall_time: float
     rows_worse: int | None = None
+    composed: dict | None = None
 
     @property
     def within_contract(self) -> bool:
@@ -148,6 +166,63 @@ def better(it: Iteration, than: Iteration, original: Iteration) -> bool:
     return (bool(it.rows_worse), it.objective()) < (bool(than.rows_worse), than.objective())
 
 
+def feature_groups(path: NominalPath, row_lines: dict) -> list[tuple[tuple[int, ...], tuple[str, ...]]]:
+    """Feed runs joined by the Table-2 rows they cut: ``[(runs, rows), ...]``, each run and each row
+    (that some feed run cuts) in one group. ``row_lines``: row -> program lines (1-based) whose cut the
+    row reads (:attr:`simulate.compensation.measure.SimulationRun.row_lines`); a line that is no feed
+    move of ``path`` (a rapid, a plunge into air) ties nothing."""
+    run_of_line = {int(seg.line): int(path.run[i]) for i, seg in enumerate(path.segments) if path.run[i] >= 0}
+    parent = list(range(len(path.runs)))
+
+    def root(r: int) -> int:
+        while parent[r] != r:
+            parent[r] = parent[parent[r]]
+            r = parent[r]
+        return r
+
+    runs_of_row = {}
+    for row, lines in row_lines.items():
+        rs = sorted({run_of_line[ln] for ln in lines if ln in run_of_line})
+        if rs:
+            runs_of_row[row] = rs
+            for r in rs[1:]:
+                parent[root(r)] = root(rs[0])
+    groups: dict[int, tuple[list, list]] = {}
+    for r in range(len(path.runs)):
+        groups.setdefault(root(r), ([], []))[0].append(r)
+    for row, rs in runs_of_row.items():
+        groups[root(rs[0])][1].append(row)
+    return [(tuple(runs), tuple(rows)) for runs, rows in groups.values()]
+
+
+def choose_per_group(groups, original, candidates, fallback: int = 0) -> dict[int, int]:
+    """Per feed run, the iteration whose correction it takes (0: none), chosen per feature group
+    (module docstring, *Per feature*).
+
+    ``original``: the original's Table-2 table; ``candidates``: ``[(iteration index, table), ...]`` of the
+    iterations within the contract. A group takes, of the candidates that lower the sum of |deviation|
+    of its rows below the original's, one that leaves none of its rows worse (:func:`worse_rows`) with the
+    lowest such sum, else the lowest sum; no correction (0) when none lowers it. A group without rows
+    (its runs cut no probed surface) takes ``fallback`` (the iteration chosen for the whole program)."""
+    dev0 = {r.name: abs(r.deviation) for r in original.rows}
+    out: dict[int, int] = {}
+    for runs, rows in groups:
+        if rows:
+            base = sum(dev0[n] for n in rows)
+            scored = []
+            for k, table in candidates:
+                dev = {r.name: abs(r.deviation) for r in table.rows}
+                total = sum(dev[n] for n in rows)
+                worse = bool(set(rows) & set(worse_rows(original, table)))
+                if total < base:
+                    scored.append((worse, total, k))
+            pick = min(scored)[2] if scored else 0
+        else:
+            pick = fallback
+        out.update({r: pick for r in runs})
+    return out
+
+
 def _path_stats(dev: Correction) -> tuple[float, float]:
     v = np.concatenate([np.linalg.norm(x, axis=1) for x in dev.values]) if dev.values else np.zeros(1)
     return float(np.sqrt(np.mean(v ** 2))), float(v.max())
@@ -156,6 +231,29 @@ def _path_stats(dev: Correction) -> tuple[float, float]:
 def _load(path_file: Path, nominal: NominalPath, spindle_rpm: float | None, require_spindle: bool) -> ProgramSetup:
     return load_program(path_file, stock=nominal.setup.stock, spindle_rpm=spindle_rpm, require_spindle=require_spindle,
                         source=str(path_file))
+
+
+def _compose(path, run0, kept, best, iters, s, header, tmp, load, t_nom, v_nom, simulate):
+    """The program composed per feature group (module docstring, *Per feature*), simulated:
+    ``(Iteration, (index, correction, run, written, raw deviation))``, or None where every group takes
+    the same iteration (that program was simulated already)."""
+    groups = feature_groups(path, run0.row_lines)
+    choice = choose_per_group(groups, run0.table, [(k, tb) for k, (_, tb) in sorted(kept.items())], fallback=best)
+    if len(set(choice.values())) < 2:
+        return None
+    zero = Correction.zero(path)
+    corr = Correction(zero.grids, [kept[choice[r]][0].values[r] if choice[r] else zero.values[r]
+                                   for r in range(len(zero.grids))])
+    k = len(iters)
+    setup, wp, corr = keep_speed(path, corr, s, f"{header} iteration {k}, per feature".strip(),
+                                 tmp / f"iteration{k}.nc", load, t_nom)
+    run = simulate(setup, 1.0)
+    raw = deviation_field(path, wp, run, GRID)
+    rms, mx = _path_stats(raw)
+    it = Iteration(k, table_sum(run.table), run.table.score, rms, mx, corr.max_norm(), setup.interp.duration / t_nom,
+                   feed_peak_speed(setup) / v_nom, wp.n_pieces, run.wall_time,
+                   len(worse_rows(run0.table, run.table)), dict(choice))
+    return it, (k, corr, run, wp, raw)
 
 
 def compensate(nominal: ProgramSetup, simulate: Simulator, settings: CompensationSettings | None = None, *,
@@ -209,6 +307,7 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
     run0, before_raw = run, raw
     prev = None
     stale, lowest = 0, it0.objective()
+    kept: dict[int, tuple] = {}   # iteration -> (correction, table), within the contract
 
     def load(f: Path) -> ProgramSetup:
         return _load(f, path, spindle_rpm, require_spindle)
@@ -236,6 +335,8 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
             iters.append(it)
             if on_iteration:
                 on_iteration(it)
+            if it.within_contract and run.table is not None:
+                kept[k] = (corr, run.table)
             if better(it, iters[best[0]], it0):
                 best = (k, corr, run, wp, raw)
             # progress is the objective's, whatever the rows: a step may pass through more rows worse
@@ -243,6 +344,15 @@ def compensate(nominal: ProgramSetup, simulate: Simulator, settings: Compensatio
             lowest = min(lowest, it.objective())
             if not it.within_contract or stale >= PATIENCE:
                 break
+        if run0.table is not None and run0.row_lines and kept:
+            comp = _compose(path, run0, kept, best[0], iters, s, header, Path(tmp), load, t_nom, v_nom, simulate)
+            if comp is not None:
+                it, entry = comp
+                iters.append(it)
+                if on_iteration:
+                    on_iteration(it)
+                if better(it, iters[best[0]], it0):
+                    best = entry
         k, corr_b, run_b, wp_b, raw_b = best
         if wp_b is None:   # nothing improved: the original's pieces, no correction
             wp_b = write_program(path, corr_b, s, header=f"{header} no correction".strip())

@@ -60,9 +60,10 @@ def check_scales_of(stiffness_scale: float, check_scales=()) -> list[float]:
 
 
 def simulation_count(iterations: int, stiffness_scale: float = 1.0, check_scales=()) -> int:
-    """Simulations :func:`run_compensation` runs at most: the original, every iteration and both
+    """Simulations :func:`run_compensation` runs at most: the original, every iteration, the program
+    composed per feature group (:func:`simulate.compensation.iterate.choose_per_group`) and both
     programs at every stiffness multiplier [-] other than 1."""
-    return iterations + 1 + 2 * len(check_scales_of(stiffness_scale, check_scales))
+    return iterations + 2 + 2 * len(check_scales_of(stiffness_scale, check_scales))
 
 
 def progress_total(steps: int, iterations: int, stiffness_scale: float = 1.0, check_scales=()) -> int:

@@ -57,6 +57,9 @@ class SimulationRun:
         The friction model used per joint (``{"joint", "kind", "source"}``) when the pipeline says.
     contact : ndarray (N, 6) of int or None
         Each gear's state per cycle (+1 / -1 on a flank, 0 in the play) when the drives ran.
+    row_lines : dict of str to frozenset of int, or None
+        Per Table-2 row, the program lines (1-based) whose cut made the probed surfaces the row is
+        computed from (:func:`row_lines`); None without a table.
     """
 
     setup: ProgramSetup
@@ -66,6 +69,7 @@ class SimulationRun:
     wall_time: float = 0.0
     friction: list = field(default_factory=list)
     contact: np.ndarray | None = None
+    row_lines: dict | None = None
 
 
 #: ``simulate(setup, stiffness_scale) -> SimulationRun``; ``stiffness_scale`` multiplies the model's.
@@ -78,16 +82,92 @@ def pipeline_simulator(job: MachiningJob, advance=None) -> Simulator:
     from simulate.pipeline import _robot
 
     robot = _robot(job.robot)
+    surfaces: dict = {}   # row -> scan groups, the same for every program of this test piece
 
     def simulate(setup: ProgramSetup, scale: float = 1.0) -> SimulationRun:
         c0 = time.perf_counter()
         settings = replace(job.settings, stiffness_scale=job.settings.stiffness_scale * scale)
         mo = run_job(replace(job, program=setup, robot=robot, settings=settings), advance=advance)
         tip = np.asarray(mo.trajectory.xyz) + mo.steps.tool_offset()
+        lines = None
+        if mo.table is not None and mo.scan is not None:
+            if not surfaces:
+                from simulate.pipeline import piece_size
+                from simulate.toolpath.testpiece import iso_test_piece
+
+                surfaces.update(row_surfaces(mo.scan, iso_test_piece(piece_size(setup, settings.size))))
+            lines = row_lines(mo.workpiece, mo.scan, np.asarray(mo.result.steps.line), surfaces)
         return SimulationRun(setup, tip, mo.table, mo.trajectory, time.perf_counter() - c0, list(mo.friction),
-                             mo.result.joint_contact)
+                             mo.result.joint_contact, lines)
 
     return simulate
+
+
+def row_surfaces(scan, piece, jitter: float = 5e-6, seed: int = 0) -> dict[str, tuple[str, ...]]:
+    """Which scan groups each Table-2 row is computed from, found by evaluating the scan again with one
+    group's points moved at a time (seeded normal noise of ``jitter`` [m] per coordinate; a shift alone
+    would leave the form rows unchanged) and seeing which rows change
+    (:func:`simulate.evaluation.features.evaluate_scan`). Measured rather than listed, so that the
+    references a row reads (a height's floor, the angles' datum wall) are included as the evaluation
+    really uses them."""
+    from simulate.evaluation.cmm import Scan
+    from simulate.evaluation.features import evaluate_scan
+
+    base = {r.name: r.deviation for r in evaluate_scan(scan, piece).rows}
+    out: dict[str, list[str]] = {name: [] for name in base}
+    rng = np.random.default_rng(seed)
+    for g in sorted(scan.points):
+        pts = dict(scan.points)
+        pts[g] = pts[g] + rng.normal(0.0, jitter, pts[g].shape)
+        for r in evaluate_scan(Scan(points=pts, source=scan.source), piece).rows:
+            if abs(r.deviation - base[r.name]) > 1e-3 * jitter:
+                out[r.name].append(g)
+    return {k: tuple(v) for k, v in out.items()}
+
+
+def end_steps(workpiece, points: np.ndarray) -> np.ndarray:
+    """The simulation step that made each probed point (a dexel end, as
+    :func:`simulate.evaluation.cmm.probe` returns it: the end's coordinate along its ray, the ray's
+    centre across it), -1 where it is the stock's surface or no end is found within 1 nm."""
+    wp = workpiece
+    pts = np.asarray(points, float).reshape(-1, 3)
+    lower, s = np.asarray(wp.lower, float), float(wp.spacing)
+    shape = np.asarray(wp.shape)
+    nx, ny, _ = (int(v) for v in shape)
+    idx = np.floor((pts - lower) / s).astype(np.int64)
+    inside = np.all((idx >= 0) & (idx < shape), axis=1)
+    centre = lower + (idx + 0.5) * s
+    out = np.full(len(pts), -1, np.int64)
+    for ax in range(3):
+        others = [a for a in range(3) if a != ax]
+        # the probe's ray along ax: the other two coordinates are that ray's centre
+        on = inside & np.all(np.abs(pts[:, others] - centre[:, others]) < 1e-9, axis=1)
+        if not on.any():
+            continue
+        i, j, k = idx[on].T
+        ray = (k * ny + j) if ax == 0 else (k * nx + i) if ax == 1 else (j * nx + i)
+        fam = wp.families[ax]
+        valid = np.arange(fam.capacity)[None, :] < fam.count[ray][:, None]
+        p = pts[on, ax][:, None]
+        d = np.concatenate([np.where(valid, np.abs(fam.lo[ray] - p), np.inf),
+                            np.where(valid, np.abs(fam.hi[ray] - p), np.inf)], axis=1)
+        steps = np.concatenate([fam.lo_step[ray], fam.hi_step[ray]], axis=1)
+        m = np.argmin(d, axis=1)
+        hit = d[np.arange(len(m)), m] < 1e-9
+        where = np.flatnonzero(on)[hit]
+        out[where] = steps[np.flatnonzero(hit), m[hit]]
+    return out
+
+
+def row_lines(workpiece, scan, step_line: np.ndarray, surfaces: dict) -> dict[str, frozenset]:
+    """Per Table-2 row, the program lines (1-based) whose steps cut the probed points of the scan
+    groups the row reads (``surfaces``, :func:`row_surfaces`); the stock's own surface counts for no
+    line."""
+    lines = {}
+    for g, pts in scan.points.items():
+        st = end_steps(workpiece, pts)
+        lines[g] = set(np.asarray(step_line)[st[st >= 0]].astype(int).tolist())
+    return {row: frozenset().union(*(lines.get(g, set()) for g in groups)) for row, groups in surfaces.items()}
 
 
 def table_sum(table) -> float:

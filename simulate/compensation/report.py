@@ -68,7 +68,8 @@ def summary(result: CompensationResult, scale: float = 1.0) -> dict:
                             "score": it.score, "path_rms_um": it.path_rms / UM, "path_max_um": it.path_max / UM,
                             "max_offset_um": it.max_offset / UM, "time_ratio": it.time_ratio,
                             "speed_ratio": it.speed_ratio, "pieces": it.pieces, "wall_time_s": it.wall_time,
-                            "rows_worse": it.rows_worse}
+                            "rows_worse": it.rows_worse,
+                            "composed": _composed(result, it)}
                            for it in result.iterations],
             "max_offset_mm": best.max_offset / 1e-3, "time_ratio": best.time_ratio, "speed_ratio": best.speed_ratio}
 
@@ -229,7 +230,8 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
     lines += markdown_table(
         ("iteration", "sum of abs. deviation [µm]", "score", "rows worse", "path RMS [µm]", "path max [µm]",
          "max offset [µm]", "time ratio", "peak speed ratio", "pieces", "wall [s]"),
-        [(f"{it['index']}{' (chosen)' if it['index'] == info['best_iteration'] else ''}",
+        [(f"{it['index']}{_composed_label(it.get('composed'))}"
+          f"{' (chosen)' if it['index'] == info['best_iteration'] else ''}",
           "-" if it["table_sum_mm"] is None else f"{it['table_sum_mm'] * 1e3:.1f}",
           "-" if it["score"] is None else f"{it['score']:.2f}",
           "-" if it["rows_worse"] is None else it["rows_worse"], f"{it['path_rms_um']:.1f}",
@@ -247,6 +249,28 @@ def report_text(result: CompensationResult, info: dict, title: str, scale: float
               "compensated program: friction torque per joint in Nm), `deviation.png`.", "",
               "![deviation](deviation.png)", ""]
     return "\n".join(lines)
+
+
+def _composed(result: CompensationResult, it) -> list | None:
+    """For the program composed per feature group: per feed run its original program lines (first,
+    last) and the iteration whose correction it carries (0: none)."""
+    if it.composed is None:
+        return None
+    path = result.path
+    out = []
+    for r, k in sorted(it.composed.items()):
+        lines = [int(seg.line) for i, seg in enumerate(path.segments) if path.run[i] == r]
+        out.append({"lines": [min(lines), max(lines)], "iteration": int(k)})
+    return out
+
+
+def _composed_label(composed: list | None) -> str:
+    """' (per feature: lines 11-21 from 3, lines 49-64 uncorrected, ...)' for the composed program."""
+    if not composed:
+        return ""
+    parts = [f"lines {c['lines'][0]}-{c['lines'][1]} " + (f"from {c['iteration']}" if c["iteration"] else "uncorrected")
+             for c in composed]
+    return f" (per feature: {', '.join(parts)})"
 
 
 def write_outputs(result: CompensationResult, out_dir: Path, *, robot, placement, title: str,

@@ -41,7 +41,7 @@ def test_meter_counts_each_simulation_as_the_original_and_ends_at_the_total(smal
     lengths = []
     rec = Recorder()
     iterations = 3
-    meter = SimulationMeter(rec, n0, iterations + 1 + 2)
+    meter = SimulationMeter(rec, n0, iterations + 2 + 2)   # + the program composed per feature group
 
     def sim(s, scale=1.0):
         n = len(s.interp)
@@ -56,7 +56,7 @@ def test_meter_counts_each_simulation_as_the_original_and_ends_at_the_total(smal
     assert rec.running[-1] == runs * n0          # each simulation counted as the original's steps
     meter.finish()
     total = progress_total(n0, iterations, 0.8)
-    assert total == (iterations + 3) * n0
+    assert total == (iterations + 4) * n0
     assert all(isinstance(c, int) and c > 0 for c in rec.calls)           # whole steps
     assert max(rec.running) == rec.running[-1] == total                   # never past, ends at it
     assert np.all(np.diff(rec.running) > 0)
@@ -122,7 +122,8 @@ def test_run_compensation_progress_reaches_the_cli_total_exactly(small, tmp_path
     assert len(rec.calls) > 6 * 4
 
 
-@pytest.mark.parametrize("scales, sims", [((), 1 + 4), ((1.0,), 1 + 4), ((0.8, 1.2), 1 + 4 + 4)])
+# the original, 4 iterations, the program composed per feature group, two per check scale other than 1
+@pytest.mark.parametrize("scales, sims", [((), 1 + 4 + 1), ((1.0,), 1 + 4 + 1), ((0.8, 1.2), 1 + 4 + 1 + 4)])
 def test_progress_total_counts_simulations(scales, sims):
     assert progress_total(100, 4, 1.0, scales) == 100 * sims
     assert progress_total(100, 4, 0.9, scales) == 100 * (sims + 2 * (0.9 not in scales))
