@@ -104,10 +104,12 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
         text, source, stock_text, stock_source = svc._program(body, limits)
         robot = svc._robot(body.robot)
         pose = pose_of(body)
-        # each iteration simulates once, each stiffness check twice (original and compensated program);
-        # the cost before the reach check, which interpolates the program
+        # the simulations the job runs at most (one count with the job's own); the cost before the reach
+        # check, which interpolates the program
+        from simulate.compensation.job import simulation_count
+
         svc._cost(body, text, source, stock_text, stock_source, body.options.spacing_mm, "options.spacing_mm",
-                  body.options.iterations + 1 + 2 * len(body.options.check_scales), limits)
+                  simulation_count(body.options.iterations, check_scales=body.options.check_scales), limits)
         svc._reach(text, source, robot, [pose], ["pose"])
         friction = svc._friction(body, robot, settings.mlflow_tracking_uri)
         job = {"program_source": source, "stock_source": stock_source, "robot": robot, "pose": pose,
