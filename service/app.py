@@ -577,7 +577,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         _reach(text, source, robot, poses, _pose_fields(body.poses, body.select, poses))
         friction = _friction(body, robot, settings.mlflow_tracking_uri)
         job = {"program_source": source, "stock_source": stock_source, "robot": robot, "poses": poses,
-               "friction": friction, "options": body.options.model_dump(),
+               "pose_set": body.pose_set, "friction": friction, "options": body.options.model_dump(),
                "tracking_uri": settings.mlflow_tracking_uri}
 
         def prepare(d: Path) -> None:

@@ -246,9 +246,10 @@ def variables() -> list[dict]:
     labels = {"deflection": "tool deflection |d|", "force": "cutting force |F|", "tracking_error":
               "servo tracking error |e|", "time": "time stamp", "line": "program line", "switch":
               "switching bits (axes stopping or reversing)", "peak_force": "peak cutting force"}
-    return [{"name": TOOL_DEVIATION, "label": "tool deviation |d + e|", "unit": "µm", "factor": 1e6}] + [
+    return [{"name": TOOL_DEVIATION, "label": "tool deviation |d + e|", "unit": "µm", "factor": 1e6,
+             "categorical": False}] + [
         {"name": v, "label": labels.get(v, v.replace("_", " ")), "unit": DISPLAY_UNITS[v][1],
-         "factor": DISPLAY_UNITS[v][0]} for v in VARIABLES]
+         "factor": DISPLAY_UNITS[v][0], "categorical": v in CATEGORICAL} for v in VARIABLES]
 
 
 def vertex_values(vw, step: np.ndarray, variable: str) -> np.ndarray:
@@ -300,6 +301,20 @@ def viridis(n: int = 64) -> list[list[int]]:
     import matplotlib
 
     c = matplotlib.colormaps["viridis"](np.linspace(0.0, 1.0, n))[:, :3]
+    return np.round(c * 255).astype(int).tolist()
+
+
+#: Variables coloured by category, not by a scale: neighbouring program lines (and switching bit patterns)
+#: must look different, which a continuous map does not give.
+CATEGORICAL = ("line", "switch")
+
+
+def tab20() -> list[list[int]]:
+    """matplotlib's qualitative tab20 as sRGB triples: the colours of the categorical variables (a line
+    number or bit pattern k gets colour k mod 20)."""
+    import matplotlib
+
+    c = np.asarray(matplotlib.colormaps["tab20"].colors)[:, :3]
     return np.round(c * 255).astype(int).tolist()
 
 
@@ -396,8 +411,109 @@ def box(vw, program: Path, lo_mm, hi_mm) -> dict:
 
 
 # ---- sections of the job kinds --------------------------------------------------------------
+def tolerance_cells(deviation_mm: dict, tolerance_mm: float) -> dict:
+    """Per pose the cell of one Table-2 row: ``in_tolerance`` (|deviation| <= tolerance, the rule of
+    :attr:`simulate.evaluation.features.FeatureRow.in_tolerance`), ``factor`` (|deviation| / tolerance [-],
+    the row's term of the score) and ``rank`` among the poses (1: smallest |deviation|; ties share the
+    lower rank). The tolerance is the report's (the ISO 10791-7 rows of :mod:`simulate.evaluation.features`)."""
+    mags = {p: abs(float(v)) for p, v in deviation_mm.items() if _num(v) is not None}
+    out: dict = {}
+    for p in deviation_mm:
+        if p not in mags:
+            out[p] = {"in_tolerance": None, "factor": None, "rank": None}
+            continue
+        out[p] = {"in_tolerance": bool(mags[p] <= tolerance_mm),
+                  "factor": mags[p] / tolerance_mm if tolerance_mm > 0 else None,
+                  "rank": 1 + sum(m < mags[p] for m in mags.values())}
+    return out
+
+
+def _iso(t) -> str | None:
+    """A Unix time [s] as ISO 8601 UTC to the second."""
+    import datetime as dt
+
+    if _num(t) is None:
+        return None
+    return dt.datetime.fromtimestamp(float(t), dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def _friction_text(entry: dict) -> str:
+    """One joint's friction model as the report names it: kind and registered name/version, or its source."""
+    m = entry.get("model")
+    where = f"{m.get('name')} v{m.get('version')}" if isinstance(m, dict) else entry.get("source", "-")
+    return f"{entry.get('kind', '-')} ({where})"
+
+
+def job_header(ctx: Context, report: dict) -> dict:
+    """What the planner needs to file the result: program, robot, pose file, dexel spacing, the friction
+    model per axis (kind and registered version, from the report: what the run used), and when it ran."""
+    req = ctx.rec.request or {}
+    opts = req.get("options") or {}
+    per_axis: dict[int, set] = {}
+    for pose in report.get("poses", []):
+        for f in pose.get("friction") or []:
+            per_axis.setdefault(int(f.get("joint", 0)), set()).add(_friction_text(f))
+    friction = [[f"A{j}", ", ".join(sorted(v))] for j, v in sorted(per_axis.items())]
+    poses = req.get("poses") or []
+    items = [["program", req.get("program_source", "-")], ["robot", req.get("robot", "-")],
+             ["pose file", f"{req['pose_set']}.json" if req.get("pose_set") else "inline poses"],
+             ["poses", ", ".join(p.get("name", "?") for p in poses) or "-"],
+             ["dexel spacing [mm]", _num(opts.get("spacing_mm")), 3],
+             ["components", ", ".join(k for k in ("deflection", "friction", "switching") if opts.get(k, True))
+              + (" (with shares)" if opts.get("shares") else "")],
+             ["ran (UTC)", f"{_iso(ctx.rec.started) or '-'} .. {_iso(ctx.rec.finished) or '-'}"]]
+    return {"type": "header", "title": "Job", "items": items, "friction": friction, "pdf": ctx.url("report.pdf")}
+
+
+def job_scales(ctx: Context, poses: list[str], digests: dict) -> dict:
+    """The colour scale shared by all poses of the job, per variable, in its display unit: the smallest and
+    largest value at the machined dexel ends of every pose (:func:`scale_of`). The surface the page draws
+    passes through a subset of those ends, so every vertex of every pose gets a colour inside it."""
+    ranges: dict[str, list] = {}
+    for p in poses:
+        name = f"workpiece/{p}.npz"
+        for var, (lo, hi) in ctx.read(name, lambda path, n=name: scale_of(path, digests[n])).items():
+            r = ranges.setdefault(var, [lo, hi])
+            r[0], r[1] = min(r[0], lo), max(r[1], hi)
+    return ranges
+
+
+_SCALES: dict = {}
+
+
+def scale_of(path: Path, digest: str | None) -> dict:
+    """Per variable the (lo, hi) of one workpiece's machined dexel ends in display units (kept per file and
+    digest: a few numbers; the workpiece itself is not kept, so the page's LRU keeps its meshes)."""
+    from simulate.machining.virtual_workpiece import VirtualWorkpiece, colour_range
+
+    key = (str(path), digest)
+    if key not in _SCALES:
+        vw = VirtualWorkpiece.load(path)
+        steps = np.unique(_near_steps(vw, lambda pts: np.ones(len(pts), bool)))
+        _SCALES[key] = {}
+        for v in variables():
+            lo, hi = colour_range(vertex_values(vw, steps, v["name"]))
+            _SCALES[key][v["name"]] = (lo * v["factor"], hi * v["factor"])
+    return _SCALES[key]
+
+
+def placement_frames(ctx: Context, poses: list[str]) -> dict:
+    """Per pose the workpiece frame in the robot base frame as a 4x4 row-major matrix [mm] (the pose file's
+    xyz and rpy, :attr:`simulate.toolpath.placement.Placement.T`): the page draws the part in the base frame."""
+    from simulate.toolpath.placement import parse_poses
+
+    given = {p.get("name"): p for p in (ctx.rec.request or {}).get("poses") or []}
+    out = {}
+    for name in poses:
+        if name in given:
+            T = parse_poses({"poses": [given[name]]}, source="request")[0].T.copy()
+            T[:3, 3] /= MM
+            out[name] = T.reshape(-1).tolist()
+    return out
+
+
 def simulation_sections(ctx: Context) -> list[dict]:
-    """Ranking (Table 2 per pose), the 3D workpiece, downloads."""
+    """The job's header, ranking (Table 2 per pose), the 3D workpiece, the printable report, downloads."""
     report = ctx.read("report.json", lambda p: json.loads(p.read_text()))
     ranking = ctx.read("ranking.json", lambda p: json.loads(p.read_text()))["ranking"]
     poses = [e["pose"] for e in ranking]
@@ -406,16 +522,20 @@ def simulation_sections(ctx: Context) -> list[dict]:
     rows = []
     for stored in report["features"]:
         r = feature_row(stored)
+        dev = {p: r.deviation_mm.get(p) for p in poses}
         rows.append({"name": r.name, "nominal_text": r.nominal_text, "tolerance_mm": r.tolerance_mm,
-                     "deviation_mm": {p: r.deviation_mm.get(p) for p in poses}})
+                     "deviation_mm": dev, "cells": tolerance_cells(dev, r.tolerance_mm)})
     digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
     with_npz = [p for p in poses if f"workpiece/{p}.npz" in digests]
     summaries = {s["pose"]: s for s in report["poses"]}
     return [
+        job_header(ctx, report),
         {"type": "ranking", "title": "Table 2: deviation per pose [mm]", "ranking": ranking, "rows": rows,
          "poses": [summaries.get(p, {"pose": p}) for p in poses]},
         {"type": "workpiece", "title": "Virtual workpiece", "poses": with_npz, "variables": variables(),
-         "colormap": viridis(), "stock_rgb": [200, 200, 200], "click_radius_mm": CLICK_RADIUS_MM,
+         "colormap": viridis(), "categorical": tab20(), "stock_rgb": [200, 200, 200],
+         "click_radius_mm": CLICK_RADIUS_MM, "scales": job_scales(ctx, with_npz, digests),
+         "frames": placement_frames(ctx, with_npz),
          "urls": {p: {"mesh": ctx.url(f"workpiece/{p}/mesh"), "values": ctx.url(f"workpiece/{p}/values"),
                       "click": ctx.url(f"workpiece/{p}/click"), "box": ctx.url(f"workpiece/{p}/box")}
                   for p in with_npz},
@@ -514,10 +634,10 @@ def circle_sections(ctx: Context) -> list[dict]:
             "-" if s.get(k) is None else ("on" if s.get(k) else "off")
             for k in ("friction", "backlash", "ff_friction"))],
         ["friction scale [-]", _num(s.get("friction_scale")), 2]]},
-        {"type": "table", "title": "Reversal spikes", "id": "spikes",
-         "columns": ["angle [deg]", "joint", "spike [µm]", "lost motion [µm]", "excursion [µm]"],
-         "rows": [[_num(r.get("angle_deg")), r.get("joint"), _num(r.get("spike_um")), _num(r.get("lost_motion_um")),
-                   _num(r.get("height_um"))] for r in spikes],
+        {"type": "table", "title": "Reversal spikes (one row per reversal)", "id": "spikes",
+         "columns": ["angle [deg]", "joints reversing", "spike [µm]", "lost motion [µm]", "excursion [µm]"],
+         "rows": [[_num(g[0].get("angle_deg")), ", ".join(str(r.get("joint")) for r in g), _num(g[0].get("spike_um")),
+                   _num(g[0].get("lost_motion_um")), _num(g[0].get("height_um"))] for g in reversal_groups(spikes)],
          "digits": [1, None, 1, 1, 1],
          "note": "where a joint's commanded velocity changes sign along the circle, split as a ballbar analysis "
                  "splits it: the spike is the transient peak beyond the settled trace, the lost motion the "
@@ -526,9 +646,7 @@ def circle_sections(ctx: Context) -> list[dict]:
                  "outward positive)",
          "empty": "no joint reverses on this circle"}]
     digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
-    if "out/circle.png" in digests:
-        out.append({"type": "image", "title": "Polar plot (radial deviation, magnified)",
-                    "url": ctx.url("files/out/circle.png")})
+    # the page draws the polar plot from circle.csv; the job's circle.png (the same plot) is in the files
     if "out/circle.csv" in digests:
         df = _read_csv(ctx, "out/circle.csv")
         step = max(1, -(-len(df) // POLAR_MAX_POINTS))
@@ -540,6 +658,18 @@ def circle_sections(ctx: Context) -> list[dict]:
                     "marks": _spike_marks(spikes)})
     out.append({"type": "files", "title": "Result files", "files": ctx.files()})
     return out
+
+
+def reversal_groups(spikes: list[dict]) -> list[list[dict]]:
+    """The reversals of a circle: the joints reversing at the same angle with the same split (the evaluation
+    splits the trace once per sample, so joints reversing together carry identical numbers) as one group, in
+    the order of the summary."""
+    groups: dict = {}
+    for r in spikes:
+        key = tuple(None if _num(r.get(k)) is None else round(float(r[k]), 6)
+                    for k in ("angle_deg", "spike_um", "lost_motion_um", "height_um"))
+        groups.setdefault(key, []).append(r)
+    return list(groups.values())
 
 
 def _spike_marks(spikes: list[dict]) -> list[dict]:
@@ -672,6 +802,37 @@ def _register_builtin() -> None:
 _register_builtin()
 
 
+# ---- the printable report ----------------------------------------------------------------------
+_PDFS: OrderedDict = OrderedDict()
+
+
+def printable(ctx: Context, view: ViewKind) -> bytes:
+    """The job's PDF (:func:`service.view_pdf.build` of the page's sections), kept for a few jobs (by the
+    job's recorded digests): a job's files do not change once it has succeeded."""
+    from service import view_pdf
+
+    digests = ctx.request.app.state.store.files(ctx.rec.id) or {}
+    key = (ctx.rec.id, tuple(sorted(digests.items())))
+    with _CACHE_LOCK:
+        if key in _PDFS:
+            return _PDFS[key]
+    sections = view.sections(ctx)
+
+    def npz(pose: str) -> Path:
+        return ctx.read(f"workpiece/{pose}.npz", lambda p: p)
+
+    def file(name: str) -> Path:
+        return ctx.read(name, lambda p: p)
+
+    title = f"greybench {view.title} job {ctx.rec.id}, finished {_iso(ctx.rec.finished) or '-'}"
+    pdf = view_pdf.build(title, sections, load_npz=npz, load_file=file)
+    with _CACHE_LOCK:
+        _PDFS[key] = pdf
+        while len(_PDFS) > _CACHE_SIZE:
+            _PDFS.popitem(last=False)
+    return pdf
+
+
 # ---- pages and routes -------------------------------------------------------------------------
 def _page(status: int, title: str, message: str):
     """A short HTML page for a refused or unfinished job (no traceback, no job data)."""
@@ -763,7 +924,17 @@ def add_routes(app, settings, keyed: list, svc: ModuleType) -> None:
         def data(ctx: Context = Depends(access)) -> dict:
             svc._succeeded(ctx.rec)
             return {"job": ctx.rec.id, "kind": ctx.rec.kind.value, "title": view.title,
-                    "finished": ctx.rec.finished, "sections": view.sections(ctx)}
+                    "finished": ctx.rec.finished, "sections": view.sections(ctx), "pdf": ctx.url("report.pdf")}
+
+        @app.get(f"{prefix}/{{job_id}}/view/report.pdf", tags=[tag], responses={**errors, 200: {
+                 "content": {"application/pdf": {}}, "description": "the printable report (A4 pages)"}},
+                 name=f"{kind.value}_view_pdf", summary="The printable report of the job's page (PDF)")
+        def report_pdf(ctx: Context = Depends(access)):
+            svc._succeeded(ctx.rec)
+            pdf = printable(ctx, view)
+            return Response(pdf, media_type="application/pdf", headers={
+                "Content-Disposition": f'attachment; filename="greybench-{view.kind.value}-{ctx.rec.id[:8]}.pdf"',
+                "Cache-Control": "private, max-age=3600"})
 
         @app.get(f"{prefix}/{{job_id}}/view/files/{{name:path}}", tags=[tag], responses=errors,
                  name=f"{kind.value}_view_file",

@@ -416,9 +416,12 @@ def test_page_in_chromium(job, browser, tmp_path):
         lines |= set(attrs["line"][inside].tolist())
     boxed = page.locator("table.box-lines tr[data-line]").evaluate_all("rows => rows.map(r => +r.dataset.line)")
     assert boxed and sorted(boxed) == sorted(lines)
-    # best to worst per row: green (hue 120) for the smallest |deviation| to red (hue 0) for the largest
-    hues = page.evaluate("window.greybenchView.rankColours([0.3, -0.1, 0.2, null])")
-    assert [int(h[4:].split(",")[0]) for h in hues] == [40, 120, 80, 0]
+    # the colour says in or out of tolerance (green, hue 120), then how far out: orange (hue 40) just over
+    # the tolerance to red (hue 0) at 10x and beyond; the rank among the poses does not colour the cell
+    hues = page.evaluate("[{in_tolerance: true, factor: 0.5, rank: 2}, {in_tolerance: false, factor: 1, rank: 1},"
+                         " {in_tolerance: false, factor: 10 ** 0.5, rank: 1}, {in_tolerance: false, factor: 20,"
+                         " rank: 1}].map(c => window.greybenchView.cellStyle(c).hue)")
+    assert hues == [120, 40, 20, 0]
     # another variable recolours the part; the legend names its unit
     page.select_option(".wp-variable", "force")
     page.wait_for_function("() => window.greybenchView.ready")

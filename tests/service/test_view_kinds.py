@@ -19,8 +19,11 @@ from .conftest import HEADERS, KEY, ROBOT_FRICTION, Server, server_env, watched_
 #: The synthetic circle: 1 µm-per-degree free of spikes, two reversals with known heights.
 ROUNDNESS_UM, RADIUS_ERROR_UM = 12.5, -3.25
 SPIKES = [(90.0, 1, 7.5), (90.0, 6, 7.5), (270.0, 2, -4.0)]
-#: per reversal of SPIKES: (spike, lost motion) [µm]
-SPLITS = [(1.5, 6.0), (-0.5, 2.0), (-3.0, -1.0)]
+#: per reversal of SPIKES: (spike, lost motion) [µm]; joints reversing at the same sample share one split, as
+#: simulate.evaluation.circle evaluates them
+SPLITS = [(1.5, 6.0), (1.5, 6.0), (-3.0, -1.0)]
+#: the spike table: one row per reversal, naming every joint that reverses there
+REVERSAL_ROWS = [[90.0, "A1, A6", 1.5, 6.0, 7.5], [270.0, "A2", -3.0, -1.0, -4.0]]
 
 #: The synthetic placement search: best found placement against two given poses.
 GIVEN = [{"name": "near", "xyz": [1.5, 0.0, -0.1], "rpy": [0.0, 0.0, 0.0]},
@@ -112,9 +115,9 @@ def test_circle_page_shows_the_circle_numbers(client, legacy):
     assert items["largest excursion after a reversal (lost motion and spike) [µm]"] == pytest.approx(7.5)
     assert items["largest reversal spike, beyond the settled trace [µm]"] == pytest.approx(3.0)
     assert items["largest lost motion, step of the settled trace [µm]"] == pytest.approx(6.0)
-    assert by_type["table"]["columns"] == ["angle [deg]", "joint", "spike [µm]", "lost motion [µm]", "excursion [µm]"]
-    assert by_type["table"]["rows"] == [[a, f"A{j}", sp, lm, h] for (a, j, h), (sp, lm) in zip(SPIKES, SPLITS,
-                                                                                                  strict=True)]
+    assert by_type["table"]["columns"] == ["angle [deg]", "joints reversing", "spike [µm]", "lost motion [µm]",
+                                           "excursion [µm]"]
+    assert by_type["table"]["rows"] == REVERSAL_ROWS
     # the polar trace is the CSV's, thinned to at most POLAR_MAX_POINTS samples; the oval's extremes survive
     from service.view import POLAR_MAX_POINTS
 
@@ -127,7 +130,10 @@ def test_circle_page_shows_the_circle_numbers(client, legacy):
     # joints reversing together share one mark, labelled with the spike and the lost motion as the CLI's table
     assert by_type["polar"]["marks"] == [{"angle_deg": 90.0, "label": "A1+A6 spike +1.5 µm, lost motion +6.0 µm"},
                                          {"angle_deg": 270.0, "label": "A2 spike -3.0 µm, lost motion -1.0 µm"}]
-    png = client.get(by_type["image"]["url"], headers=HEADERS)
+    # the polar plot once (drawn by the page); the job's PNG of it is a download
+    assert "image" not in by_type
+    png = client.get(next(f["url"] for f in by_type["files"]["files"] if f["name"] == "out/circle.png"),
+                     headers=HEADERS)
     assert png.status_code == 200 and png.content[:4] == b"\x89PNG"
     assert {f["name"] for f in by_type["files"]["files"]} == {"out/circle.csv", "out/circle.png", "out/summary.json"}
     csv = client.get(next(f["url"] for f in by_type["files"]["files"] if f["name"] == "out/circle.csv"),
@@ -150,6 +156,34 @@ def test_circle_without_reversals_says_so(client, tmp_path):
     assert store.finish(rec.id, "test", JobState.succeeded, result={}, files=folder_digests(jobs / rec.id))
     table = next(s for s in _sections(client, "/circles", rec.id) if s["type"] == "table")
     assert table["rows"] == [] and "no joint reverses" in table["empty"]
+
+
+def test_joints_with_different_numbers_at_one_angle_keep_their_rows():
+    from service.view import reversal_groups
+
+    same = {"angle_deg": 92.2, "spike_um": 4.0, "lost_motion_um": 1.0, "height_um": 5.0}
+    spikes = [{**same, "joint": "A1"}, {**same, "joint": "A6"}, {**same, "joint": "A3", "spike_um": 2.0}]
+    assert [[r["joint"] for r in g] for g in reversal_groups(spikes)] == [["A1", "A6"], ["A3"]]
+
+
+def test_circle_and_search_pdfs(client, tmp_path):
+    """Every kind's page prints: the PDF renders page by page and holds the page's numbers."""
+    from .test_view_colours import pdf_pages
+
+    store, jobs = client.app.state.store, client.app.state.manager.jobs_dir
+    for prefix, job_id, words in (("/circles", _circle_job(store, jobs), ["Circle test", "Reversal spikes",
+                                                                          "A1, A6", f"{ROUNDNESS_UM:.1f}"]),
+                                  ("/placement-searches", _placement_job(store, jobs), ["Placement search",
+                                                                                        "optimised", "3.0000"])):
+        data = client.get(f"{prefix}/{job_id}/view/data", headers=HEADERS).json()
+        assert data["pdf"].startswith(f"{prefix}/{job_id}/view/report.pdf")
+        r = client.get(data["pdf"], headers=HEADERS)
+        assert r.status_code == 200 and r.content[:5] == b"%PDF-"
+        (tmp_path / prefix.strip("/")).mkdir()
+        pages, text = pdf_pages(r.content, tmp_path / prefix.strip("/"))
+        assert pages and all(p.std() > 1 for p in pages)
+        for w in words:
+            assert w in text, (prefix, w)
 
 
 def test_placement_page_best_against_given(client):
@@ -255,12 +289,17 @@ def test_circle_page_in_chromium(server, browser, tmp_path):
     assert summary["radius [mm]"] == "50.000" and summary["feed [mm/min]"] == "2000.0"
     assert summary["friction scale [-]"] == "1.00" and summary["centre offset, in-plane axes [µm]"] == "0.5, -0.2"
     spikes = [r.split("\t") for r in page.locator("table[data-id='spikes'] tbody tr").all_inner_texts()]
-    assert spikes == [[f"{a:.1f}", f"A{j}", f"{sp:.1f}", f"{lm:.1f}", f"{h:.1f}"]
-                      for (a, j, h), (sp, lm) in zip(SPIKES, SPLITS, strict=True)]
+    assert spikes == [[f"{a:.1f}", j, f"{sp:.1f}", f"{lm:.1f}", f"{h:.1f}"] for a, j, sp, lm, h in REVERSAL_ROWS]
     assert page.locator("section.polar svg polyline").count() == 1
     assert page.locator("section.polar svg text.mark").all_text_contents() == [
         "A1+A6 spike +1.5 µm, lost motion +6.0 µm", "A2 spike -3.0 µm, lost motion -1.0 µm"]
-    assert page.evaluate("document.querySelector('section.image img').naturalWidth") > 300   # the job's plot
+    # every label inside the drawing (the left one was cut off), and the polar plot drawn once (no PNG copy)
+    outside = page.evaluate("""() => { const svg = document.querySelector('section.polar svg').getBoundingClientRect();
+        return [...document.querySelectorAll('section.polar svg text')].map(t => t.getBoundingClientRect())
+          .filter(b => b.left < svg.left - 0.5 || b.right > svg.right + 0.5 || b.top < svg.top - 0.5
+                       || b.bottom > svg.bottom + 0.5).length; }""")
+    assert outside == 0
+    assert page.locator("section.image img").count() == 0 and page.locator("svg.polar").count() == 1
     assert page.locator("ul.files a").count() == 3
     assert not problems, problems
     page.close()
@@ -296,7 +335,7 @@ def test_key_entered_once_opens_the_circle_page(server, browser):
     page.click("#login-form button")
     page.wait_for_function("() => window.greybenchView && window.greybenchView.ready", timeout=60_000)
     assert "token=" in page.url and f"/circles/{job_id}/view" in page.url
-    assert page.locator("table[data-id='spikes'] tbody tr").count() == len(SPIKES)
+    assert page.locator("table[data-id='spikes'] tbody tr").count() == len(REVERSAL_ROWS)
     page.close()
 
 
@@ -327,10 +366,12 @@ def test_pages_of_real_jobs(server, browser):
     assert float(summary["roundness (circular deviation G, ISO 230-4) [µm]"]) == pytest.approx(res["roundness_um"],
                                                                                                 abs=5e-4)
     rows = [r.split("\t") for r in page.locator("table[data-id='spikes'] tbody tr").all_inner_texts()]
+    from service.view import reversal_groups
+
     assert [(float(a), j, float(sp), float(lm), float(h)) for a, j, sp, lm, h in rows] == [
-        (pytest.approx(s["angle_deg"], abs=0.05), s["joint"], pytest.approx(s["spike_um"], abs=0.005),
-         pytest.approx(s["lost_motion_um"], abs=0.005), pytest.approx(s["height_um"], abs=0.005))
-        for s in res["reversal_spikes"]]
+        (pytest.approx(g[0]["angle_deg"], abs=0.05), ", ".join(s["joint"] for s in g),
+         pytest.approx(g[0]["spike_um"], abs=0.005), pytest.approx(g[0]["lost_motion_um"], abs=0.005),
+         pytest.approx(g[0]["height_um"], abs=0.005)) for g in reversal_groups(res["reversal_spikes"])]
     assert not problems, problems
     page.close()
     res = done["/placement-searches"]["result"]

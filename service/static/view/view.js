@@ -6,11 +6,18 @@
 let THREE = null;
 let OrbitControls = null;
 
-async function loadThree() {
-  if (!THREE) {
-    THREE = await import('three');
-    ({ OrbitControls } = await import('/view-static/vendor/three/OrbitControls.js'));
+let threeLoading = null;
+
+// the three modules fetched at once (three.module.js imports three.core.js: one after the other otherwise)
+function loadThree() {
+  if (!threeLoading) {
+    threeLoading = Promise.all([import('three'), import('/view-static/vendor/three/three.core.js'),
+      import('/view-static/vendor/three/OrbitControls.js')]).then(([three, , orbit]) => {
+      THREE = three;
+      OrbitControls = orbit.OrbitControls;
+    });
   }
+  return threeLoading;
 }
 
 const KEY_STORE = 'greybench-api-key';
@@ -78,38 +85,58 @@ function card(section) {
   return el;
 }
 
-// green (best) .. red (worst) by rank of |value| within a row, like the paper's Table 2
-function rankColours(values) {
-  const idx = values.map((v, i) => [v === null ? Infinity : Math.abs(v), i]).sort((a, b) => a[0] - b[0]);
-  const out = new Array(values.length);
-  idx.forEach(([, i], r) => {
-    const t = values.length > 1 ? r / (values.length - 1) : 0;
-    out[i] = `hsl(${Math.round(120 * (1 - t))}, 65%, 78%)`;
-  });
-  return out;
+// A Table-2 cell answers "is it good" first: green where |deviation| <= tolerance, orange to red where it is
+// not, darker the more times over its tolerance (log scale, full red at 10x); the rank among the poses comes
+// second, as a neutral badge (filled: the best pose of the row), so the best of poses out of tolerance is red.
+function cellStyle(cell) {
+  if (!cell || cell.in_tolerance === null || cell.in_tolerance === undefined) return { cls: 'no-value', hue: null, background: '#fff' };
+  if (cell.in_tolerance) return { cls: 'in-tol', hue: 120, background: 'hsl(120, 45%, 84%)' };
+  const t = Math.min(1, Math.log10(Math.max(1, cell.factor || 1)));
+  const hue = Math.round(40 * (1 - t));
+  return { cls: 'out-tol', hue, background: `hsl(${hue}, 80%, ${Math.round(80 - 14 * t)}%)` };
 }
 
-window.greybenchView.rankColours = rankColours;
+window.greybenchView.cellStyle = cellStyle;
+
+function factorText(f) { return f === null || f === undefined ? '' : (f >= 10 ? f.toFixed(0) : f.toFixed(1)); }
 
 const RENDER = {
+  // program, robot, pose file, spacing, friction per axis, when it ran; the printable report
+  header(section, el) {
+    const num = (v, d) => (typeof v === 'number' ? fmt(v, d ?? 3) : esc(v ?? '-'));
+    const items = section.items.map(([k, v, d]) => `<tr><th>${esc(k)}</th><td class="text">${num(v, d)}</td></tr>`).join('');
+    const fr = section.friction.map(([a, t]) => `<tr><th>${esc(a)}</th><td class="text">${esc(t)}</td></tr>`).join('');
+    el.insertAdjacentHTML('beforeend', `<div class="header-grid"><table class="job-items">${items}</table>
+      <table class="job-friction"><tr><th colspan="2" class="text">friction model per axis: kind (registered name and version, or source)</th></tr>${fr || '<tr><td>-</td></tr>'}</table>
+      ${section.pdf ? `<p><a class="pdf-link" href="${esc(section.pdf)}" download>printable report (PDF)</a></p>` : ''}</div>`);
+  },
+
   ranking(section, el) {
     const poses = section.ranking.map((e) => e.pose);
     const head = section.ranking.map((e) => `<th data-pose="${esc(e.pose)}">${esc(e.pose)}<br><small>rank ${e.rank}</small></th>`).join('');
     const rows = section.rows.map((r) => {
-      const vals = poses.map((p) => r.deviation_mm[p]);
-      const colours = rankColours(vals);
-      const cells = vals.map((v, j) => {
-        const ok = v !== null && Math.abs(v) <= r.tolerance_mm;
-        return `<td class="${ok ? 'in-tol' : 'out-tol'}" style="background:${colours[j]}" title="${ok ? 'in tolerance' : 'out of tolerance'}">${fmt(v, 4)}</td>`;
+      const cells = poses.map((p) => {
+        const v = r.deviation_mm[p], c = (r.cells || {})[p] || {};
+        const st = cellStyle(c);
+        const what = c.in_tolerance ? 'in tolerance' : c.in_tolerance === false ? `out of tolerance: ${factorText(c.factor)} x the tolerance` : 'no value';
+        // the rank badge and the factor are drawn by the style sheet (::before, ::after): the cell's text stays the value
+        const times = c.in_tolerance === false ? ` data-times="${factorText(c.factor)}"` : '';
+        return `<td class="${st.cls}${c.rank === 1 ? ' best' : ''}" data-pose="${esc(p)}" data-rank="${c.rank ?? ''}" data-factor="${c.factor ?? ''}"${times} style="background:${st.background}" title="${what}; rank ${c.rank ?? '-'} of ${poses.length} poses in this row">${fmt(v, 4)}</td>`;
       }).join('');
       return `<tr><td>${esc(r.name)}</td><td class="text">${esc(r.nominal_text)}</td><td>${fmt(r.tolerance_mm, 3)}</td>${cells}</tr>`;
     }).join('');
     const score = section.ranking.map((e) => `<td>${fmt(e.score, 2)}</td>`).join('');
     const inTol = section.ranking.map((e) => `<td>${e.in_tolerance} / ${section.rows.length}</td>`).join('');
+    const swatch = (c) => `<span class="swatch" style="background:${cellStyle(c).background}"></span>`;
     el.insertAdjacentHTML('beforeend', `<table class="table2"><thead><tr><th>row</th><th>nominal</th><th>tolerance [mm]</th>${head}</tr></thead>
       <tbody>${rows}</tbody><tfoot><tr><th colspan="3">score (sum of |deviation| / tolerance, lower is better) [-]</th>${score}</tr>
       <tr><th colspan="3">rows in tolerance</th>${inTol}</tr></tfoot></table>
-      <p class="legend-note">Deviation [mm] per pose, poses best first; colour per row from green (smallest |deviation|) to red (largest); bold with &#10003;: in tolerance.</p>`);
+      <p class="legend-note key">Deviation [mm] per pose, poses best first. Colour: is it good.
+        ${swatch({ in_tolerance: true })} in tolerance (|deviation| &le; tolerance, bold &#10003;);
+        ${swatch({ in_tolerance: false, factor: 1.2 })} ${swatch({ in_tolerance: false, factor: 3 })} ${swatch({ in_tolerance: false, factor: 10 })}
+        out of tolerance, 1.2&times;, 3&times;, 10&times; or more its tolerance (the factor in the cell).
+        Badge: the rank of the pose in that row (<span class="rank best">1</span> smallest |deviation|, filled), which says nothing about the tolerance.
+        Tolerances: ISO 10791-7 rows as the paper's Table 2 prints them.</p>`);
     const withShares = section.poses.filter((p) => p.shares && p.shares.score);
     if (withShares.length) {
       const rowsS = withShares.map((p) => `<tr><td>${esc(p.pose)}</td>${['deflection', 'friction', 'switching'].map((c) => `<td>${fmt(100 * (p.shares.score[c] || 0), 0)}</td>`).join('')}</tr>`).join('');
@@ -119,6 +146,10 @@ const RENDER = {
 
   workpiece(section, el) {
     if (!section.poses.length) { el.insertAdjacentHTML('beforeend', `<p>${esc(section.note)}</p>`); return; }
+    // the first pose's mesh downloads while three.js loads
+    const first = binary(section.urls[section.poses[0]].mesh);
+    first.catch(() => { /* reported when the viewer uses it */ });
+    section.prefetched = { pose: section.poses[0], mesh: first };
     loadThree().then(() => {
       const viewer = new WorkpieceView(section, el);
       window.greybenchView.views.push(viewer);
@@ -212,7 +243,8 @@ const RENDER = {
       <p class="legend-note">${legend}</p>`);
   },
 
-  // a circle (ballbar) test: radial deviation over the angle; deviation scaled about the nominal circle
+  // a circle (ballbar) test: radial deviation over the angle; deviation scaled about the nominal circle. The
+  // drawing has room for the labels on either side (text measured after drawing): nothing outside the SVG
   polar(section, el) {
     const size = 420, c = size / 2, r0 = size * 0.3;
     const all = section.series.flatMap((s) => s.deviation_um);
@@ -236,8 +268,16 @@ const RENDER = {
     }).join('');
     const rings = [-1, 0, 1].map((f) => `<circle cx="${c}" cy="${c}" r="${r0 + f * span * k}" fill="none" stroke="#bbb" stroke-dasharray="${f ? '3,3' : ''}"/>`).join('');
     const legend = section.series.map((s, i) => `<span style="color:${colours[i % colours.length]}">&#9632; ${esc(s.label)}</span>`).join(' ');
-    el.insertAdjacentHTML('beforeend', `<svg width="${size}" height="${size}" viewBox="0 0 ${size} ${size}" style="overflow:visible;margin:0 9em">${rings}${paths}${marks}</svg>
+    el.insertAdjacentHTML('beforeend', `<svg class="polar" width="${size}" height="${size}" viewBox="0 0 ${size} ${size}">${rings}${paths}${marks}</svg>
       <p class="legend-note">${legend}; rings: nominal and &plusmn;${fmt(span, 1)} µm radial deviation.</p>`);
+    // widen the view box to the drawn labels' extent (plus a margin), so none is clipped
+    const svg = el.querySelector('svg.polar');
+    const box = svg.getBBox();
+    const m = 6, x0 = Math.min(0, box.x - m), y0 = Math.min(0, box.y - m);
+    const x1 = Math.max(size, box.x + box.width + m), y1 = Math.max(size, box.y + box.height + m);
+    svg.setAttribute('viewBox', `${x0.toFixed(1)} ${y0.toFixed(1)} ${(x1 - x0).toFixed(1)} ${(y1 - y0).toFixed(1)}`);
+    svg.setAttribute('width', (x1 - x0).toFixed(0));
+    svg.setAttribute('height', (y1 - y0).toFixed(0));
   },
 };
 
@@ -266,14 +306,24 @@ class WorkpieceView {
     this.pose = section.poses[0];
     this.variable = section.variables[0].name;
     this.lut = section.colormap.map((rgb) => rgb.map((v) => srgbToLinear(v / 255)));
+    this.cat = section.categorical.map((rgb) => rgb.map((v) => srgbToLinear(v / 255)));
+    this.shared = true;   // one colour scale for all poses of the job (section.scales); unticked: the pose's own
     this.stock = section.stock_rgb.map((v) => srgbToLinear(v / 255));
+    this.noSwitchRgb = [236, 236, 210];
+    this.noSwitch = this.noSwitchRgb.map((x) => srgbToLinear(x / 255));
     el.insertAdjacentHTML('beforeend', `
       <div class="wp-controls">
         <label>pose <select class="wp-pose">${section.poses.map((p) => `<option>${esc(p)}</option>`).join('')}</select></label>
         <label>colour by <select class="wp-variable">${section.variables.map((v) => `<option value="${v.name}">${esc(v.label)} [${esc(v.unit)}]</option>`).join('')}</select></label>
-        <span class="legend"><span class="wp-lo"></span><canvas class="wp-bar" width="240" height="14"></canvas><span class="wp-hi"></span><span class="wp-unit"></span>
+        <label title="unticked: each pose's part on its own range"><input type="checkbox" class="wp-shared" checked> one colour scale for all poses</label>
+        <span class="legend"><span class="wp-scale"><span class="wp-lo"></span><canvas class="wp-bar" width="240" height="14"></canvas><span class="wp-hi"></span><span class="wp-unit"></span></span>
+          <span class="wp-cats"></span>
           <span class="stock-swatch"></span> stock surface</span>
+        <span class="wp-scale-note legend-note"></span>
       </div>
+      <p class="legend-note">3D: the part in the robot base frame; triads x red, y green, z blue: the workpiece frame at the part's
+        origin and the base frame at the robot's base (grey disc), joined by a dashed line. <button type="button" class="wp-cell">show the cell</button>
+        <button type="button" class="wp-part">show the part</button></p>
       <div class="wp-layout">
         <div class="wp-canvas"></div>
         <div class="wp-side"><p class="legend-note">Drag: orbit; wheel: zoom; right drag: pan. Click the part: what cut that point.
@@ -284,6 +334,9 @@ class WorkpieceView {
     el.querySelector('.wp-variable').value = this.variable;
     el.querySelector('.wp-pose').addEventListener('change', (e) => { this.pose = e.target.value; this.loadMesh(); });
     el.querySelector('.wp-variable').addEventListener('change', (e) => { this.variable = e.target.value; this.loadValues(); });
+    el.querySelector('.wp-shared').addEventListener('change', (e) => { this.shared = e.target.checked; this.loadValues(); });
+    el.querySelector('.wp-cell').addEventListener('click', () => this.frameCell());
+    el.querySelector('.wp-part').addEventListener('click', () => this.framePart());
     this.drawBar();
   }
 
@@ -305,20 +358,140 @@ class WorkpieceView {
     this.scene.add(this.camera);
     this.controls = new OrbitControls(this.camera, this.renderer.domElement);
     this.controls.addEventListener('change', () => this.render());
+    // the part lives in the workpiece frame [mm]; the group puts it into the base frame (the pose's placement)
+    this.group = new THREE.Group();
+    this.group.matrixAutoUpdate = false;
+    this.scene.add(this.group);
+    this.cell = new THREE.Group();
+    this.scene.add(this.cell);
+    window.addEventListener('resize', () => this.resize());
     this.raycaster = new THREE.Raycaster();
     this.bindPointer();
     this.loadMesh();
   }
 
-  render() { if (this.renderer) this.renderer.render(this.scene, this.camera); }
+  // one draw per frame however many changes asked for one (software WebGL: a draw of the wide canvas is costly)
+  render() {
+    if (this.pending || !this.renderer) return;
+    this.pending = requestAnimationFrame(() => this.renderNow());
+  }
+
+  renderNow() {
+    if (this.pending) cancelAnimationFrame(this.pending);
+    this.pending = null;
+    if (this.renderer) this.renderer.render(this.scene, this.camera);
+  }
+
+  resize() {
+    const w = this.box.clientWidth, h = this.box.clientHeight;
+    if (!w || !h) return;
+    this.renderer.setSize(w, h);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.render();
+  }
+
+  // a triad (x red, y green, z blue) of length L [mm] with its name, as a group
+  triad(L, name) {
+    const g = new THREE.Group();
+    g.name = name;
+    const cols = [0xd62728, 0x2ca02c, 0x1f55d4];
+    const dirs = [new THREE.Vector3(1, 0, 0), new THREE.Vector3(0, 1, 0), new THREE.Vector3(0, 0, 1)];
+    dirs.forEach((d, i) => {
+      const arrow = new THREE.ArrowHelper(d, new THREE.Vector3(), L, cols[i], L * 0.18, L * 0.08);
+      arrow.name = `${name}-${'xyz'[i]}`;
+      // drawn over the part: a triad inside the stock would be hidden
+      arrow.traverse((o) => { if (o.material) { o.material.depthTest = false; o.renderOrder = 10; } });
+      g.add(arrow);
+      const label = this.label('xyz'[i], cols[i], L * 0.22);
+      label.position.copy(d.clone().multiplyScalar(L * 1.15));
+      g.add(label);
+    });
+    const title = this.label(name, 0x222222, L * 0.14);
+    title.position.set(L * 0.2, -L * 0.2, L * 0.05);
+    g.add(title);
+    return g;
+  }
+
+  label(text, colour, size) {
+    const cv = document.createElement('canvas');
+    const ctx = cv.getContext('2d');
+    ctx.font = 'bold 48px sans-serif';
+    cv.width = Math.ceil(ctx.measureText(text).width) + 16; cv.height = 64;
+    ctx.font = 'bold 48px sans-serif';
+    ctx.fillStyle = `#${colour.toString(16).padStart(6, '0')}`;
+    ctx.textBaseline = 'middle';
+    ctx.fillText(text, 8, 34);
+    const sprite = new THREE.Sprite(new THREE.SpriteMaterial({ map: new THREE.CanvasTexture(cv), depthTest: false, transparent: true }));
+    sprite.renderOrder = 11;
+    sprite.scale.set(size * cv.width / cv.height, size, 1);
+    return sprite;
+  }
+
+  // the base frame, the base and a dashed line from the base to the part's origin, in base coordinates [mm]
+  drawCell(size) {
+    this.scene.remove(this.cell);
+    this.cell = new THREE.Group();
+    this.cell.name = 'cell';
+    const origin = new THREE.Vector3().setFromMatrixPosition(this.group.matrix);
+    const reach = Math.max(origin.length(), size);
+    this.cell.add(this.triad(Math.max(size * 0.6, reach * 0.12), 'base frame'));
+    const base = new THREE.Mesh(new THREE.CylinderGeometry(reach * 0.1, reach * 0.1, reach * 0.02, 48),
+      new THREE.MeshLambertMaterial({ color: 0x8a9099 }));
+    base.rotation.x = Math.PI / 2;
+    base.position.z = -reach * 0.011;
+    base.name = 'robot base';
+    this.cell.add(base);
+    const line = new THREE.Line(new THREE.BufferGeometry().setFromPoints([new THREE.Vector3(), origin]),
+      new THREE.LineDashedMaterial({ color: 0x555555, dashSize: reach * 0.02, gapSize: reach * 0.015 }));
+    line.computeLineDistances();
+    this.cell.add(line);
+    this.scene.add(this.cell);
+    const wp = this.triad(size * 0.35, 'workpiece');
+    wp.name = 'workpiece frame';
+    if (this.wpTriad) this.group.remove(this.wpTriad);
+    this.wpTriad = wp;
+    this.group.add(wp);
+  }
+
+  // workpiece frame [mm] <-> base frame [mm] (scene)
+  toWorld(x, y, z) { return new THREE.Vector3(x, y, z).applyMatrix4(this.group.matrix); }
+  toLocal(v) { return v.clone().applyMatrix4(this.group.matrix.clone().invert()); }
+
+  framePart() {
+    const [lo, hi] = this.header.bounds_mm.map((v) => new THREE.Vector3(...v));
+    const centre = this.toWorld(...lo.clone().add(hi).multiplyScalar(0.5).toArray());
+    const size = hi.clone().sub(lo).length();
+    this.camera.near = size / 100; this.camera.far = size * 200; this.camera.updateProjectionMatrix();
+    this.camera.position.copy(centre).add(new THREE.Vector3(-0.55, -1.0, 0.85).normalize().multiplyScalar(size * 1.35));
+    this.controls.target.copy(centre);
+    this.controls.update();
+    this.render();
+  }
+
+  frameCell() {
+    const origin = new THREE.Vector3().setFromMatrixPosition(this.group.matrix);
+    const centre = origin.clone().multiplyScalar(0.5);
+    const size = Math.max(origin.length(), 1) * 1.4;
+    this.camera.position.copy(centre).add(new THREE.Vector3(-0.3, -1.0, 0.7).normalize().multiplyScalar(size * 1.5));
+    this.controls.target.copy(centre);
+    this.controls.update();
+    this.render();
+  }
 
   async loadMesh() {
     window.greybenchView.ready = false;
     status(`loading pose ${this.pose} ...`);
     try {
-      const { header, arrays } = await binary(this.section.urls[this.pose].mesh);
+      const pre = this.section.prefetched;
+      this.section.prefetched = null;
+      const { header, arrays } = await (pre && pre.pose === this.pose ? pre.mesh : binary(this.section.urls[this.pose].mesh));
       this.header = header;
-      if (this.mesh) { this.scene.remove(this.mesh); this.mesh.geometry.dispose(); }
+      if (this.mesh) { this.group.remove(this.mesh); this.mesh.geometry.dispose(); }
+      const T = (this.section.frames || {})[this.pose];
+      if (T) this.group.matrix.set(...T); else this.group.matrix.identity();
+      this.group.matrixWorldNeedsUpdate = true;
+      this.group.updateMatrixWorld(true);
       const g = new THREE.BufferGeometry();
       g.setAttribute('position', new THREE.BufferAttribute(arrays.position_mm, 3));
       g.setIndex(new THREE.BufferAttribute(arrays.index, 1));
@@ -327,14 +500,10 @@ class WorkpieceView {
       g.computeBoundingBox();
       g.computeBoundingSphere();
       this.mesh = new THREE.Mesh(g, new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide }));
-      this.scene.add(this.mesh);
+      this.group.add(this.mesh);
       const [lo, hi] = header.bounds_mm.map((v) => new THREE.Vector3(...v));
-      const centre = lo.clone().add(hi).multiplyScalar(0.5);
-      const size = hi.clone().sub(lo).length();
-      this.camera.near = size / 100; this.camera.far = size * 20; this.camera.updateProjectionMatrix();
-      this.camera.position.copy(centre).add(new THREE.Vector3(-0.55, -1.0, 0.85).normalize().multiplyScalar(size * 1.35));
-      this.controls.target.copy(centre);
-      this.controls.update();
+      this.drawCell(hi.clone().sub(lo).length());
+      this.framePart();
       await this.loadValues();
     } catch (e) { this.fail(e); }
   }
@@ -345,12 +514,22 @@ class WorkpieceView {
       const v = this.section.variables.find((x) => x.name === this.variable);
       const u = this.section.urls[this.pose].values;
       const { header, arrays } = await binary(u + (u.includes('?') ? '&' : '?') + `variable=${encodeURIComponent(this.variable)}`);
-      const [lo, hi] = header.range;
+      // the job's scale (every pose alike) unless the planner asks for the pose's own range
+      const shared = this.shared && this.section.scales && this.section.scales[this.variable];
+      const [lo, hi] = shared ? this.section.scales[this.variable] : header.range;
       const col = this.mesh.geometry.getAttribute('color');
-      const n = this.lut.length - 1;
+      const n = this.lut.length - 1, nc = this.cat.length;
+      const seen = new Map();
       for (let i = 0; i < arrays.value.length; i++) {
         const x = arrays.value[i];
-        const c = Number.isNaN(x) ? this.stock : this.lut[Math.max(0, Math.min(n, Math.round(((x - lo) / (hi - lo)) * n)))];
+        let c;
+        if (Number.isNaN(x)) c = this.stock;
+        else if (v.categorical) {
+          // a line (a bit pattern) is a category: neighbours get different colours; 0 switching bits: no axis switching
+          const k = Math.round(x);
+          c = (this.variable === 'switch' && k === 0) ? this.noSwitch : this.cat[((k % nc) + nc) % nc];
+          seen.set(k, (seen.get(k) || 0) + 1);
+        } else c = this.lut[Math.max(0, Math.min(n, Math.round(((x - lo) / (hi - lo)) * n)))];
         col.setXYZ(i, c[0], c[1], c[2]);
       }
       col.needsUpdate = true;
@@ -358,12 +537,33 @@ class WorkpieceView {
       this.el.querySelector('.wp-lo').textContent = fmt(lo, digits);
       this.el.querySelector('.wp-hi').textContent = fmt(hi, digits);
       this.el.querySelector('.wp-unit').textContent = `${v.unit}`;
+      this.el.querySelector('.wp-scale').hidden = !!v.categorical;
+      this.el.querySelector('.wp-shared').disabled = !!v.categorical;
+      this.el.querySelector('.wp-cats').innerHTML = v.categorical ? this.categoryKey(seen) : '';
+      this.el.querySelector('.wp-scale-note').textContent = v.categorical ? '' : shared
+        ? `scale of the job: the same colour means the same value on every pose (this pose: ${fmt(header.range[0], digits)} .. ${fmt(header.range[1], digits)} ${v.unit})`
+        : 'scale of this pose only: colours do not compare between poses';
+      this.scaleShown = { lo, hi, shared: !!shared, categorical: !!v.categorical, categories: [...seen.keys()].sort((p, q) => p - q) };
+      window.greybenchView.scale = this.scaleShown;
       this.range = [lo, hi];
-      this.render();
+      this.renderNow();
       status(`pose ${this.pose}: ${header.vertices} vertices, lattice ${fmt(this.header.lattice_mm, 2)} mm`);
       window.greybenchView.ready = true;
       document.body.dataset.ready = '1';
     } catch (e) { this.fail(e); }
+  }
+
+  // the key of a categorical variable: a swatch per value when there are few, else how the colours repeat
+  categoryKey(seen) {
+    const keys = [...seen.keys()].sort((p, q) => p - q);
+    const rgb = (k) => (this.variable === 'switch' && k === 0 ? this.noSwitchRgb : this.section.categorical[((k % 20) + 20) % 20]);
+    const name = (k) => (this.variable === 'switch'
+      ? (k === 0 ? 'no axis switching' : [0, 1, 2, 3, 4, 5].filter((b) => (k >> b) & 1).map((b) => `A${b + 1}`).join('+'))
+      : `line ${k}`);
+    if (keys.length <= 16) {
+      return keys.map((k) => `<span class="cat" data-value="${k}"><span class="swatch" style="background:rgb(${rgb(k).join(',')})"></span> ${esc(name(k))}</span>`).join(' ');
+    }
+    return `${keys.length} ${this.variable === 'switch' ? 'bit patterns' : 'program lines'}, one of 20 colours each (value mod 20: neighbours differ); click the part to name a line`;
   }
 
   drawBar() {
@@ -427,31 +627,33 @@ class WorkpieceView {
     const ndc = new THREE.Vector2(((cx - b.left) / b.width) * 2 - 1, -((cy - b.top) / b.height) * 2 + 1);
     this.raycaster.setFromCamera(ndc, this.camera);
     const hits = this.raycaster.intersectObject(this.mesh, false);
-    return hits.length ? hits[0].point.clone() : null;
+    return hits.length ? this.toLocal(hits[0].point) : null;   // workpiece frame [mm]
   }
 
   // client pixel of a point [mm] (tests and scripting)
   project(x, y, z) {
-    const v = new THREE.Vector3(x, y, z).project(this.camera);
+    const v = this.toWorld(x, y, z).project(this.camera);
     const b = this.renderer.domElement.getBoundingClientRect();
     return { x: b.left + ((v.x + 1) / 2) * b.width, y: b.top + ((1 - v.y) / 2) * b.height };
   }
 
-  // look at a point [mm] from a direction (unit vector, from the point towards the camera) at a distance [mm]
+  // look at a point [mm, workpiece frame] from a direction (unit vector in the workpiece frame, from the point
+  // towards the camera) at a distance [mm]
   lookAt(point, direction, distance) {
-    const p = new THREE.Vector3(...point);
+    const p = this.toWorld(...point);
+    const d = new THREE.Vector3(...direction).normalize().applyMatrix3(new THREE.Matrix3().setFromMatrix4(this.group.matrix));
     this.controls.target.copy(p);
-    this.camera.position.copy(p).add(new THREE.Vector3(...direction).normalize().multiplyScalar(distance));
+    this.camera.position.copy(p).add(d.multiplyScalar(distance));
     this.controls.update();
     this.render();
   }
 
   marker(p) {
-    if (this.mark) this.scene.remove(this.mark);
+    if (this.mark) this.group.remove(this.mark);
     const r = Math.max(0.6, this.section.click_radius_mm);
     this.mark = new THREE.Mesh(new THREE.SphereGeometry(r, 16, 12), new THREE.MeshBasicMaterial({ color: 0xff2020, wireframe: true }));
     this.mark.position.copy(p);
-    this.scene.add(this.mark);
+    this.group.add(this.mark);
     this.render();
   }
 
@@ -485,9 +687,9 @@ class WorkpieceView {
     }
     if (!pts.length) { this.panel.innerHTML = '<p>No part inside the rectangle.</p>'; return; }
     const box = new THREE.Box3().setFromPoints(pts).expandByScalar(this.header.lattice_mm / 2);
-    if (this.boxHelper) this.scene.remove(this.boxHelper);
+    if (this.boxHelper) this.group.remove(this.boxHelper);
     this.boxHelper = new THREE.Box3Helper(box, 0xd00000);
-    this.scene.add(this.boxHelper);
+    this.group.add(this.boxHelper);
     this.render();
     const u = this.section.urls[this.pose].box;
     const q = `min_mm=${box.min.toArray().join(',')}&max_mm=${box.max.toArray().join(',')}`;
@@ -518,6 +720,8 @@ async function start() {
     showLogin();
     return;
   }
+  // a simulation's page shows a part: fetch three.js while the sections load (other kinds never fetch it)
+  if (prefix === '/simulations') loadThree().catch(() => { /* reported by the workpiece section */ });
   try {
     const data = await (await api(`${prefix}/${jobId}/view/data?token=${encodeURIComponent(token)}`)).json();
     document.title = `greybench: ${data.title} ${jobId.slice(0, 8)}`;
@@ -527,6 +731,9 @@ async function start() {
       const render = RENDER[s.type];
       if (render) render(s, el);
       else el.insertAdjacentHTML('beforeend', `<pre>${esc(JSON.stringify(s, null, 1))}</pre>`);
+    }
+    if (data.pdf && !data.sections.some((s) => s.type === 'header')) {
+      $('header').insertAdjacentHTML('beforeend', `<a class="pdf-link" href="${esc(data.pdf)}" download>printable report (PDF)</a>`);
     }
     window.greybenchView.data = data;
     if (!data.sections.some((s) => s.type === 'workpiece' && s.poses.length)) {
