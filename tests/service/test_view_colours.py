@@ -291,6 +291,8 @@ def test_printable_report_from_the_page(job, browser, tmp_path):
     from PIL import Image
 
     colour = [np.asarray(Image.open(p).convert("RGB")).astype(int) for p in sorted(tmp_path.glob("page-*.png"))]
-    assert any((np.ptp(c, axis=2) > 60).mean() > 0.05 for c in colour)
+    # (Table 2's coloured cells make one such page; the short test program's part is mostly grey stock)
+    shares = sorted(float((np.ptp(c, axis=2) > 60).mean()) for c in colour)
+    assert len(shares) >= 2 and shares[-2] > 0.01, f"coloured share per page: {shares}"
     # without a key or a link: refused
     assert httpx.get(f"{srv.url}/simulations/{job_id}/view/report.pdf").status_code == 401
