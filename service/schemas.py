@@ -132,6 +132,9 @@ class SimulationOptions(StrictRequest):
     material: Name | None = Field(None, description="workpiece material in data/materials.toml (default Al7075)")
     shares: bool = Field(False, description="also re-run each pose with deflection, friction and switching off in "
                                             "turn (3 more simulations per pose) to report each component's share")
+    workers: int = Field(1, ge=1, le=8, description="simulations at once [-]: worker processes of the job "
+                                                    "(rank-poses --workers), or Ray tasks when the service has a "
+                                                    "Ray address; the ranking does not depend on it")
 
 
 class SimulationRequest(StrictRequest):
@@ -275,7 +278,8 @@ class JobList(Strict):
 
 
 class RankingEntry(BaseModel):
-    """One pose of a ranking (``ranking.json`` of the job, written by :func:`service.pipeline.rank`)."""
+    """One pose of a ranking (``ranking.json`` of the job: :func:`simulate.evaluation.ranking.ranking_json`,
+    what ``greybench rank-poses --json`` prints)."""
 
     pose: str
     score: float = Field(description="ranking score: sum over the Table-2 rows of |deviation| / tolerance "
@@ -304,6 +308,9 @@ class FeatureRow(Strict):
     deviation_mm: dict[str, float | None] = Field(description="pose -> deviation [mm]")
     worst_instance: dict[str, str] = Field(default_factory=dict,
                                            description="pose -> the instance (wall, edge, line) the deviation is from")
+    in_tolerance: dict[str, bool] = Field(default_factory=dict,
+                                          description="pose -> |deviation| within the tolerance (empty in results "
+                                                      "stored before it was recorded)")
 
 
 class Report(Strict):
@@ -316,14 +323,20 @@ class Report(Strict):
 
     @classmethod
     def from_stored(cls, job: str, doc: dict) -> Report:
-        """From a job's ``report.json`` (rows with ``nominal``, ``tolerance``, ``deviation`` in mm or deg)."""
+        """From a job's ``report.json`` (:func:`simulate.evaluation.ranking.report_json`; older jobs' rows
+        with ``nominal``, ``tolerance``, ``deviation`` in mm or deg are read too)."""
         return cls(job=job, poses=doc["poses"], features=[feature_row(r) for r in doc["features"]])
 
 
 
 def feature_row(row: dict) -> FeatureRow:
-    """A stored Table-2 row with the unit in every field name; form rows lose their nominal."""
+    """A stored Table-2 row with the unit in every field name: a row of
+    :func:`simulate.evaluation.ranking.ranking_json` as it is; a row of an older job (``nominal``,
+    ``tolerance``, ``deviation`` in mm or deg) renamed, form rows losing their nominal."""
     from simulate.evaluation.features import FORM_ROWS
+
+    if "tolerance_mm" in row:
+        return FeatureRow.model_validate({k: row[k] for k in FeatureRow.model_fields if k in row})
 
     nominal, text = row.get("nominal"), str(row.get("nominal_text", ""))
     form = row["name"] in FORM_ROWS
@@ -347,7 +360,7 @@ def report_frame(doc: dict) -> pd.DataFrame:
     for stored in doc["features"]:
         row = feature_row(stored)
         for pose, dev in row.deviation_mm.items():
-            ok = None if dev is None else abs(dev) <= row.tolerance_mm
+            ok = row.in_tolerance.get(pose, None if dev is None else abs(dev) <= row.tolerance_mm)
             rows.append([row.name, row.nominal_mm, row.nominal_deg, row.tolerance_mm, pose, dev, ok])
     return pd.DataFrame(rows, columns=list(REPORT_CSV_COLUMNS))
 

@@ -253,13 +253,14 @@ def machining_summary(res: MachiningResult) -> MachiningSummary:
 def rank_program(program: Path, robot: Path, poses: Path, *, settings: RankSettings,
                  components: RankComponents, shares: bool = False, out_dir: Path | None = None, workers: int = 2,
                  friction: dict[int, str] | None = None, progress: Progress = quiet,
-                 setup: Path | None = None) -> Ranking:
+                 setup: Path | None = None, ray_address: str | None = None) -> Ranking:
     """Simulate the program in every pose of the pose file, measure and rank the virtual parts
     (:func:`simulate.evaluation.ranking.rank_poses`); with ``out_dir`` also the report
     (:func:`simulate.evaluation.report.write_report`). ``friction``: joint -> model reference in place
-    of the robot file's (errors name ``--friction``). Ray tasks instead of processes when
-    ``RAY_ADDRESS`` is set. Progress in simulations ("simulating poses"). ``setup``: a setup file
-    (work offsets, tool table; :mod:`simulate.toolpath.setup`)."""
+    of the robot file's (errors name ``--friction``). ``workers`` processes, or Ray tasks on the cluster
+    at ``ray_address`` (None: ``RAY_ADDRESS`` when set; ``""``: no Ray). Progress in simulations
+    ("simulating poses"). ``setup``: a setup file (work offsets, tool table; :mod:`simulate.toolpath.setup`).
+    The one ranking workflow: ``greybench rank-poses`` and the service's simulation jobs call it."""
     from simulate.evaluation.ranking import COMPONENTS, rank_poses
     from simulate.robot.friction import joint_rows
     from simulate.robot.model import load_robot
@@ -284,7 +285,8 @@ def rank_program(program: Path, robot: Path, poses: Path, *, settings: RankSetti
     with progress("simulating poses", n_jobs) as advance:
         r = rank_poses(program, robot, placements, settings=settings, components=components, shares=shares,
                        out_dir=out_dir, workers=workers, advance=advance, friction=friction,
-                       ray_address=os.environ.get("RAY_ADDRESS"), setup=tables)
+                       ray_address=(os.environ.get("RAY_ADDRESS") if ray_address is None else ray_address) or None,
+                       setup=tables)
     if out_dir is not None:
         from simulate.evaluation.report import write_report
 
