@@ -39,6 +39,7 @@ from service.jobs import DataDirLock, JobKind, JobManager, JobRecord, JobState, 
 from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside, named_file
 from service.schemas import (
     MAX_PAGE,
+    REPORT_CSV_COLUMNS,
     STATUS_BY_KIND,
     AnyJobStatus,
     DiagnoseJobStatus,
@@ -59,6 +60,7 @@ from service.schemas import (
     Responses,
     SimulationJobStatus,
     SimulationRequest,
+    file_responses,
 )
 from service.settings import ServiceSettings, load_settings
 
@@ -606,7 +608,9 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
     @app.get("/simulations/{job_id}/report", response_model=Report, dependencies=keyed, tags=["simulations"],
              responses={**not_found, 409: {"model": ErrorBody},
-                        200: {"content": {"text/csv": {}}, "description": "the report (JSON, or CSV with format=csv)"}})
+                        200: {"content": {"text/csv": {"schema": {"type": "string"}}},
+                             "description": "the report (JSON, or CSV with format=csv: columns "
+                                            + ", ".join(REPORT_CSV_COLUMNS) + ")"}})
     def report(request: Request, job_id: str = job_id_param,
                format: Literal["json", "csv"] = Query("json", description="json or csv")):
         rec = _job(request, job_id, JobKind.simulation)
@@ -619,7 +623,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     @app.get("/simulations/{job_id}/workpiece/{pose}.glb", dependencies=keyed, tags=["simulations"],
              response_class=FileResponse,
              responses={**not_found, 409: {"model": ErrorBody},
-                        200: {"content": {"model/gltf-binary": {}}, "description": "virtual workpiece mesh"}})
+                        **file_responses(["model/gltf-binary"], "virtual workpiece mesh (binary glTF, "
+                                                                      "coloured by deflection)")})
     def workpiece(request: Request, job_id: str = job_id_param,
                   pose: str = PathParam(pattern=NAME_PATTERN, description="pose name")):
         rec = _job(request, job_id, JobKind.simulation)

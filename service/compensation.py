@@ -41,6 +41,7 @@ from service.schemas import (
     SinglePoseJob,
     StrictRequest,
     exactly_one,
+    file_responses,
 )
 from simulate.compensation.settings import CompensationSettings
 from simulate.defaults import RANKING_DEXEL_SPACING
@@ -131,7 +132,8 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
         return svc._status(request.app.state.manager.cancel(job_id))
 
     @app.get("/compensations/{job_id}/files/{name}", dependencies=keyed, tags=["compensations"],
-             response_class=FileResponse, responses={**not_found, 409: {"model": ErrorBody}})
+             response_class=FileResponse,
+             responses={**not_found, 409: {"model": ErrorBody}, **file_responses(FILES.values(), "the file")})
     def compensation_file(request: Request, job_id: str = job_id_param,
                           name: str = PathParam(pattern=NAME_PATTERN, description="file name (see the list)")):
         return svc._out_file(request, job_id, JobKind.compensation, name, FILES)

@@ -255,6 +255,13 @@ class CircleJobStatus(JobStatus):
 #: A route's documented error answers (FastAPI's ``responses``), e.g. ``{404: {"model": ErrorBody}}``.
 Responses = dict[int | str, dict[str, Any]]
 
+
+def file_responses(media_types, description: str) -> Responses:
+    """The 200 answer of a file route in the OpenAPI: each of ``media_types`` with a binary body
+    (``type: string, format: binary``), so a generated client keeps the route and returns the bytes."""
+    body = {"schema": {"type": "string", "format": "binary"}}
+    return {200: {"content": {mt: dict(body) for mt in sorted(set(media_types))}, "description": description}}
+
 #: Any job's status: one of the kinds, told apart by ``kind`` (OpenAPI ``oneOf`` with a discriminator).
 AnyJobStatus = Annotated[SimulationJobStatus | DiagnoseJobStatus | ExplainJobStatus | CompensationJobStatus
                          | PlacementSearchJobStatus | CircleJobStatus, Field(discriminator="kind")]
@@ -313,12 +320,31 @@ class FeatureRow(Strict):
                                                       "stored before it was recorded)")
 
 
+class PoseSummary(Strict):
+    """One pose of a report (:func:`simulate.evaluation.ranking.pose_summary`); fields other than ``pose``
+    are null in results stored before they were recorded."""
+
+    pose: str
+    steps: int | None = Field(None, description="2 ms cycles simulated [-]")
+    simulated_time_s: float | None = Field(None, description="simulated machining time [s]")
+    switching_points: int | None = Field(None, description="cycles with an axis switching (stop or reversal) [-]")
+    peak_force_n: float | None = Field(None, description="largest cutting force [N]")
+    peak_deflection_m: float | None = Field(None, description="largest tool deflection [m]")
+    max_tracking_error_m: float | None = Field(None, description="largest servo tracking error, workpiece frame [m]")
+    rms_tracking_error_m: float | None = Field(None, description="RMS servo tracking error, workpiece frame [m]")
+    score: float | None = Field(None, description="sum over the Table-2 rows of |deviation| / tolerance [-]")
+    in_tolerance: int | None = Field(None, ge=0, description="Table-2 rows within their tolerance [-] (of 10)")
+    worst_feature: str | None = Field(None, description="the row with the largest |deviation| / tolerance")
+    friction: list[dict[str, Any]] = Field(default_factory=list,
+                                           description="per joint: kind and the registered version used "
+                                                       "('model') or 'source' (robot-file, off, no servo)")
+    shares: dict[str, dict[str, float]] | None = Field(None, description="with options.shares: per row and "
+                                                                         "'score' each component's share [0..1]")
+
+
 class Report(Strict):
     job: str
-    poses: list[dict[str, Any]] = Field(description="per pose: steps, simulated_time_s [s], switching points, "
-                                                    "max_tracking_error_m [m], peak_force_n [N], "
-                                                    "peak_deflection_m [m], friction (per joint the model kind "
-                                                    "and registered version used)")
+    poses: list[PoseSummary] = Field(description="per pose: process figures, score and the friction models used")
     features: list[FeatureRow]
 
     @classmethod
