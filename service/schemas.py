@@ -370,7 +370,9 @@ def feature_row(row: dict) -> FeatureRow:
     return FeatureRow(name=row["name"], nominal_mm=None if form or angle else nominal,
                       nominal_deg=nominal if angle and not form else None, nominal_text="-" if form else text,
                       tolerance_mm=row["tolerance"], deviation_mm=row["deviation"],
-                      worst_instance=row.get("worst_instance") or {})
+                      worst_instance=row.get("worst_instance") or {},
+                      in_tolerance={pose: abs(dev) <= row["tolerance"] for pose, dev in row["deviation"].items()
+                                    if dev is not None})
 
 
 #: Columns of the CSV report (one row per feature and pose).
