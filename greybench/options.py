@@ -34,8 +34,8 @@ ProbeSpacing = Annotated[float, typer.Option("--probe-spacing", help="Virtual CM
 Size = Annotated[int | None, typer.Option("--size", help="Test piece size [mm]: 160 or 320 (default: the stock's "
                                                          "size_mm).")]
 StiffnessScale = Annotated[float, typer.Option("--stiffness-scale", help="Joint stiffness multiplier [-].")]
-Workers = Annotated[int, typer.Option("--workers", help="Simulations at once [-] (processes, at most 2; Ray tasks "
-                                                        "when RAY_ADDRESS is set).")]
+Workers = Annotated[int, typer.Option("--workers", help="Simulations at once [-] (worker processes; Ray tasks when "
+                                                        "RAY_ADDRESS is set).")]
 Friction = Annotated[list[str] | None, typer.Option(
     "--friction", help="AXIS=MODEL: friction model reference for a joint (saved folder, runs:/<id>/model, "
                        "models:/<name>@<alias>), repeatable; others keep the robot file's.")]

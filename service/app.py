@@ -39,6 +39,7 @@ from service.jobs import DataDirLock, JobKind, JobManager, JobRecord, JobState, 
 from service.paths import JOB_ID_PATTERN, NAME_PATTERN, NotFound, check_job_id, check_name, inside, named_file
 from service.schemas import (
     MAX_PAGE,
+    REPORT_CSV_COLUMNS,
     STATUS_BY_KIND,
     AnyJobStatus,
     DiagnoseJobStatus,
@@ -59,6 +60,7 @@ from service.schemas import (
     Responses,
     SimulationJobStatus,
     SimulationRequest,
+    file_responses,
 )
 from service.settings import ServiceSettings, load_settings
 
@@ -262,16 +264,6 @@ def _submitted(request: Request, kind: JobKind, job: dict, prepare, location: st
                             headers={"Location": f"{location}/{rec.id}"})
 
 
-def _ascii_digits(text: str, source: str, field: str) -> None:
-    """422 naming the line and column of the first digit outside 0-9 (Python reads Arabic-Indic and other
-    Unicode digits as numbers; no controller does)."""
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        for col, ch in enumerate(line, start=1):
-            if ch.isdigit() and not ch.isascii():
-                raise InputError(f"non-ASCII digit '{ch}' (U+{ord(ch):04X}): G-code numbers use the digits 0-9",
-                                 source=source, field=field, line=lineno, column=col)
-
-
 def _program(body, limits) -> tuple[str, str, str, str]:
     """(text, source, stock text, stock source) of a named program or inline G-code and its stock. The
     program is parsed once to give 422 naming the line (its length checked first: parsing a huge program
@@ -279,7 +271,7 @@ def _program(body, limits) -> tuple[str, str, str, str]:
     spindle on is refused here, not a minute later in the job (every job kind takes the spindle speed
     from the program)."""
     from simulate.costs import check_program_size
-    from simulate.toolpath.gcode import parse_program
+    from simulate.run import check_program_text
 
     if body.program is not None:
         path = named_file("programs", body.program, ".nc", "program")
@@ -288,28 +280,16 @@ def _program(body, limits) -> tuple[str, str, str, str]:
         text, source = body.gcode, "gcode"
     field = "program" if body.program is not None else "gcode"
     check_program_size(text, limits, source=source, field=field)
-    _ascii_digits(text, source, field)
-    prog = parse_program(text, source=source)
+    check_program_text(text, source, field)   # the CLI's check (digits, parse, motion, spindle)
     stock_text, stock_source = _stock(body)
-    if not prog.segments:
-        raise InputError("the program has no motion (empty, or only comments and settings)", source=source,
-                         field=field)
-    if not any(getattr(seg, "spindle", 0) > 0 for seg in prog.segments):
-        raise InputError("the program never switches the spindle on (no S word with M3/M4 before a cut)",
-                         source=source, field=field)
     return text, source, stock_text, stock_source
 
 
 def _material(name: str | None, field: str) -> None:
-    """422 naming ``field`` for a material not in data/materials.toml (checked before the job starts)."""
-    from simulate.machining.cutting import load_material
+    """422 naming ``field`` for a material not in data/materials.toml (the CLI's check)."""
+    from simulate.run import check_material
 
-    if name is None:
-        return
-    try:
-        load_material(name)
-    except InputError as exc:
-        raise InputError(exc.message, source="materials.toml", field=field) from None
+    check_material(name, field)
 
 
 def _finite_columns(frame: pd.DataFrame, columns: tuple[str, ...], source: str) -> None:
@@ -394,21 +374,14 @@ def _poses(body: SimulationRequest) -> list[dict]:
 
 def _reach(text: str, source: str, robot: str, poses: list[dict], fields: list[str]) -> None:
     """422 naming ``fields[i]`` when pose ``i`` puts a point of the program out of reach, beyond a joint
-    limit or above a joint speed limit: the pipeline's own check
-    (:func:`simulate.toolpath.placement.joint_trajectory`), run here so the job is never queued (tens of
-    ms for a 160 mm test piece, against a job that fails a minute later)."""
+    limit or above a joint speed limit (:func:`simulate.run.check_reach`, the CLI's check), run here so the
+    job is never queued (tens of ms for a 160 mm test piece, against a job that fails a minute later)."""
     from simulate.robot.model import load_robot
-    from simulate.toolpath.gcode import parse_program
-    from simulate.toolpath.interpolation import PathLimits, interpolate
-    from simulate.toolpath.placement import joint_trajectory, parse_poses
+    from simulate.run import check_reach
+    from simulate.toolpath.placement import parse_poses
 
-    interp = interpolate(parse_program(text, source=source), PathLimits())   # as simulate.pipeline.load_program
     rob = load_robot(named_file("robots", robot, ".toml", "robot"))
-    for placement, field in zip(parse_poses({"poses": poses}, source="poses"), fields, strict=True):
-        try:
-            joint_trajectory(rob, interp, placement, source=source)
-        except InputError as exc:
-            raise InputError(exc.message, source=source, field=field, line=exc.line) from None
+    check_reach(text, source, rob, parse_poses({"poses": poses}, source="poses"), fields)
 
 
 def _pose_fields(inline: list[PoseIn] | None, select: list[str] | None, poses: list[dict]) -> list[str]:
@@ -606,7 +579,9 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
 
     @app.get("/simulations/{job_id}/report", response_model=Report, dependencies=keyed, tags=["simulations"],
              responses={**not_found, 409: {"model": ErrorBody},
-                        200: {"content": {"text/csv": {}}, "description": "the report (JSON, or CSV with format=csv)"}})
+                        200: {"content": {"text/csv": {"schema": {"type": "string"}}},
+                             "description": "the report (JSON, or CSV with format=csv: columns "
+                                            + ", ".join(REPORT_CSV_COLUMNS) + ")"}})
     def report(request: Request, job_id: str = job_id_param,
                format: Literal["json", "csv"] = Query("json", description="json or csv")):
         rec = _job(request, job_id, JobKind.simulation)
@@ -619,7 +594,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     @app.get("/simulations/{job_id}/workpiece/{pose}.glb", dependencies=keyed, tags=["simulations"],
              response_class=FileResponse,
              responses={**not_found, 409: {"model": ErrorBody},
-                        200: {"content": {"model/gltf-binary": {}}, "description": "virtual workpiece mesh"}})
+                        **file_responses(["model/gltf-binary"], "virtual workpiece mesh (binary glTF, "
+                                                                      "coloured by deflection)")})
     def workpiece(request: Request, job_id: str = job_id_param,
                   pose: str = PathParam(pattern=NAME_PATTERN, description="pose name")):
         rec = _job(request, job_id, JobKind.simulation)

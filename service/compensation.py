@@ -41,6 +41,7 @@ from service.schemas import (
     SinglePoseJob,
     StrictRequest,
     exactly_one,
+    file_responses,
 )
 from simulate.compensation.settings import CompensationSettings
 from simulate.defaults import RANKING_DEXEL_SPACING
@@ -133,7 +134,8 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
         return svc._status(request.app.state.manager.cancel(job_id))
 
     @app.get("/compensations/{job_id}/files/{name}", dependencies=keyed, tags=["compensations"],
-             response_class=FileResponse, responses={**not_found, 409: {"model": ErrorBody}})
+             response_class=FileResponse,
+             responses={**not_found, 409: {"model": ErrorBody}, **file_responses(FILES.values(), "the file")})
     def compensation_file(request: Request, job_id: str = job_id_param,
                           name: str = PathParam(pattern=NAME_PATTERN, description="file name (see the list)")):
         return svc._out_file(request, job_id, JobKind.compensation, name, FILES)
@@ -141,20 +143,20 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
 
 def run(request: dict, job_dir: Path, progress) -> dict:
     """The job body: fetch the friction models, compensate, write the files into ``<job>/out``."""
-    from service.pipeline import DATA_DIR, PoseTask, _model_folders, pose_tasks
+    from service.pipeline import DATA_DIR, fetch_models
     from simulate.compensation import progress_total, run_compensation
 
-    req = dict(request, poses=[request["pose"]])
-    task: PoseTask = pose_tasks(req, job_dir, progress)[0]
+    folders, _ = fetch_models(request, job_dir, progress)
+    pose = request["pose"]
     opts = request.get("options", {})
     scratch = Path(tempfile.mkdtemp(prefix="greybench-compensate-"))
     try:
         program = scratch / "program.nc"
-        program.write_text(task.program_text)
-        (scratch / "program.stock.json").write_text(task.stock_text)
+        program.write_text((job_dir / "program.nc").read_text())
+        (scratch / "program.stock.json").write_text((job_dir / "stock.json").read_text())
         poses = scratch / "poses.json"
-        poses.write_text(json.dumps({"poses": [task.pose]}))
-        robot = DATA_DIR / "robots" / f"{task.robot}.toml"
+        poses.write_text(json.dumps({"poses": [pose]}))
+        robot = DATA_DIR / "robots" / f"{request['robot']}.toml"
         done = [0]
         progress(0.05, "simulating the original program")
 
@@ -164,22 +166,22 @@ def run(request: dict, job_dir: Path, progress) -> dict:
 
         from simulate.pipeline import load_program
 
-        interp = load_program(program, require_spindle=True, source=task.program_source).interp
+        interp = load_program(program, require_spindle=True, source=request["program_source"]).interp
         # run_compensation counts up to exactly this total (the original's steps per simulation)
         iterations = int(opts.get("iterations", CompensationSettings.iterations))
         total = [progress_total(len(interp.t), iterations, float(opts.get("stiffness_scale", 1.0)),
                                 opts.get("check_scales", []))]
         try:
-            info = run_compensation(program, robot, poses, task.pose["name"], job_dir / "out",
+            info = run_compensation(program, robot, poses, pose["name"], job_dir / "out",
                                     iterations=iterations,
                                     stiffness_scale=float(opts.get("stiffness_scale", 1.0)),
                                     check_scales=tuple(opts.get("check_scales", [])),
                                     spacing_mm=float(opts.get("spacing_mm", RANKING_DEXEL_SPACING * 1e3)),
-                                    friction=_model_folders(task), ff_friction=bool(opts.get("ff_friction", False)),
+                                    friction=folders, ff_friction=bool(opts.get("ff_friction", False)),
                                     backlash_comp=bool(opts.get("backlash_comp", False)), advance=advance)
         except InputError as exc:   # name the program as the client knows it
             if exc.source == str(program):
-                exc = InputError(exc.message, source=task.program_source, field=exc.field, row=exc.row,
+                exc = InputError(exc.message, source=request["program_source"], field=exc.field, row=exc.row,
                                  line=exc.line, column=exc.column)
             raise exc from None
     finally:

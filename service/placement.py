@@ -41,6 +41,7 @@ from service.schemas import (
     Responses,
     StrictRequest,
     exactly_one,
+    file_responses,
 )
 from simulate.defaults import RANKING_DEXEL_SPACING
 
@@ -182,7 +183,8 @@ def add_routes(app: FastAPI, settings, keyed: list, svc: ModuleType) -> None:
         return svc._status(request.app.state.manager.cancel(job_id))
 
     @app.get("/placement-searches/{job_id}/files/{name}", dependencies=keyed, tags=["placement-searches"],
-             response_class=FileResponse, responses={**not_found, 409: {"model": ErrorBody}})
+             response_class=FileResponse,
+             responses={**not_found, 409: {"model": ErrorBody}, **file_responses(FILES.values(), "the file")})
     def placement_search_file(request: Request, job_id: str = job_id_param,
                               name: str = PathParam(pattern=NAME_PATTERN, description="file name (see the list)")):
         rec = svc._job(request, job_id, kind)

@@ -132,6 +132,9 @@ class SimulationOptions(StrictRequest):
     material: Name | None = Field(None, description="workpiece material in data/materials.toml (default Al7075)")
     shares: bool = Field(False, description="also re-run each pose with deflection, friction and switching off in "
                                             "turn (3 more simulations per pose) to report each component's share")
+    workers: int = Field(1, ge=1, le=8, description="simulations at once [-]: worker processes of the job "
+                                                    "(rank-poses --workers), or Ray tasks when the service has a "
+                                                    "Ray address; the ranking does not depend on it")
 
 
 class SimulationRequest(StrictRequest):
@@ -252,6 +255,13 @@ class CircleJobStatus(JobStatus):
 #: A route's documented error answers (FastAPI's ``responses``), e.g. ``{404: {"model": ErrorBody}}``.
 Responses = dict[int | str, dict[str, Any]]
 
+
+def file_responses(media_types, description: str) -> Responses:
+    """The 200 answer of a file route in the OpenAPI: each of ``media_types`` with a binary body
+    (``type: string, format: binary``), so a generated client keeps the route and returns the bytes."""
+    body = {"schema": {"type": "string", "format": "binary"}}
+    return {200: {"content": {mt: dict(body) for mt in sorted(set(media_types))}, "description": description}}
+
 #: Any job's status: one of the kinds, told apart by ``kind`` (OpenAPI ``oneOf`` with a discriminator).
 AnyJobStatus = Annotated[SimulationJobStatus | DiagnoseJobStatus | ExplainJobStatus | CompensationJobStatus
                          | PlacementSearchJobStatus | CircleJobStatus, Field(discriminator="kind")]
@@ -275,7 +285,8 @@ class JobList(Strict):
 
 
 class RankingEntry(BaseModel):
-    """One pose of a ranking (``ranking.json`` of the job, written by :func:`service.pipeline.rank`)."""
+    """One pose of a ranking (``ranking.json`` of the job: :func:`simulate.evaluation.ranking.ranking_json`,
+    what ``greybench rank-poses --json`` prints)."""
 
     pose: str
     score: float = Field(description="ranking score: sum over the Table-2 rows of |deviation| / tolerance "
@@ -304,26 +315,54 @@ class FeatureRow(Strict):
     deviation_mm: dict[str, float | None] = Field(description="pose -> deviation [mm]")
     worst_instance: dict[str, str] = Field(default_factory=dict,
                                            description="pose -> the instance (wall, edge, line) the deviation is from")
+    in_tolerance: dict[str, bool] = Field(default_factory=dict,
+                                          description="pose -> |deviation| within the tolerance (empty in results "
+                                                      "stored before it was recorded)")
+
+
+class PoseSummary(Strict):
+    """One pose of a report (:func:`simulate.evaluation.ranking.pose_summary`); fields other than ``pose``
+    are null in results stored before they were recorded."""
+
+    pose: str
+    steps: int | None = Field(None, description="2 ms cycles simulated [-]")
+    simulated_time_s: float | None = Field(None, description="simulated machining time [s]")
+    switching_points: int | None = Field(None, description="cycles with an axis switching (stop or reversal) [-]")
+    peak_force_n: float | None = Field(None, description="largest cutting force [N]")
+    peak_deflection_m: float | None = Field(None, description="largest tool deflection [m]")
+    max_tracking_error_m: float | None = Field(None, description="largest servo tracking error, workpiece frame [m]")
+    rms_tracking_error_m: float | None = Field(None, description="RMS servo tracking error, workpiece frame [m]")
+    score: float | None = Field(None, description="sum over the Table-2 rows of |deviation| / tolerance [-]")
+    in_tolerance: int | None = Field(None, ge=0, description="Table-2 rows within their tolerance [-] (of 10)")
+    worst_feature: str | None = Field(None, description="the row with the largest |deviation| / tolerance")
+    friction: list[dict[str, Any]] = Field(default_factory=list,
+                                           description="per joint: kind and the registered version used "
+                                                       "('model') or 'source' (robot-file, off, no servo)")
+    shares: dict[str, dict[str, float]] | None = Field(None, description="with options.shares: per row and "
+                                                                         "'score' each component's share [0..1]")
 
 
 class Report(Strict):
     job: str
-    poses: list[dict[str, Any]] = Field(description="per pose: steps, simulated_time_s [s], switching points, "
-                                                    "max_tracking_error_m [m], peak_force_n [N], "
-                                                    "peak_deflection_m [m], friction (per joint the model kind "
-                                                    "and registered version used)")
+    poses: list[PoseSummary] = Field(description="per pose: process figures, score and the friction models used")
     features: list[FeatureRow]
 
     @classmethod
     def from_stored(cls, job: str, doc: dict) -> Report:
-        """From a job's ``report.json`` (rows with ``nominal``, ``tolerance``, ``deviation`` in mm or deg)."""
+        """From a job's ``report.json`` (:func:`simulate.evaluation.ranking.report_json`; older jobs' rows
+        with ``nominal``, ``tolerance``, ``deviation`` in mm or deg are read too)."""
         return cls(job=job, poses=doc["poses"], features=[feature_row(r) for r in doc["features"]])
 
 
 
 def feature_row(row: dict) -> FeatureRow:
-    """A stored Table-2 row with the unit in every field name; form rows lose their nominal."""
+    """A stored Table-2 row with the unit in every field name: a row of
+    :func:`simulate.evaluation.ranking.ranking_json` as it is; a row of an older job (``nominal``,
+    ``tolerance``, ``deviation`` in mm or deg) renamed, form rows losing their nominal."""
     from simulate.evaluation.features import FORM_ROWS
+
+    if "tolerance_mm" in row:
+        return FeatureRow.model_validate({k: row[k] for k in FeatureRow.model_fields if k in row})
 
     nominal, text = row.get("nominal"), str(row.get("nominal_text", ""))
     form = row["name"] in FORM_ROWS
@@ -331,7 +370,9 @@ def feature_row(row: dict) -> FeatureRow:
     return FeatureRow(name=row["name"], nominal_mm=None if form or angle else nominal,
                       nominal_deg=nominal if angle and not form else None, nominal_text="-" if form else text,
                       tolerance_mm=row["tolerance"], deviation_mm=row["deviation"],
-                      worst_instance=row.get("worst_instance") or {})
+                      worst_instance=row.get("worst_instance") or {},
+                      in_tolerance={pose: abs(dev) <= row["tolerance"] for pose, dev in row["deviation"].items()
+                                    if dev is not None})
 
 
 #: Columns of the CSV report (one row per feature and pose).
@@ -347,7 +388,7 @@ def report_frame(doc: dict) -> pd.DataFrame:
     for stored in doc["features"]:
         row = feature_row(stored)
         for pose, dev in row.deviation_mm.items():
-            ok = None if dev is None else abs(dev) <= row.tolerance_mm
+            ok = row.in_tolerance.get(pose, None if dev is None else abs(dev) <= row.tolerance_mm)
             rows.append([row.name, row.nominal_mm, row.nominal_deg, row.tolerance_mm, pose, dev, ok])
     return pd.DataFrame(rows, columns=list(REPORT_CSV_COLUMNS))
 

@@ -86,6 +86,66 @@ def check_cost(program: Path, stock: Path | None, spacing_mm: float, simulations
                          fields=CostFields(program="--program", spacing="--spacing", stock="--stock"), setup=setup)
 
 
+# ---- submission checks: the CLI and the service alike ------------------------------------------
+def check_digits(text: str, source: str, field: str | None = None) -> None:
+    """``InputError`` naming the line and column of the first digit outside 0-9 (Python reads Arabic-Indic
+    and other Unicode digits as numbers; no controller does)."""
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        for col, ch in enumerate(line, start=1):
+            if ch.isdigit() and not ch.isascii():
+                raise InputError(f"non-ASCII digit '{ch}' (U+{ord(ch):04X}): G-code numbers use the digits 0-9",
+                                 source=source, field=field, line=lineno, column=col)
+
+
+def check_program_text(text: str, source: str, field: str | None = None, *, spindle_rpm: float | None = None,
+                       setup: MachineSetup | None = None) -> None:
+    """The program checks every machining submission passes before any work (``greybench rank-poses`` and
+    the service's jobs): ASCII digits (:func:`check_digits`), the program parses (``InputError`` naming
+    the line), it has motion (not empty or comments only) and, without a default ``spindle_rpm``
+    [rev/min], it switches the spindle on."""
+    from simulate.toolpath.gcode import parse_program
+    from simulate.toolpath.setup import setup_tables
+
+    check_digits(text, source, field)
+    prog = parse_program(text, source=source, **setup_tables(setup))
+    if not prog.segments:
+        raise InputError("the program has no motion (empty, or only comments and settings)", source=source,
+                         field=field)
+    if spindle_rpm is None and not any(getattr(seg, "spindle", 0) > 0 for seg in prog.segments):
+        raise InputError("the program never switches the spindle on (no S word with M3/M4 before a cut)",
+                         source=source, field=field)
+
+
+def check_material(name: str | None, field: str = "material") -> None:
+    """``InputError`` naming ``field`` for a material not in ``data/materials.toml`` (None: the default)."""
+    from simulate.machining.cutting import load_material
+
+    if name is None:
+        return
+    try:
+        load_material(name)
+    except InputError as exc:
+        raise InputError(exc.message, source="materials.toml", field=field) from None
+
+
+def check_reach(text: str, source: str, rob: Robot, placements: Sequence[Placement], fields: Sequence[str], *,
+                setup: MachineSetup | None = None) -> None:
+    """``InputError`` naming ``fields[i]`` (and the program line) when placement ``i`` puts a point of the
+    program out of reach, beyond a joint limit or above a joint speed limit: the pipeline's own check
+    (:func:`simulate.toolpath.placement.joint_trajectory`) before any simulation starts."""
+    from simulate.toolpath.gcode import parse_program
+    from simulate.toolpath.interpolation import PathLimits, interpolate
+    from simulate.toolpath.placement import joint_trajectory
+    from simulate.toolpath.setup import setup_tables
+
+    interp = interpolate(parse_program(text, source=source, **setup_tables(setup)), PathLimits())
+    for placement, field in zip(placements, fields, strict=True):
+        try:
+            joint_trajectory(rob, interp, placement, source=source)
+        except InputError as exc:
+            raise InputError(exc.message, source=source, field=field, line=exc.line) from None
+
+
 # ---- one part: greybench machine --------------------------------------------------------------
 def cutter_from_robot(rob: Robot) -> Cutter:
     """The cutter the robot carries: its file's ``[tool]`` table, via
@@ -261,13 +321,14 @@ def machining_summary(res: MachiningResult) -> MachiningSummary:
 def rank_program(program: Path, robot: Path, poses: Path, *, settings: RankSettings,
                  components: RankComponents, shares: bool = False, out_dir: Path | None = None, workers: int = 2,
                  friction: dict[int, str] | None = None, progress: Progress = quiet,
-                 setup: Path | None = None) -> Ranking:
+                 setup: Path | None = None, ray_address: str | None = None) -> Ranking:
     """Simulate the program in every pose of the pose file, measure and rank the virtual parts
     (:func:`simulate.evaluation.ranking.rank_poses`); with ``out_dir`` also the report
     (:func:`simulate.evaluation.report.write_report`). ``friction``: joint -> model reference in place
-    of the robot file's (errors name ``--friction``). Ray tasks instead of processes when
-    ``RAY_ADDRESS`` is set. Progress in simulations ("simulating poses"). ``setup``: a setup file
-    (work offsets, tool table; :mod:`simulate.toolpath.setup`)."""
+    of the robot file's (errors name ``--friction``). ``workers`` processes, or Ray tasks on the cluster
+    at ``ray_address`` (None: ``RAY_ADDRESS`` when set; ``""``: no Ray). Progress in simulations
+    ("simulating poses"). ``setup``: a setup file (work offsets, tool table; :mod:`simulate.toolpath.setup`).
+    The one ranking workflow: ``greybench rank-poses`` and the service's simulation jobs call it."""
     from simulate.evaluation.ranking import COMPONENTS, rank_poses
     from simulate.robot.friction import joint_rows
     from simulate.robot.model import load_robot
@@ -283,16 +344,22 @@ def rank_program(program: Path, robot: Path, poses: Path, *, settings: RankSetti
         raise InputError(exc.message, source=exc.source, field=field) from None
     placements = load_poses(poses)
     tables = None if setup is None else read_setup(setup)
+    text = program.read_text(errors="replace")
+    # the service's submission checks (one function each), before any worker starts
+    check_program_text(text, str(program), "--program", spindle_rpm=settings.spindle_rpm, setup=tables)
+    check_material(settings.material)
     # refused before anything is written: the poses, and with shares the component re-runs, run in turn
     n_jobs = len(placements) * (1 + (len(COMPONENTS) if shares else 0))
     check_cost(program, None, settings.spacing / MM, simulations=n_jobs, setup=tables)
+    check_reach(text, str(program), rob, placements, ["--poses"] * len(placements), setup=tables)
     _folder(out_dir)
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
     with progress("simulating poses", n_jobs) as advance:
         r = rank_poses(program, robot, placements, settings=settings, components=components, shares=shares,
                        out_dir=out_dir, workers=workers, advance=advance, friction=friction,
-                       ray_address=os.environ.get("RAY_ADDRESS"), setup=tables)
+                       ray_address=(os.environ.get("RAY_ADDRESS") if ray_address is None else ray_address) or None,
+                       setup=tables)
     if out_dir is not None:
         from simulate.evaluation.report import write_report
 

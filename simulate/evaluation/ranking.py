@@ -1,15 +1,20 @@
 """Pose ranking (paper 3.8 and 4): simulate the program in every workpiece placement, measure the
 virtual part like a CMM, score the Table-2 deviations and rank the placements.
 
-Per pose (one worker process each, at most ``workers`` at a time, or one Ray task each with a Ray address:
+Per pose (one worker process each, ``workers`` of them at a time, or one Ray task each with a Ray address:
 :mod:`simulate.parallel`) one run of the machining pipeline
 (:func:`simulate.pipeline.run_job`; the program is interpolated once for all poses): inverse kinematics
 for the placement with switching points, the coupled loop with the axis servos and each joint's friction
 model inside it, the translational compliance in the workpiece frame and the robot file's cutter, then
 the virtual CMM (:mod:`simulate.evaluation.cmm`) and the ten rows (:mod:`simulate.evaluation.features`).
 
+This is the one ranking of the project: ``greybench rank-poses`` (:func:`simulate.run.rank_program`) and
+the service's simulation jobs (:mod:`service.pipeline`) both call :func:`rank_poses` and store
+:func:`ranking_json` as ``ranking.json`` (and the service :func:`report_json` as ``report.json``).
+
 Score (lower is better): ``sum over rows of |deviation| / tolerance``; ties broken by more rows in
-tolerance, then by the pose name. Dimensionless, so a 15 um straightness tolerance weighs as much as
+tolerance, then by the pose name (:func:`rank_key`, the one sort key of every ranking).
+Dimensionless, so a 15 um straightness tolerance weighs as much as
 a 20 um diameter tolerance, which is how the paper colours Table 2 (best to worst per row).
 
 Components (:class:`Components`): ``deflection`` (compliance x cutting force), ``friction`` (each joint's
@@ -26,6 +31,7 @@ the dexel grid: no tool reaches it and it would only multiply the horizontal ray
 from __future__ import annotations
 
 import json
+import os
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -130,18 +136,28 @@ class PoseResult:
     xyz: np.ndarray | None = None
     switch: np.ndarray | None = None
     friction: list = field(default_factory=list)
+    worker: int = 0
 
     @property
     def score(self) -> float:
         return self.table.score
 
 
+def rank_key(result: PoseResult) -> tuple[float, int, str]:
+    """The sort key of a ranking (best first): score [-], then more rows in tolerance, then the pose name."""
+    return (result.score, -result.table.n_in_tolerance, result.pose)
+
+
 @dataclass(frozen=True)
 class RankEntry:
+    """One ranked pose: ``score`` [-] (sum of |deviation| / tolerance), ``in_tolerance`` (rows of 10),
+    ``rank`` (1 = best) and ``worst_feature`` (the row with the largest |deviation| / tolerance)."""
+
     pose: str
     score: float
     in_tolerance: int
     rank: int
+    worst_feature: str = ""
 
 
 @dataclass
@@ -160,6 +176,9 @@ class Ranking:
         In the pose file's order.
     wall_time : float
         s.
+    settings : RankSettings
+    workers : int
+        Processes the simulations ran in (1: this process; Ray: the tasks at once).
     """
 
     entries: list[RankEntry]
@@ -168,6 +187,7 @@ class Ranking:
     placements: list[Placement]
     wall_time: float = 0.0
     settings: RankSettings = field(default_factory=RankSettings)
+    workers: int = 1
 
     @property
     def best(self) -> str:
@@ -223,13 +243,9 @@ class _Job:
 def _run_job(job: _Job) -> PoseResult:
     """Simulate and measure one pose (runs in a worker process): one :func:`simulate.pipeline.run_job`."""
     from simulate.machining.virtual_workpiece import VirtualWorkpiece
+    from simulate.parallel import single_threaded
 
-    try:  # one numba thread per worker: the workers already fill the cores
-        import numba
-
-        numba.set_num_threads(1)
-    except (ImportError, ValueError):
-        pass
+    single_threaded()  # one numba thread per worker: the workers already fill the cores
     comp, pl = job.components, job.placement
     mo = run_job(MachiningJob(program=job.program, robot=job.robot, placement=pl, friction=dict(job.friction),
                               components=comp, settings=job.settings.machining()))
@@ -243,7 +259,7 @@ def _run_job(job: _Job) -> PoseResult:
         write_scan(scan, d / "scan.csv")
         wfile = VirtualWorkpiece(mo.workpiece, res.steps).save(d / "workpiece.npz")
         meta = {"program": str(Path(job.program.program).resolve()), "robot": str(job.robot), "pose": pl.name,
-                "xyz": pl.xyz.tolist(), "rpy": pl.rpy.tolist(), "spacing_m": job.settings.spacing,
+                "xyz": pl.xyz.tolist(), "rpy": pl.rpy.tolist(), "spacing_m": job.settings.spacing,  # m, rad
                 "components": comp.label(), "friction": mo.friction, "units": "m, workpiece frame"}
         write_text_atomic(d / "meta.json", json.dumps(meta, indent=1))
     keep = job.keep_steps
@@ -251,7 +267,7 @@ def _run_job(job: _Job) -> PoseResult:
     return PoseResult(pose=pl.name, components=comp, table=table, scan=scan,
                       steps=res.steps if keep else None, tcp_error=mo.tracking_error if keep else None,
                       workpiece_file=wfile, timings=mo.timings, xyz=jt.xyz if keep else None,
-                      switch=jt.switch if keep else None, friction=mo.friction)
+                      switch=jt.switch if keep else None, friction=mo.friction, worker=os.getpid())
 
 
 def rank_poses(program: str | Path, robot: str | Path, placements: list[Placement], *,
@@ -276,7 +292,7 @@ def rank_poses(program: str | Path, robot: str | Path, placements: list[Placemen
     out_dir : path, optional
         Per pose ``<out_dir>/<pose>/scan.csv`` and ``workpiece.npz`` (ranked runs only).
     workers : int
-        Parallel processes (at most 2 on the shared machine).
+        Worker processes on this machine: ``min(workers, simulations)`` run at once (1: in this process).
     advance : callable(n), optional
         Called once per finished simulation.
     friction : dict of int to str, optional
@@ -307,17 +323,18 @@ def rank_poses(program: str | Path, robot: str | Path, placements: list[Placemen
             for c in COMPONENTS:
                 jobs.append(_Job(prog, str(robot), pl, replace(components, **{c: False}), settings, fr, None, False))
     # worker processes on this machine, or Ray tasks when a Ray address is given (simulate.parallel)
-    results: list[PoseResult] = run_all(_run_job, jobs, workers=max(1, min(int(workers), 2, len(jobs))),
-                                        ray_address=ray_address, advance=advance)
+    n_workers = max(1, min(int(workers), len(jobs)))
+    results: list[PoseResult] = run_all(_run_job, jobs, workers=n_workers, ray_address=ray_address, advance=advance)
     n = len(placements)
     main = {r.pose: r for r in results[:n]}
     variants = {}
     for k, r in enumerate(results[n:]):
         variants[(r.pose, COMPONENTS[k % len(COMPONENTS)])] = r
-    ordered = sorted(main.values(), key=lambda r: (r.score, -r.table.n_in_tolerance, r.pose))
-    entries = [RankEntry(r.pose, r.score, r.table.n_in_tolerance, i + 1) for i, r in enumerate(ordered)]
+    ordered = sorted(main.values(), key=rank_key)
+    entries = [RankEntry(r.pose, r.score, r.table.n_in_tolerance, i + 1, r.table.worst.name)
+               for i, r in enumerate(ordered)]
     return Ranking(entries=entries, results=main, variants=variants, placements=list(placements),
-                   wall_time=time.perf_counter() - t0, settings=settings)
+                   wall_time=time.perf_counter() - t0, settings=settings, workers=n_workers)
 
 
 # ----------------------------------------------------------------------------- JSON
@@ -335,16 +352,51 @@ def feature_json(row) -> dict:
 
 
 def ranking_json(r: Ranking) -> dict:
-    """The ``rank-poses --json`` object: ``{"ranking": [{"rank", "pose", "score", "in_tolerance"}],
+    """The ``rank-poses --json`` object and ``ranking.json`` (of ``rank-poses --out`` and of a service
+    simulation job alike): ``{"ranking": [{"rank", "pose", "score", "in_tolerance", "worst_feature"}],
     "features": [{"name", "nominal_mm", "nominal_deg", "nominal_text", "tolerance_mm",
-    "deviation_mm": {pose: value}, "in_tolerance": {pose: bool}}]}``. Lengths in mm as in the paper's
-    Table 2 (the angle rows' deviations and tolerances are lengths too); ``score`` is dimensionless
-    (sum of |deviation| / tolerance), ``in_tolerance`` a count of rows."""
+    "deviation_mm": {pose: value}, "in_tolerance": {pose: bool}, "worst_instance": {pose: name}}]}``.
+    Lengths in mm as in the paper's Table 2 (the angle rows' deviations and tolerances are lengths too);
+    ``score`` is dimensionless (sum of |deviation| / tolerance), ``in_tolerance`` a count of rows,
+    ``worst_feature`` the row with the largest |deviation| / tolerance, ``worst_instance`` the wall, edge
+    or line a row's deviation comes from."""
     poses = [p.name for p in r.placements]
     feats = []
     for row in r.results[poses[0]].table.rows:
         rows = {p: r.results[p].table[row.name] for p in poses}
         feats.append({**feature_json(row), "deviation_mm": {p: x.deviation / 1e-3 for p, x in rows.items()},
-                      "in_tolerance": {p: x.in_tolerance for p, x in rows.items()}})
-    return {"ranking": [{"rank": e.rank, "pose": e.pose, "score": e.score, "in_tolerance": e.in_tolerance}
-                        for e in r.entries], "features": feats}
+                      "in_tolerance": {p: x.in_tolerance for p, x in rows.items()},
+                      "worst_instance": {p: x.worst_instance for p, x in rows.items()}})
+    return {"ranking": [{"rank": e.rank, "pose": e.pose, "score": e.score, "in_tolerance": e.in_tolerance,
+                         "worst_feature": e.worst_feature} for e in r.entries], "features": feats}
+
+
+def pose_summary(r: Ranking, pose: str) -> dict:
+    """One pose's process figures, units in the keys: ``steps`` (2 ms cycles), ``simulated_time_s`` [s],
+    ``switching_points`` (cycles with a switching bit), ``peak_force_n`` [N], ``peak_deflection_m`` [m],
+    ``max_tracking_error_m`` and ``rms_tracking_error_m`` [m] (servo error in the workpiece frame),
+    ``score`` [-], ``in_tolerance`` (rows), ``worst_feature``, ``friction`` (per joint the model kind and
+    source) and, with the component re-runs, ``shares`` (:meth:`Ranking.shares`, 0..1)."""
+    res = r.results[pose]
+    table = res.table
+    out: dict = {"pose": pose, "score": float(table.score), "in_tolerance": int(table.n_in_tolerance),
+                 "worst_feature": table.worst.name, "friction": [dict(f) for f in res.friction]}
+    steps = res.steps
+    if steps is not None:
+        n = len(steps.t)
+        terr = np.zeros((n, 3)) if res.tcp_error is None else np.asarray(res.tcp_error)
+        out.update({"steps": int(n), "simulated_time_s": float(steps.t[-1] - steps.t[0]) if n > 1 else 0.0,
+                    "switching_points": int(np.count_nonzero(res.switch)) if res.switch is not None else 0,
+                    "peak_force_n": float(steps.peak_force.max()) if n else 0.0,
+                    "peak_deflection_m": float(np.linalg.norm(steps.deflection, axis=1).max()) if n else 0.0,
+                    "max_tracking_error_m": float(np.linalg.norm(terr, axis=1).max()) if n else 0.0,
+                    "rms_tracking_error_m": float(np.sqrt(np.mean(np.sum(terr ** 2, axis=1)))) if n else 0.0})
+    if r.variants:
+        out["shares"] = r.shares(pose)
+    return out
+
+
+def report_json(r: Ranking) -> dict:
+    """``report.json`` of a ranking: ``{"poses": [pose_summary per pose, pose-file order], "features":
+    ranking_json's feature rows}`` (mm, deg, N, m, s as the keys say)."""
+    return {"poses": [pose_summary(r, p.name) for p in r.placements], "features": ranking_json(r)["features"]}

@@ -31,7 +31,7 @@ def test_report_fields_carry_units_and_form_rows_no_nominal(tmp_path):
     rows = {r["name"]: r for r in doc["features"]}
     assert rows["circle diameter"] == {"name": "circle diameter", "nominal_mm": 108.0, "nominal_deg": None,
                                        "nominal_text": "108", "tolerance_mm": 0.02, "deviation_mm": {"a": 0.011},
-                                       "worst_instance": {"a": "diameter"}}
+                                       "worst_instance": {"a": "diameter"}, "in_tolerance": {"a": True}}
     assert rows["circle roundness"]["nominal_mm"] is None and rows["circle roundness"]["nominal_text"] == "-"
     assert rows["slope angle"]["nominal_deg"] == 5.0 and rows["slope angle"]["nominal_mm"] is None
     # the CSV a job stores and serves (report.csv, through the one table writer)
