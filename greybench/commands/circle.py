@@ -6,7 +6,7 @@ from pathlib import Path
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, print_summary, print_table, progress, resolve_robot
+from greybench.support import emit_json, err, print_summary, print_table, progress
 
 
 def circle(
@@ -36,13 +36,14 @@ def circle(
     radius_error_um and reversal_spikes (angle [deg], joint, excursion height [µm], and as a ballbar
     analysis splits it: spike beyond the settled trace [µm], lost motion step [µm]).
     """
-    from simulate.run import circle_rows, circle_test, spike_table
+    from greybench.api import CircleOptions, circle_test
+    from simulate.run import circle_rows, spike_table
 
     centre = o.numbers(center_mm, 3, "center-mm", "mm") if center_mm is not None else (0.0, 0.0, 0.0)
-    result, summary = circle_test(resolve_robot(robot), pose, name, out_dir, radius_mm=radius_mm,
-                                  feed_mm_min=feed_mm_min, plane=plane, center_mm=centre, cw=cw,
-                                  friction=not no_friction, backlash=not no_backlash, friction_scale=friction_scale,
-                                  ff_friction=ff_friction, progress=progress)
+    res = circle_test(pose, out_dir, progress=progress, options=CircleOptions(
+        robot=robot, name=name, radius_mm=radius_mm, feed_mm_min=feed_mm_min, plane=plane, center_mm=centre, cw=cw,
+        friction=not no_friction, backlash=not no_backlash, friction_scale=friction_scale, ff_friction=ff_friction))
+    result, summary = res.result, res.summary
     if as_json:
         emit_json(summary)
         return

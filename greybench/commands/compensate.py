@@ -9,9 +9,9 @@ from typing import Annotated, Any
 import typer
 
 from greybench import options as o
-from greybench.support import out, print_table, progress, resolve_robot, show
+from greybench.support import out, print_table, progress, show
 from simulate.compensation.settings import CompensationSettings
-from simulate.run import compensation_steps, compensation_summary
+from simulate.run import compensation_summary
 
 
 def print_info(info: dict[str, Any]) -> None:
@@ -50,16 +50,13 @@ def compensate_cmd(
 ) -> None:
     """Pre-compensate a program from the simulation: correct the commanded path against the predicted
     tool deviation (deflection, tracking error with friction and backlash) and iterate."""
-    from simulate.compensation import run_compensation
+    from greybench.api import CompensationOptions, compensate_program
 
-    steps = compensation_steps(program, iterations, stiffness_scale, check_scale or ())
-    with progress("compensating", total=steps) as adv:
-        info = run_compensation(program, resolve_robot(robot), pose, name, out_dir, iterations=iterations,
-                                stiffness_scale=stiffness_scale, check_scales=tuple(check_scale or ()), gain=gain,
-                                spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
-                                friction=o.friction_refs(friction), ff_friction=ff_friction,
-                                backlash_comp=backlash_comp, advance=adv)
-    show(as_json, info, lambda: print_info(info))
+    res = compensate_program(program, pose, out_dir, progress=progress, options=CompensationOptions(
+        robot=robot, name=name, iterations=iterations, stiffness_scale=stiffness_scale,
+        check_scales=tuple(check_scale or ()), gain=gain, spacing_mm=spacing, probe_spacing_mm=probe_spacing, size=size,
+        friction=o.friction_refs(friction), ff_friction=ff_friction, backlash_comp=backlash_comp))
+    show(as_json, res.info, lambda: print_info(res.info))
 
 
 COMMANDS = {"compensate": compensate_cmd}

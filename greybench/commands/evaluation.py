@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import emit_json, err, out, print_table, progress, resolve_robot, show
+from greybench.support import emit_json, err, out, print_table, progress, show
 
 if TYPE_CHECKING:
     from simulate.evaluation.ranking import Ranking
@@ -47,16 +47,13 @@ def rank_poses_cmd(
                                                          "pose).")] = False,
 ) -> None:
     """Simulate the program in every pose, measure the virtual parts (ISO 10791-7 features) and rank the poses."""
-    from simulate.evaluation.ranking import Components, RankSettings, ranking_json
-    from simulate.run import MM, rank_program
-    settings = RankSettings(spacing=spacing * MM, probe_spacing=probe_spacing * MM, stiffness_scale=stiffness_scale,
-                            size=size, ff_friction=ff_friction,
-                            backlash_comp=backlash_comp)
-    comps = Components(deflection=False, servo=False) if ideal else Components()
-    r = rank_program(program, resolve_robot(robot), poses, settings=settings, components=comps, shares=shares,
-                     out_dir=out_dir, workers=workers, friction=o.friction_refs(friction), progress=progress,
-                     setup=setup)
-    show(as_json, ranking_json(r), lambda: print_ranking(r, out_dir))
+    from greybench.api import RankOptions, rank_placements
+
+    res = rank_placements(program, poses, out_dir, progress=progress, options=RankOptions(
+        robot=robot, spacing_mm=spacing, probe_spacing_mm=probe_spacing, stiffness_scale=stiffness_scale, shares=shares,
+        ideal=ideal, size=size, workers=workers, friction=o.friction_refs(friction), ff_friction=ff_friction,
+        backlash_comp=backlash_comp, setup=setup))
+    show(as_json, res.to_dict(), lambda: print_ranking(res.ranking, out_dir))
 
 
 def trace_cmd(

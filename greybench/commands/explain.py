@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from greybench import options as o
-from greybench.support import out, print_table, progress, resolve_robot, show
-from simulate.run import explain_measured, explanation_tables
+from greybench.support import out, print_table, progress, show
+from simulate.run import explanation_tables
 
 if TYPE_CHECKING:
     from simulate.explain.pipeline import Explanation
@@ -40,9 +40,11 @@ def explain(
     """Compare the measured part with the simulation point by point and feature by feature, name the cause
     (stiffness:<axis>, backlash:<axis>, friction:<axis>, tool_radius, thermal or none), calibrate it by
     re-simulating and report the RMS before and after [m]."""
-    ex = explain_measured(measured, program, resolve_robot(robot), pose, name, out_dir=out_dir, spacing_mm=spacing,
-                          size=size, max_sims=max_sims, progress=progress)
-    show(as_json, ex.as_json(), lambda: print_explanation(ex, out_dir))
+    from greybench.api import ExplainOptions, explain_part
+
+    res = explain_part(measured, program, pose, out_dir, progress=progress, options=ExplainOptions(
+        robot=robot, name=name, spacing_mm=spacing, size=size, max_sims=max_sims))
+    show(as_json, res.to_dict(), lambda: print_explanation(res.explanation, out_dir))
 
 
 def print_explanation(ex: Explanation, out_dir: Path | None = None) -> None:

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from greybench import options as o
 from greybench.support import emit_json, out, print_table, progress, resolve_robot, show, warn
 from identify import workflows as wf
-from identify.models import MODELS, FrictionModel, make_seeded, parse_model_names
+from identify.models import MODELS, FrictionModel, make_seeded
 from identify.plant import Effect
 from identify.records import derivative_note
-from identify.workflows import COMPARE_MODELS, fit_model, load_pair, predict_record, record_warnings, synth_record
+from identify.workflows import COMPARE_MODELS, load_pair, predict_record, record_warnings, synth_record
+
+if TYPE_CHECKING:
+    from identify.records import AxisRecord
 
 
 def synth(
@@ -81,29 +84,26 @@ def fit(
 ) -> None:
     """Fit a friction model (co-identifying inertia J [kg m^2] and offset c [Nm] unless the
     record has tau_rb [Nm]); track it in MLflow, save it, print RMSE [Nm], R^2, NRMSE, max error [Nm]."""
-    from simulate.coupling import coupling_warnings
+    from greybench.api import FitOptions, fit_friction
 
-    est = _make(model, seed, epochs)
-    robot_file = resolve_robot(robot or "max100")
-    model_name = wf.fit_model_name(train, axis or 1, robot_file.stem if robot else None, name)
-    train_rec, test_rec = load_pair(train, test, axis, linear=linear, cutoff=cutoff)
-    warnings = [*record_warnings(train_rec, test_rec), *coupling_warnings(train_rec, robot_file, axis)]
-    warn(warnings)
-    if not as_json:
-        out.print(derivative_note(train_rec), highlight=False)
-    with progress(f"fit {model}") as advance:
-        res = fit_model(est, train_rec, test_rec, out_dir=out_dir, track=track, experiment=experiment, axis=axis or 1,
-                        robot=robot_file.stem if robot else None, register=register, name=model_name,
-                        advance=advance)
-    run = res.run
+    def loaded(train_rec: AxisRecord, warnings: list[str]) -> None:
+        warn(warnings)
+        if not as_json:
+            out.print(derivative_note(train_rec), highlight=False)
+
+    res = fit_friction(model, train, test, out_dir=out_dir, progress=progress, on_loaded=loaded,
+                       options=FitOptions(axis=axis, robot=robot, name=name, cutoff_hz=cutoff, linear=linear,
+                                          seed=seed, epochs=epochs, experiment=experiment, track=track,
+                                          register=register))
     if as_json:
-        emit_json(res.to_dict(model, est, train_rec, warnings, out_dir))
+        emit_json(res.to_dict())
         return
-    print_table(*wf.params_table(est))
+    print_table(*wf.params_table(res.estimator))
     where = f", saved to {out_dir}" if out_dir else ""
-    print_table(*wf.metrics_table(f"{model}: fit in {res.fit_time:.2f} s{where}", res.metrics, train_rec.units["tau"]))
-    if run:
-        out.print(res.run_text())
+    print_table(*wf.metrics_table(f"{model}: fit in {res.outcome.fit_time:.2f} s{where}", res.metrics,
+                                  res.train.units["tau"]))
+    if res.run:
+        out.print(res.outcome.run_text())
 
 
 def predict(
@@ -161,25 +161,18 @@ def compare(
 ) -> None:
     """Fit several friction models on one record and rank them by test RMSE [Nm], with R^2,
     fit time [s] and parameter count; every fit is a run of one MLflow experiment."""
-    from identify.tracking import compare_models
+    from greybench.api import CompareOptions, compare_friction
 
-    names = parse_model_names(models, COMPARE_MODELS, "--models")
-    train_rec, test_rec = load_pair(train, test, axis, linear=linear, cutoff=cutoff)
-    assert test_rec is not None
-    warn(record_warnings(train_rec, test_rec))
-    robot_name = resolve_robot(robot).stem
-    models_ = [_make(name, seed, epochs) for name in names]  # unknown names and bad --epochs fail first
-    with progress("compare", total=len(names) + (1 if track else 0)) as advance:
-        rows, parent = compare_models(models_, train_rec, test_rec, track=track, experiment=experiment,
-                                      axis=axis or 1, robot=robot_name, advance=advance,
-                                      params={"train_file": str(train), "test_file": str(test)})
+    res = compare_friction(train, test, progress=progress, on_loaded=lambda _rec, warnings: warn(warnings),
+                           options=CompareOptions(models=models, axis=axis, cutoff_hz=cutoff, linear=linear,
+                                                  robot=robot, seed=seed, epochs=epochs, experiment=experiment,
+                                                  track=track))
     if as_json:
-        emit_json({"experiment": experiment if track else None, "parent_run_id": parent, "axis": axis or 1,
-                   "rows": rows})
+        emit_json(res.to_dict())
         return
-    print_table(*wf.compare_table(rows, test, axis or 1, train_rec.units["tau"]))
-    if parent:
-        out.print(f"MLflow experiment '{experiment}', parent run {parent}; open it with: greybench ui")
+    print_table(*wf.compare_table(res.rows, test, res.axis, res.unit))
+    if res.parent_run_id:
+        out.print(f"MLflow experiment '{experiment}', parent run {res.parent_run_id}; open it with: greybench ui")
 
 
 def train_robot(

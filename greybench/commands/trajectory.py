@@ -7,9 +7,8 @@ from typing import Annotated, Literal
 import typer
 
 from greybench import options as o
-from greybench.support import out, resolve_robot, show
+from greybench.support import out, show
 from identify import workflows as wf
-from identify.axis_limits import load_axis_limits
 
 
 def trajectory(
@@ -26,14 +25,11 @@ def trajectory(
 ) -> None:
     """Generate an excitation trajectory within the axis's position, velocity [rad/s],
     acceleration [rad/s^2] and jerk [rad/s^3] limits from the robot file."""
-    from identify.records import write_table
+    from greybench.api import trajectory as make_trajectory
 
-    limits = load_axis_limits(resolve_robot(robot), axis)
-    traj = wf.make_trajectory(kind, limits, duration, rate)
-    write_table(traj.to_frame(), out_file)
-    show(as_json, {"kind": kind, "axis": axis, "samples": int(traj.t.size), "duration": float(traj.t[-1]),
-                   "peaks": traj.peaks(), "limits": limits.__dict__, "out": str(out_file)},
-         lambda: out.print(f"{kind} trajectory, axis {axis}: {wf.trajectory_text(traj, limits, out_file)}"))
+    res = make_trajectory(kind, out_file, axis=axis, robot=robot, duration_s=duration, rate_hz=rate)
+    text = wf.trajectory_text(res.trajectory, res.limits, out_file)
+    show(as_json, res.to_dict(kind, axis), lambda: out.print(f"{kind} trajectory, axis {axis}: {text}"))
 
 
 COMMANDS = {"trajectory": trajectory}
