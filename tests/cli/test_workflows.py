@@ -96,10 +96,11 @@ def test_compensation_progress_counts_every_simulation():
 
     program = DATA_DIR / "programs" / "iso160.nc"
     n = len(load_program(program, require_spindle=True).interp.t)
-    assert compensation_steps(program, 4) == 5 * n                       # the original and 4 iterations
-    assert compensation_steps(program, 4, 1.2) == 7 * n                  # + before/after at stiffness x1.2
+    # the original, 4 iterations and the program composed per feature group
+    assert compensation_steps(program, 4) == 6 * n
+    assert compensation_steps(program, 4, 1.2) == 8 * n                  # + before/after at stiffness x1.2
     # repeated and nominal multipliers add nothing
-    assert compensation_steps(program, 2, 1.2, (0.8, 1.2, 1.0, 0.8)) == (3 + 4) * n
+    assert compensation_steps(program, 2, 1.2, (0.8, 1.2, 1.0, 0.8)) == (4 + 4) * n
     with pytest.raises(InputError):
         compensation_steps(DATA_DIR / "programs" / "missing.nc")
 
