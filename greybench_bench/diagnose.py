@@ -36,10 +36,18 @@ def bench_diagnose(
     speed_samples: int = typer.Option(60_000, "--speed-samples", help="Samples of the timed train and test records "
                                                                       "[-]."),
     seed: int = typer.Option(0, "--seed", help="Seed of the case generator [-]."),
+    heavy: int = typer.Option(0, "--heavy", help="Instead: this many cases per hidden effect and noise level of "
+                                                 "the generated heavy joint (motor-current records, noise 1, 2, 3, "
+                                                 "5 % of the Coulomb level; docs/heavy-joints.md) [-]."),
 ) -> None:
     """Confusion matrix over generated hidden-effect cases (2x..10x noise RMS) and the diagnosis time on
-    60,000-sample train and test records (target <= 60 s on 2 cores)."""
+    60,000-sample train and test records (target <= 60 s on 2 cores); with --heavy, the confusion matrix
+    over generated heavy-joint cases (right cause >= 95 %, extended model within 1.2x the noise)."""
     import tempfile
+
+    if heavy:
+        bench_heavy(heavy, duration, seed)
+        return
 
     from greybench.support import DATA_DIR
     from identify.axis_limits import load_axis_limits
@@ -110,3 +118,41 @@ def bench_diagnose(
     table.add_row("  + MLflow logging of both "
                   "runs", f"{t_track - t_save:.1f} s", "", "identify.tracking (pyfunc models)")
     out.print(table)
+
+
+#: Record length of the heavy-joint cases [s] (1 kHz), as in the diagnosis tests.
+HEAVY_DURATION = 10.0
+
+
+def heavy_table(outcomes) -> Table:
+    """Per noise level: right cause named, and the extended model's held-out RMSE over the noise."""
+    table = Table(title="heavy joints: right cause named and extended RMSE / noise RMS, per noise level")
+    for col in ("noise [% of Coulomb]", "right cause", "extended / noise: median", "max", "target"):
+        table.add_column(col, justify="right")
+    for share in sorted({o.case.noise_share for o in outcomes}):
+        rows = [o for o in outcomes if o.case.noise_share == share]
+        ratio = [o.extended_over_noise for o in rows]
+        table.add_row(f"{100 * share:g}", f"{sum(o.right for o in rows)}/{len(rows)}", f"{np.median(ratio):.3f}",
+                      f"{np.max(ratio):.3f}", ">= 95 %, <= 1.2")
+    return table
+
+
+def bench_heavy(per_cell: int, duration: float, seed: int) -> None:
+    """``bench diagnose --heavy``: the confusion matrix over generated heavy-joint cases."""
+    from greybench.support import DATA_DIR
+    from identify.diagnosis_cases import heavy_trajectories, run_heavy_case
+    from identify.heavy_joint import heavy_cases
+
+    tr, te = heavy_trajectories(DATA_DIR / "robots" / "max100.toml", min(duration, HEAVY_DURATION))
+    cases = heavy_cases(per_cell, seed=seed)
+    outcomes = []
+    with progress(f"diagnosing {len(cases)} heavy-joint cases", total=len(cases)) as advance:
+        for case in cases:
+            outcomes.append(run_heavy_case(case, tr, te))
+            advance(1)
+    out.print(confusion_table([(o.case.effect, o.named) for o in outcomes]))
+    out.print(heavy_table(outcomes))
+    right = sum(o.right for o in outcomes)
+    out.print(f"right cause named in {right}/{len(outcomes)} = {100 * right / len(outcomes):.1f} % of the cases "
+              f"(goal >= 95 %); extended / noise at most {max(o.extended_over_noise for o in outcomes):.3f} "
+              "(goal <= 1.2)", highlight=False)

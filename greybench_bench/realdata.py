@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import typer
 from rich.table import Table
 
@@ -56,6 +57,10 @@ class JointResult:
         Model name -> fit wall time [s].
     unit : str
         The records' torque unit: Nm, or N on a linear axis (declared by the headers).
+    label : str
+        Column label: ``J<joint>``, or ``H<joint> (<effect>)`` for a generated heavy joint.
+    noise : float or None
+        A generated joint's measurement-error RMS on the test record [``unit``] (the floor no model beats).
     """
 
     joint: int
@@ -66,6 +71,8 @@ class JointResult:
     rmse: dict[str, float] = field(default_factory=dict)
     fit_time: dict[str, float] = field(default_factory=dict)
     unit: str = "Nm"
+    label: str = ""
+    noise: float | None = None
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -108,6 +115,35 @@ def _rmse(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
+#: Hidden effect of generated heavy joint H<j>, in turn (``--heavy``; docs/heavy-joints.md).
+HEAVY_EFFECTS = ("load", "temperature", "asymmetry", "position", "none")
+#: Length of each generated heavy-joint record [s] (1 kHz) and its noise [share of the Coulomb level].
+HEAVY_DURATION = 10.0
+HEAVY_NOISE = 0.02
+
+
+def write_heavy_joints(folder: Path, n: int, seed: int = 0) -> dict[int, tuple[str, float]]:
+    """Write ``n`` generated heavy joints (:mod:`identify.heavy_joint`) in the real-data layout into ``folder``;
+    the published model of each is the same gear's nominal friction (reference temperature, no hidden
+    effect, times the drive's gain). Returns joint -> (hidden effect, test noise RMS [Nm])."""
+    from greybench.support import DATA_DIR
+    from identify.diagnosis_cases import heavy_trajectories
+    from identify.heavy_joint import HeavyCase, case_records
+    from identify.records import write_table
+
+    tr, te = heavy_trajectories(DATA_DIR / "robots" / "max100.toml", HEAVY_DURATION)
+    out = {}
+    for j in range(1, n + 1):
+        effect = HEAVY_EFFECTS[(j - 1) % len(HEAVY_EFFECTS)]
+        case = HeavyCase(effect, HEAVY_NOISE, 0.0 if effect == "none" else 1.0, 900 + 1000 * seed + j)
+        _, _, a, b = case_records(case, tr, te)
+        write_table(a.frame, folder / f"joint{j}_train.csv")
+        write_table(b.frame, folder / f"joint{j}_test.csv")
+        write_table(pd.DataFrame({"t": b.frame["t"], "tau_f": b.nominal_friction}), folder / PUBLISHED.format(j))
+        out[j] = (effect, b.noise_rms)
+    return out
+
+
 def run_joint(data: Path, joint: int, models=COMPARE_MODELS, *, seed: int = 0, epochs: int | None = None,
               advance: Callable[[float], None] | None = None) -> JointResult:
     """Fit ``models`` on one joint's training record and score them on its test record."""
@@ -122,7 +158,7 @@ def run_joint(data: Path, joint: int, models=COMPARE_MODELS, *, seed: int = 0, e
     tau_f = _published(data, joint, test.t)
     y = test.friction_target
     res = JointResult(joint=joint, n_train=train.n, n_test=test.n, published=_rmse(y - tau_f), no_friction=_rmse(y),
-                      unit=train.units["tau"])
+                      unit=train.units["tau"], label=f"J{joint}")
     for name in models:
         kwargs = dict(BENCH_SETTINGS.get(name, {}))
         est0 = make_model(name)
@@ -167,7 +203,8 @@ def summary(results: list[JointResult], grey: str = "greybox", residual: str = "
 
 
 def bench_realdata(
-    data: Path = typer.Option(..., "--data", help="Folder with joint<J>_train.csv, joint<J>_test.csv (t [s], q [rad], "
+    data: Path | None = typer.Option(None, "--data", help="Folder with joint<J>_train.csv, joint<J>_test.csv "
+                                                  "(t [s], q [rad], "
                                                   "qd [rad/s], qdd [rad/s^2], tau [Nm], tau_rb [Nm]) and "
                                                   "published_friction_joint<J>_test.csv (t [s], tau_f [Nm]); a linear "
                                                   "axis declares m and N by headers (q [m], tau [N])."),
@@ -178,14 +215,24 @@ def bench_realdata(
     epochs: int | None = typer.Option(None, "--epochs", help="Adam epochs [passes] of the learned models "
                                                                 "(default: the benchmark's modest settings)."),
     seed: int = typer.Option(0, "--seed", help="Random seed of every fit."),
-    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "summary": {...}} (RMSE in each '
-                                                       "joint's unit, Nm or N) as one JSON object."),
+    heavy: int = typer.Option(0, "--heavy", help="Also this many generated heavy industrial joints (motor-current "
+                                                 "records, friction 3 % of the rated torque, one hidden effect each: "
+                                                 f"{', '.join(HEAVY_EFFECTS)} in turn; docs/heavy-joints.md), "
+                                                 "reported beside the --data joints as H<j> [-]."),
+    as_json: bool = typer.Option(False, "--json", help='Print {"joints": [...], "heavy": [...], "summary": {...}} '
+                                                       "(RMSE in each joint's unit, Nm or N) as one JSON object."),
 ) -> None:
     """Fit every model type on every joint of a real log and print, per joint, the test RMSE [Nm; N on a
     linear axis, as the record's headers declare] of tau - tau_rb - tau_friction_pred beside the
-    published friction model's (same samples)."""
+    published friction model's (same samples); with --heavy, generated heavy joints beside them."""
+    import tempfile
+
     names = parse_model_names(models, COMPARE_MODELS, "--models")
-    found = joints_in(data)
+    if heavy < 0:
+        raise InputError("must be >= 0", field="--heavy")
+    if data is None and not heavy:
+        raise InputError("give --data, --heavy or both", field="--data")
+    found = joints_in(data) if data is not None else []
     if joints:
         try:
             wanted = [int(j) for j in joints.split(",") if j.strip()]
@@ -198,18 +245,30 @@ def bench_realdata(
         found = wanted
     if epochs is not None and epochs < 1:
         raise InputError("must be >= 1", field="--epochs")
-    results = []
+    results, heavy_results = [], []
     t0 = time.perf_counter()
-    with progress(f"bench realdata: {len(names)} models x {len(found)} joints",
-                  total=len(names) * len(found)) as advance:
+    with progress(f"bench realdata: {len(names)} models x {len(found) + heavy} joints",
+                  total=len(names) * (len(found) + heavy)) as advance:
         for j in found:
+            assert data is not None
             results.append(run_joint(data, j, names, seed=seed, epochs=epochs, advance=advance))
+        if heavy:
+            with tempfile.TemporaryDirectory() as tmp:
+                truth = write_heavy_joints(Path(tmp), heavy, seed)
+                for j, (effect, noise) in truth.items():
+                    r = run_joint(Path(tmp), j, names, seed=seed, epochs=epochs, advance=advance)
+                    r.label, r.noise = f"H{j} ({effect})", noise
+                    heavy_results.append(r)
     wall = time.perf_counter() - t0
-    summ = summary(results)
+    summ: dict = summary(results)
+    if heavy_results:
+        summ["heavy"] = summary(heavy_results)
     if as_json:
-        emit_json({"data": str(data), "models": names, "settings": BENCH_SETTINGS, "wall_time_s": wall,
-                   "joints": [r.to_dict() for r in results], "summary": summ})
+        emit_json({"data": None if data is None else str(data), "models": names, "settings": BENCH_SETTINGS,
+                   "wall_time_s": wall, "joints": [r.to_dict() for r in results],
+                   "heavy": [r.to_dict() for r in heavy_results], "summary": summ})
         return
+    results = results + heavy_results
     # models as rows, joints as columns: seven joints fit an 80-column terminal; the unit is the records'
     units = {r.unit for r in results}
     one = units.pop() if len(units) == 1 else None
@@ -218,11 +277,13 @@ def bench_realdata(
                   pad_edge=False)
     table.add_column("model", no_wrap=True)
     for r in results:
-        table.add_column(f"J{r.joint}" if one else f"J{r.joint} \\[m{r.unit}]", justify="right")
+        table.add_column(r.label if one else f"{r.label} \\[m{r.unit}]", justify="right")
     table.add_row("published", *[f"{r.published * 1e3:.1f} " for r in results])
     table.add_row("no friction", *[f"{r.no_friction * 1e3:.1f} " for r in results])
     for n in names:
         table.add_row(n, *[f"{r.rmse[n] * 1e3:.1f}" + ("*" if r.rmse[n] <= r.published else " ") for r in results])
+    if heavy_results:
+        table.add_row("noise (generated)", *["-" if r.noise is None else f"{r.noise * 1e3:.1f} " for r in results])
     out.print(table)
     out.print("* at or below the published model", highlight=False)
     if "greybox_at_or_below_published" in summ:
@@ -231,3 +292,7 @@ def bench_realdata(
         if "residual_over_greybox_max" in summ:
             line += f"; residual / grey-box at most {summ['residual_over_greybox_max']:.3f} (goal <= 1.1)"
         out.print(line, highlight=False)
+    hs = summ.get("heavy", {})
+    if "greybox_at_or_below_published" in hs:
+        out.print(f"generated heavy joints: grey-box at or below the nominal (published-style) model on "
+                  f"{hs['greybox_at_or_below_published']}/{hs['joints']}", highlight=False)

@@ -2,14 +2,20 @@
 
 Used by ``greybench bench diagnose`` (confusion matrix) and the diagnosis tests: the plant
 (:mod:`identify.plant`) hides one effect at a magnitude chosen so that its identifiable torque is a
-given multiple of the noise RMS, and :func:`identify.diagnosis.diagnose` must name it blind.
+given multiple of the noise RMS, and :func:`identify.diagnosis.diagnose` must name it blind. The
+heavy-joint cases (:func:`run_heavy_case`, ``bench diagnose --heavy``) hide an effect of its
+physical size (:mod:`identify.heavy_joint`) in motor-current records at a noise of a few per cent of
+the friction.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from identify.diagnosis import CANDIDATES
 from identify.diagnosis import diagnose as run_diagnosis
+from identify.heavy_joint import HeavyCase
 
 
 def effect_rms(effect: str, t, q, qd, qdd, seed: int, magnitude: float = 1.0, identifiable: bool = True) -> float:
@@ -84,3 +90,58 @@ def run_case(effect: str, ratio: float, train_seed: int, test_seed: int, train_t
         frame = synthesize(traj.t, traj.q, traj.qd, traj.qdd, seed=s, effect=effect, magnitude=mag).frame
         recs.append(validate_frame(frame, f"{name}-{effect}-{s}"))
     return run_diagnosis(recs[0], recs[1], generations=generations), mag
+
+
+@dataclass(frozen=True)
+class HeavyOutcome:
+    """One generated heavy-joint case diagnosed blind (:mod:`identify.heavy_joint`).
+
+    Attributes
+    ----------
+    case : HeavyCase
+    named : str
+        The top cause the diagnosis named (``none`` when nothing).
+    causes : tuple of str
+        Every named cause.
+    noise_rms : float
+        RMS of the test record's measurement error [Nm] (the generator's truth).
+    baseline_rmse, extended_rmse : float
+        Held-out RMSE of the LuGre baseline and of the extended model [Nm].
+    """
+
+    case: HeavyCase
+    named: str
+    causes: tuple[str, ...]
+    noise_rms: float
+    baseline_rmse: float
+    extended_rmse: float
+
+    @property
+    def right(self) -> bool:
+        return self.named == self.case.effect
+
+    @property
+    def extended_over_noise(self) -> float:
+        """Extended model's held-out RMSE over the measurement error's RMS [-]."""
+        return self.extended_rmse / self.noise_rms
+
+
+def heavy_trajectories(robot_file, duration: float, axis: int = 2):
+    """Training (Universal Trajectory) and test trajectories of a heavy joint: ``axis`` of ``robot_file``'s
+    limits, ``duration`` [s] at 1 kHz."""
+    from identify.axis_limits import load_axis_limits
+    from identify.trajectories import test_trajectory, universal_trajectory
+
+    limits = load_axis_limits(robot_file, axis)
+    return universal_trajectory(limits, duration=duration), test_trajectory(limits, duration=duration)
+
+
+def run_heavy_case(case: HeavyCase, train_traj, test_traj, generations: int = 15) -> HeavyOutcome:
+    """Generate the case's heavy-joint records and diagnose them blind."""
+    from identify.heavy_joint import case_records
+
+    train, test, _, truth = case_records(case, train_traj, test_traj)
+    res = run_diagnosis(train, test, generations=generations)
+    return HeavyOutcome(case=case, named=res.cause.value, causes=tuple(c.value for c in res.analysis.causes),
+                        noise_rms=truth.noise_rms, baseline_rmse=res.baseline_test.rmse,
+                        extended_rmse=res.extended_test.rmse)

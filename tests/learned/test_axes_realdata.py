@@ -199,3 +199,35 @@ def test_bench_realdata_prints_the_records_units(real_folder, plant_frames, tmp_
     doc = json.loads(run("bench", "realdata", "--data", d, "--models", "coulomb-viscous", "--json").stdout)
     assert doc["joints"][0]["unit"] == "N"
     assert doc["joints"][0]["published"] == pytest.approx(NOISE / LEAD, rel=0.1)  # the noise, in N
+
+
+def test_generated_heavy_joints_in_the_real_data_layout(tmp_path):
+    """The nominal (published-style) model of the joint without a hidden effect is the truth: its RMSE is
+    the measurement error's; with a hidden effect it misses the effect."""
+    from greybench_bench.realdata import HEAVY_EFFECTS, joints_in, write_heavy_joints
+
+    truth = write_heavy_joints(tmp_path, len(HEAVY_EFFECTS))
+    assert joints_in(tmp_path) == list(range(1, len(HEAVY_EFFECTS) + 1))
+    for j, (effect, noise) in truth.items():
+        test = pd.read_csv(tmp_path / f"joint{j}_test.csv")
+        pub = pd.read_csv(tmp_path / f"published_friction_joint{j}_test.csv")
+        err = float(np.sqrt(np.mean((test["tau"] - test["tau_rb"] - pub["tau_f"]) ** 2)))
+        if effect == "none":
+            assert err == pytest.approx(noise, rel=1e-6)
+        else:
+            assert err > 1.5 * noise, effect
+
+
+def test_bench_realdata_heavy_beside_the_data(real_folder):
+    r = run("bench", "realdata", "--data", real_folder, "--joints", "1", "--heavy", "1", "--models",
+            "coulomb-viscous", "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert [j["label"] for j in doc["joints"]] == ["J1"]
+    (h,) = doc["heavy"]
+    assert h["label"] == "H1 (load)" and h["unit"] == "Nm" and h["noise"] > 0
+    assert h["rmse"]["coulomb-viscous"] < h["no_friction"]
+    r = run("bench", "realdata", "--heavy", "1", "--models", "coulomb-viscous")
+    assert r.exit_code == 0 and "H1 (load)" in r.stdout and "noise (generated)" in r.stdout
+    r = run("bench", "realdata", "--models", "coulomb-viscous")
+    assert r.exit_code == 2 and "--data" in r.output
