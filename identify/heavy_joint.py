@@ -333,7 +333,7 @@ def heavy_cases(per_cell: int, noise_shares=(0.01, 0.02, 0.03, 0.05), seed: int 
     """``per_cell`` seeded cases for every effect and noise share, each with a strength drawn from
     :data:`MAGNITUDE_RANGE`."""
     rng = np.random.default_rng(seed)
-    cases = []
+    cases: list[HeavyCase] = []
     for _ in range(per_cell):
         for effect in effects:
             for share in noise_shares:

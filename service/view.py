@@ -314,7 +314,7 @@ def tab20() -> list[list[int]]:
     number or bit pattern k gets colour k mod 20)."""
     import matplotlib
 
-    c = np.asarray(matplotlib.colormaps["tab20"].colors)[:, :3]
+    c = np.asarray(matplotlib.colormaps["tab20"](np.arange(20)))[:, :3]   # a listed map: index k is colour k
     return np.round(c * 255).astype(int).tolist()
 
 

@@ -15,6 +15,7 @@ import io
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -56,7 +57,7 @@ class Report:
 
     def __init__(self, pdf, title: str):
         self.pdf, self.title = pdf, title
-        self.fig = None
+        self.fig: Any = None   # the matplotlib figure of the page being filled
         self.y = 0.0
         self.pages = 0
 
@@ -237,7 +238,8 @@ def build(title: str, sections: list[dict], *, load_npz: Callable[[str], Path] |
             elif kind == "plot":
                 ax = rep.axes(0.3)
                 for series in s["series"]:
-                    style = {"points": dict(ls="none", marker="o", ms=3), "step": dict(drawstyle="steps-post")}
+                    style: dict[str, dict[str, Any]] = {"points": dict(ls="none", marker="o", ms=3),
+                                                        "step": dict(drawstyle="steps-post")}
                     ax.plot(series["x"], series["y"], color=series.get("colour"), label=series["label"],
                             **style.get(series.get("style"), {}))
                 ax.set_xlabel(s["x_label"], fontsize=8)
@@ -247,8 +249,8 @@ def build(title: str, sections: list[dict], *, load_npz: Callable[[str], Path] |
                 name = s["url"].split("/view/files/", 1)[1].split("?", 1)[0]
                 rep.image(load_file(name), height=0.4, caption=s.get("note", ""))
             elif kind == "files":
-                rep.table(["file", "size [KiB]"], [[f["name"], _text(None if f["bytes"] is None else f["bytes"] / 1024, 1)]
-                                                 for f in s["files"]], widths=[0.8, 0.2])
+                rows = [[f["name"], _text(None if f["bytes"] is None else f["bytes"] / 1024, 1)] for f in s["files"]]
+                rep.table(["file", "size [KiB]"], rows, widths=[0.8, 0.2])
             if s.get("note") and kind not in ("image",):
                 rep.note(s["note"])
         rep.flush()

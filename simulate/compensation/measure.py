@@ -95,7 +95,9 @@ def pipeline_simulator(job: MachiningJob, advance=None) -> Simulator:
                 from simulate.pipeline import piece_size
                 from simulate.toolpath.testpiece import iso_test_piece
 
-                surfaces.update(row_surfaces(mo.scan, iso_test_piece(piece_size(setup, settings.size))))
+                size = piece_size(setup, settings.size)
+                assert size is not None  # a scan exists only for a test piece
+                surfaces.update(row_surfaces(mo.scan, iso_test_piece(size)))
             lines = row_lines(mo.workpiece, mo.scan, np.asarray(mo.result.steps.line), surfaces)
         return SimulationRun(setup, tip, mo.table, mo.trajectory, time.perf_counter() - c0, list(mo.friction),
                              mo.result.joint_contact, lines)
