@@ -436,7 +436,7 @@ class RankingResult:
 
     def deviations_mm(self, pose: str) -> dict[str, float]:
         """The Table-2 deviation of each feature of ``pose`` [mm]."""
-        return {row.name: row.deviation / _MM for row in self.ranking.results[pose].table.rows}
+        return {row.name: float(row.deviation / _MM) for row in self.ranking.results[pose].table.rows}
 
     def to_dict(self) -> dict[str, Any]:
         """The ``greybench rank-poses --json`` object (``ranking.json``)."""
