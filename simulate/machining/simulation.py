@@ -703,7 +703,8 @@ def check_process_limits(steps: StepTable, xyz, err, passes: ToolPasses, k_from:
     - a deflection larger than the cutter's diameter (the tool would have left the cut);
     - a chip load per tooth above :func:`simulate.machining.tools.max_chip_load` while the tool cuts
       (force above zero, or a step of ``feeding`` (N,) bool: the caller passes it for a stretch
-      that removed material): the drive-driven feed per tooth, ``|v| / (N n)``.
+      that removed material): the drive-driven feed per tooth, ``|v| / (N n)`` of the motion across
+      the tool axis and into the material along it (a retract along +z loads no tooth).
 
     The message names the quantity, its value and the bound; ``line`` is the step's program line.
     """
@@ -716,7 +717,10 @@ def check_process_limits(steps: StepTable, xyz, err, passes: ToolPasses, k_from:
     dt = np.asarray(steps.t[k_from:k_to]) - np.asarray(steps.t[k_from - 1:k_to - 1])
     prev = slice(k_from - 1, k_to - 1)
     motion = np.asarray(xyz[rows]) + e - np.asarray(xyz[prev]) - np.asarray(err[prev])
-    speed = np.linalg.norm(motion, axis=1) / np.where(dt > 0, dt, np.inf)
+    # the feed that loads a tooth: across the tool axis (workpiece z, a 3-axis program) and into the
+    # material along it (a plunge); a retract along +z loads none
+    loading = np.hypot(np.hypot(motion[:, 0], motion[:, 1]), np.minimum(motion[:, 2], 0.0))
+    speed = loading / np.where(dt > 0, dt, np.inf)
     diam = np.array([c.diameter for c in passes.cutters])[index]
     f_break = np.array([breakage_force(c) for c in passes.cutters])[index]
     h_max = np.array([max_chip_load(c) for c in passes.cutters])[index]

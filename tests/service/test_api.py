@@ -50,7 +50,8 @@ def test_select_needs_a_pose_set_and_inline_gcode_a_stock(client):
     body = {"program": "iso160", "poses": [{"name": "far", "xyz": [9.0, 0, 0], "rpy": [0, 0, 0]}]}
     r = client.post("/simulations", headers=HEADERS, json={**body, "select": ["x"]})
     assert r.status_code == 422  # 'select' picks poses of a pose_set
-    r = client.post("/simulations", headers=HEADERS, json={"gcode": "G21 G90\nG0 X0 Y0 Z5\n", "pose_set": "iso160"})
+    r = client.post("/simulations", headers=HEADERS, json={"gcode": "G21 G90\nS12000 M3\nG0 X0 Y0 Z5\nG1 X10 F1000\n",
+                                                           "pose_set": "iso160"})  # valid: only the stock missing
     assert r.status_code == 422 and r.json()["detail"]["field"] == "stock"
 
 

@@ -64,11 +64,11 @@ def test_cells_say_in_tolerance_factor_and_rank(job):
     report = _report(folder)
     assert len(rows) == len(report["features"]) == 10
     for r, f in zip(rows, report["features"], strict=True):
-        mags = {p: abs(f["deviation"][p]) for p in POSES}
+        mags = {p: abs(f["deviation_mm"][p]) for p in POSES}
         for p in POSES:
             c = r["cells"][p]
-            assert c["in_tolerance"] == (mags[p] <= f["tolerance"])
-            assert c["factor"] == pytest.approx(mags[p] / f["tolerance"], rel=1e-9)
+            assert c["in_tolerance"] == (mags[p] <= f["tolerance_mm"])
+            assert c["factor"] == pytest.approx(mags[p] / f["tolerance_mm"], rel=1e-9)
             assert c["rank"] == 1 + sum(m < mags[p] for m in mags.values())
     # the job has what the colour rule is about: a row whose best pose is out of tolerance
     assert any(min(r["cells"].values(), key=lambda c: c["rank"])["in_tolerance"] is False for r in rows)
@@ -145,17 +145,17 @@ def test_out_of_tolerance_best_cell_is_not_shown_good(job, browser):
         for p in POSES:
             cell = page.locator(f"table.table2 tbody tr:nth-child({i + 1}) td[data-pose='{p}']")
             r, g, b = _rgb(cell.evaluate("e => getComputedStyle(e).backgroundColor"))
-            ok = abs(f["deviation"][p]) <= f["tolerance"]
+            ok = abs(f["deviation_mm"][p]) <= f["tolerance_mm"]
             assert ("in-tol" in cell.get_attribute("class")) == ok
             if ok:
                 assert g > r + 20, (f["name"], p, (r, g, b))            # green
             else:
                 assert r > g + 20, (f["name"], p, (r, g, b))            # orange to red, also for the best pose
                 # the factor over tolerance is shown beside the value (the style sheet draws data-times)
-                factor = abs(f["deviation"][p]) / f["tolerance"]
+                factor = abs(f["deviation_mm"][p]) / f["tolerance_mm"]
                 text = f"{factor:.0f}" if factor >= 10 else f"{factor:.1f}"
                 assert cell.evaluate("e => getComputedStyle(e, '::after').content") == f'" {text}×"'
-            best = abs(f["deviation"][p]) <= min(abs(f["deviation"][q]) for q in POSES)
+            best = abs(f["deviation_mm"][p]) <= min(abs(f["deviation_mm"][q]) for q in POSES)
             assert ("best" in cell.get_attribute("class")) == best
             checked += not ok and best
     assert checked, "no out-of-tolerance best cell to check"
@@ -286,7 +286,7 @@ def test_printable_report_from_the_page(job, browser, tmp_path):
         assert words in text, words
     report = _report(folder)
     for f in report["features"]:
-        assert f"{f['deviation']['near']:+.4f}" in text, f["name"]
+        assert f"{f['deviation_mm']['near']:+.4f}" in text, f["name"]
     # the parts are pictures: a page holds a large coloured (non-grey) area
     from PIL import Image
 
